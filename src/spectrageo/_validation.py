@@ -1,0 +1,103 @@
+"""Input checks at the public boundary.
+
+All functions here raise :class:`~spectrageo._errors.InvalidInputError` with a message that names the
+argument, the expected value and the received one.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ._errors import InvalidInputError
+
+
+def _shape_str(a: Any) -> str:
+    shape = getattr(a, "shape", None)
+    return str(tuple(shape)) if shape is not None else type(a).__name__
+
+
+def as_points(V: Any, name: str = "V", *, allow_empty: bool = False, copy: bool = False) -> np.ndarray:
+    """Return ``V`` as a C-contiguous float64 array of shape (n, 3) with finite entries."""
+    try:
+        arr = np.array(V, dtype=np.float64, copy=copy) if copy else np.asarray(V, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(f"`{name}` must be a numeric array of shape (n, 3); got {type(V).__name__}.") from exc
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise InvalidInputError(f"`{name}` must have shape (n, 3); got {_shape_str(arr)}.")
+    if arr.shape[0] == 0 and not allow_empty:
+        raise InvalidInputError(f"`{name}` is empty; at least one point is required.")
+    if not np.isfinite(arr).all():
+        bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
+        raise InvalidInputError(
+            f"`{name}` contains NaN or inf coordinates at {bad.size} row(s), first at index {int(bad[0])}."
+        )
+    return np.ascontiguousarray(arr)
+
+
+def as_faces(F: Any, n_vertices: int, name: str = "F", *, allow_empty: bool = False) -> np.ndarray:
+    """Return ``F`` as a C-contiguous int64 array of shape (m, 3) with indices in ``[0, n_vertices)``."""
+    arr = np.asarray(F)
+    if arr.size == 0 and arr.ndim <= 2:
+        arr = arr.reshape(0, 3)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise InvalidInputError(f"`{name}` must have shape (m, 3); got {_shape_str(arr)}.")
+    if arr.dtype.kind == "f":
+        if not np.isfinite(arr).all() or np.any(arr != np.round(arr)):
+            raise InvalidInputError(f"`{name}` must hold integer vertex indices; got non-integer values.")
+    elif arr.dtype.kind not in "iu":
+        raise InvalidInputError(f"`{name}` must hold integer vertex indices; got dtype {arr.dtype}.")
+    arr = np.ascontiguousarray(arr, dtype=np.int64)
+    if arr.shape[0] == 0 and not allow_empty:
+        raise InvalidInputError(f"`{name}` is empty; a mesh needs at least one face.")
+    if arr.size:
+        lo, hi = int(arr.min()), int(arr.max())
+        if lo < 0 or hi >= n_vertices:
+            raise InvalidInputError(
+                f"`{name}` has vertex indices out of range: expected 0..{n_vertices - 1}; got {lo}..{hi}."
+            )
+    return arr
+
+
+def as_scalar_field(x: Any, n: int, name: str) -> np.ndarray:
+    """Return ``x`` as a float64 vector of length ``n`` with finite values."""
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.shape != (n,):
+        raise InvalidInputError(f"`{name}` must have shape ({n},); got {_shape_str(arr)}.")
+    if not np.isfinite(arr).all():
+        raise InvalidInputError(f"`{name}` contains NaN or inf values.")
+    return arr
+
+
+def check_positive(value: Any, name: str, *, integer: bool = False, allow_zero: bool = False) -> Any:
+    """Check that ``value`` is a (strictly, unless ``allow_zero``) positive finite number."""
+    ok_type = (int, np.integer) if integer else (int, float, np.integer, np.floating)
+    if isinstance(value, bool) or not isinstance(value, ok_type):
+        kind = "an integer" if integer else "a number"
+        raise InvalidInputError(f"`{name}` must be {kind}; got {value!r}.")
+    if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+        bound = ">= 0" if allow_zero else "> 0"
+        raise InvalidInputError(f"`{name}` must be {bound}; got {value!r}.")
+    return value
+
+
+def check_choice(value: Any, name: str, choices: tuple[str, ...] | list[str]) -> str:
+    """Check that ``value`` is one of ``choices``."""
+    if value not in choices:
+        raise InvalidInputError(f"`{name}` must be one of {', '.join(map(repr, choices))}; got {value!r}.")
+    return value
+
+
+def as_rng(rng: Any) -> np.random.Generator:
+    """Return a :class:`numpy.random.Generator` from a seed, a Generator or ``None`` (seed 0).
+
+    ``None`` maps to a fixed seed so that results are reproducible unless the caller asks otherwise.
+    """
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if rng is None:
+        return np.random.default_rng(0)
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
+        return np.random.default_rng(int(rng))
+    raise InvalidInputError(f"`rng` must be an int seed, a numpy Generator or None; got {type(rng).__name__}.")

@@ -1,0 +1,58 @@
+"""Geometry containers and per-element quantities (thesis Chapter 3)."""
+
+from .data import Mesh, MeshAnimation, PointCloud, PointCloudSequence
+from .pointcloud import pca_normals
+from .primitives import (
+    boundary_edges,
+    boundary_loops,
+    cotangent_weights,
+    edge_lengths,
+    edges,
+    face_areas,
+    face_centroids,
+    face_normals,
+    mean_curvature,
+    mean_edge_length,
+    vertex_areas,
+    vertex_face_matrix,
+    vertex_normals,
+)
+from .repair import (
+    RepairReport,
+    clean_mesh,
+    degenerate_faces,
+    duplicate_faces,
+    merge_duplicate_vertices,
+    remove_unreferenced,
+    unreferenced_vertices,
+)
+from .update import update_vertices
+
+__all__ = [
+    "Mesh",
+    "MeshAnimation",
+    "PointCloud",
+    "PointCloudSequence",
+    "RepairReport",
+    "boundary_edges",
+    "boundary_loops",
+    "clean_mesh",
+    "cotangent_weights",
+    "degenerate_faces",
+    "duplicate_faces",
+    "edge_lengths",
+    "edges",
+    "face_areas",
+    "face_centroids",
+    "face_normals",
+    "mean_curvature",
+    "mean_edge_length",
+    "merge_duplicate_vertices",
+    "pca_normals",
+    "remove_unreferenced",
+    "unreferenced_vertices",
+    "update_vertices",
+    "vertex_areas",
+    "vertex_face_matrix",
+    "vertex_normals",
+]
