@@ -18,12 +18,16 @@ def _shape_str(a: Any) -> str:
     return str(tuple(shape)) if shape is not None else type(a).__name__
 
 
-def as_points(V: Any, name: str = "V", *, allow_empty: bool = False, copy: bool = False) -> np.ndarray:
+def as_points(
+    V: Any, name: str = "V", *, allow_empty: bool = False, copy: bool = False
+) -> np.ndarray:
     """Return ``V`` as a C-contiguous float64 array of shape (n, 3) with finite entries."""
     try:
         arr = np.array(V, dtype=np.float64, copy=copy) if copy else np.asarray(V, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise InvalidInputError(f"`{name}` must be a numeric array of shape (n, 3); got {type(V).__name__}.") from exc
+        raise InvalidInputError(
+            f"`{name}` must be a numeric array of shape (n, 3); got {type(V).__name__}."
+        ) from exc
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise InvalidInputError(f"`{name}` must have shape (n, 3); got {_shape_str(arr)}.")
     if arr.shape[0] == 0 and not allow_empty:
@@ -45,9 +49,13 @@ def as_faces(F: Any, n_vertices: int, name: str = "F", *, allow_empty: bool = Fa
         raise InvalidInputError(f"`{name}` must have shape (m, 3); got {_shape_str(arr)}.")
     if arr.dtype.kind == "f":
         if not np.isfinite(arr).all() or np.any(arr != np.round(arr)):
-            raise InvalidInputError(f"`{name}` must hold integer vertex indices; got non-integer values.")
+            raise InvalidInputError(
+                f"`{name}` must hold integer vertex indices; got non-integer values."
+            )
     elif arr.dtype.kind not in "iu":
-        raise InvalidInputError(f"`{name}` must hold integer vertex indices; got dtype {arr.dtype}.")
+        raise InvalidInputError(
+            f"`{name}` must hold integer vertex indices; got dtype {arr.dtype}."
+        )
     arr = np.ascontiguousarray(arr, dtype=np.int64)
     if arr.shape[0] == 0 and not allow_empty:
         raise InvalidInputError(f"`{name}` is empty; a mesh needs at least one face.")
@@ -70,7 +78,9 @@ def as_scalar_field(x: Any, n: int, name: str) -> np.ndarray:
     return arr
 
 
-def check_positive(value: Any, name: str, *, integer: bool = False, allow_zero: bool = False) -> Any:
+def check_positive(
+    value: Any, name: str, *, integer: bool = False, allow_zero: bool = False
+) -> Any:
     """Check that ``value`` is a (strictly, unless ``allow_zero``) positive finite number."""
     ok_type = (int, np.integer) if integer else (int, float, np.integer, np.floating)
     if isinstance(value, bool) or not isinstance(value, ok_type):
@@ -85,7 +95,9 @@ def check_positive(value: Any, name: str, *, integer: bool = False, allow_zero: 
 def check_choice(value: Any, name: str, choices: tuple[str, ...] | list[str]) -> str:
     """Check that ``value`` is one of ``choices``."""
     if value not in choices:
-        raise InvalidInputError(f"`{name}` must be one of {', '.join(map(repr, choices))}; got {value!r}.")
+        raise InvalidInputError(
+            f"`{name}` must be one of {', '.join(map(repr, choices))}; got {value!r}."
+        )
     return value
 
 
@@ -100,4 +112,6 @@ def as_rng(rng: Any) -> np.random.Generator:
         return np.random.default_rng(0)
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
         return np.random.default_rng(int(rng))
-    raise InvalidInputError(f"`rng` must be an int seed, a numpy Generator or None; got {type(rng).__name__}.")
+    raise InvalidInputError(
+        f"`rng` must be an int seed, a numpy Generator or None; got {type(rng).__name__}."
+    )

@@ -7,7 +7,9 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def propagate_signs(N: np.ndarray, child: np.ndarray, par: np.ndarray) -> None:  # pragma: no cover - jitted
+def propagate_signs(
+    N: np.ndarray, child: np.ndarray, par: np.ndarray
+) -> None:  # pragma: no cover - jitted
     """Flip ``N[child[t]]`` to agree with ``N[par[t]]``, in order (BFS order of a spanning tree)."""
     for t in range(child.shape[0]):
         c = child[t]

@@ -73,14 +73,22 @@ class Mesh:
         object.__setattr__(self, "vertices", V)
         object.__setattr__(self, "faces", F)
         n, m = V.shape[0], F.shape[0]
-        object.__setattr__(self, "vertex_normals", _check_per_item(self.vertex_normals, n, "vertex_normals"))
+        object.__setattr__(
+            self, "vertex_normals", _check_per_item(self.vertex_normals, n, "vertex_normals")
+        )
         if self.vertex_colors is not None:
             c = np.asarray(self.vertex_colors)
             if c.ndim != 2 or c.shape[0] != n or c.shape[1] not in (3, 4):
-                raise InvalidInputError(f"`vertex_colors` must have shape ({n}, 3) or ({n}, 4); got {c.shape}.")
+                raise InvalidInputError(
+                    f"`vertex_colors` must have shape ({n}, 3) or ({n}, 4); got {c.shape}."
+                )
             object.__setattr__(self, "vertex_colors", c)
-        object.__setattr__(self, "vertex_attributes", _check_attributes(self.vertex_attributes, n, "vertex"))
-        object.__setattr__(self, "face_attributes", _check_attributes(self.face_attributes, m, "face"))
+        object.__setattr__(
+            self, "vertex_attributes", _check_attributes(self.vertex_attributes, n, "vertex")
+        )
+        object.__setattr__(
+            self, "face_attributes", _check_attributes(self.face_attributes, m, "face")
+        )
 
     @property
     def n_vertices(self) -> int:
@@ -133,7 +141,9 @@ class PointCloud:
         if self.colors is not None:
             c = np.asarray(self.colors)
             if c.ndim != 2 or c.shape[0] != n or c.shape[1] not in (3, 4):
-                raise InvalidInputError(f"`colors` must have shape ({n}, 3) or ({n}, 4); got {c.shape}.")
+                raise InvalidInputError(
+                    f"`colors` must have shape ({n}, 3) or ({n}, 4); got {c.shape}."
+                )
             object.__setattr__(self, "colors", c)
         object.__setattr__(self, "attributes", _check_attributes(self.attributes, n, "point"))
 
@@ -150,7 +160,9 @@ class PointCloud:
         """Subset by a boolean mask or index array; normals, colours and attributes follow."""
         keep = np.asarray(keep)
         if keep.dtype == bool and keep.shape != (self.n_points,):
-            raise InvalidInputError(f"`keep` mask must have shape ({self.n_points},); got {keep.shape}.")
+            raise InvalidInputError(
+                f"`keep` mask must have shape ({self.n_points},); got {keep.shape}."
+            )
         return PointCloud(
             self.points[keep],
             None if self.normals is None else self.normals[keep],
@@ -266,7 +278,9 @@ class PointCloudSequence:
     def as_array(self) -> np.ndarray:
         """(T, n, 3) array when every frame has the same number of points."""
         if not self.is_fixed_size():
-            raise InvalidInputError("frames have different point counts; cannot stack into (T, n, 3).")
+            raise InvalidInputError(
+                "frames have different point counts; cannot stack into (T, n, 3)."
+            )
         return np.stack([f.points for f in self.frames])
 
     def __iter__(self) -> Iterator[PointCloud]:

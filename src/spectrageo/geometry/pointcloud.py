@@ -12,8 +12,9 @@ from ..graph.adjacency import knn
 _CHUNK = 200_000
 
 
-def pca_normals(P, k: int = 10, *, orient: str = "mst", viewpoint=None,
-                return_eigenvalues: bool = False):
+def pca_normals(
+    P, k: int = 10, *, orient: str = "mst", viewpoint=None, return_eigenvalues: bool = False
+):
     """Unit normals of a point cloud from the covariance of each point's kNN patch.
 
     For point ``v_i`` with neighbourhood ``Psi_i`` (``k`` nearest neighbours plus itself) the matrix

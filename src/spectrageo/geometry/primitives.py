@@ -170,7 +170,9 @@ def cotangent_weights(V, F) -> sp.csr_matrix:
         rows += [i, j]
         cols += [j, i]
         vals += [0.5 * cot, 0.5 * cot]
-    W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    W = sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    )
     W.sum_duplicates()
     return W
 

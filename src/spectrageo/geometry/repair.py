@@ -47,7 +47,9 @@ def unreferenced_vertices(F, n_vertices: int) -> np.ndarray:
     return ~used
 
 
-def merge_duplicate_vertices(V, F, *, tol: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def merge_duplicate_vertices(
+    V, F, *, tol: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Merge vertices closer than ``tol`` (exact duplicates by default).
 
     Returns ``(V_new, F_new, index_map)`` where ``index_map[i]`` is the new index of old vertex ``i``;
@@ -94,12 +96,25 @@ class RepairReport:
 
     @property
     def changed(self) -> bool:
-        return any((self.merged_vertices, self.degenerate_faces, self.duplicate_faces, self.unreferenced_vertices))
+        return any(
+            (
+                self.merged_vertices,
+                self.degenerate_faces,
+                self.duplicate_faces,
+                self.unreferenced_vertices,
+            )
+        )
 
 
-def clean_mesh(mesh: Mesh, *, merge_vertices: bool = False, merge_tol: float = 0.0,
-               drop_degenerate: bool = True, drop_duplicate_faces: bool = True,
-               drop_unreferenced: bool = True) -> tuple[Mesh, RepairReport]:
+def clean_mesh(
+    mesh: Mesh,
+    *,
+    merge_vertices: bool = False,
+    merge_tol: float = 0.0,
+    drop_degenerate: bool = True,
+    drop_duplicate_faces: bool = True,
+    drop_unreferenced: bool = True,
+) -> tuple[Mesh, RepairReport]:
     """Apply the repair policies above; returns the repaired mesh and a report of what changed.
 
     Per-vertex/per-face extras are dropped when the vertex or face set changes.

@@ -80,7 +80,9 @@ def k_ring(C: sp.spmatrix, seeds, k: int = 1, *, include_seeds: bool = True) -> 
     n = C.shape[0]
     seeds = np.atleast_1d(np.asarray(seeds, dtype=np.int64))
     if seeds.size and (seeds.min() < 0 or seeds.max() >= n):
-        raise InvalidInputError(f"`seeds` must be vertex indices in 0..{n - 1}; got {seeds.min()}..{seeds.max()}.")
+        raise InvalidInputError(
+            f"`seeds` must be vertex indices in 0..{n - 1}; got {seeds.min()}..{seeds.max()}."
+        )
     mask = np.zeros(n, dtype=bool)
     mask[seeds] = True
     frontier = mask.copy()
@@ -95,8 +97,15 @@ def k_ring(C: sp.spmatrix, seeds, k: int = 1, *, include_seeds: bool = True) -> 
     return np.flatnonzero(mask)
 
 
-def knn(P, k: int, *, query=None, include_self: bool = False, workers: int = -1,
-        tree: cKDTree | None = None) -> tuple[np.ndarray, np.ndarray]:
+def knn(
+    P,
+    k: int,
+    *,
+    query=None,
+    include_self: bool = False,
+    workers: int = -1,
+    tree: cKDTree | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """k nearest neighbours (Section 3.1.10).
 
     Returns ``(indices, distances)`` of shape (q, k), nearest first. When ``query`` is None the
@@ -145,8 +154,9 @@ def _symmetrize(W: sp.csr_matrix, mode: str) -> sp.csr_matrix:
     raise InvalidInputError(f"`symmetric` must be 'union', 'mutual' or 'none'; got {mode!r}.")
 
 
-def knn_graph(P, k: int = 10, *, weights: str = "binary", sigma: float | None = None,
-              symmetric: str = "union") -> sp.csr_matrix:
+def knn_graph(
+    P, k: int = 10, *, weights: str = "binary", sigma: float | None = None, symmetric: str = "union"
+) -> sp.csr_matrix:
     """Sparse (n, n) kNN graph of a point cloud.
 
     ``weights``: ``"binary"`` (1), ``"gaussian"`` (``exp(-d^2 / (2 sigma^2))``, Eq. 4.2, sigma defaults
@@ -165,7 +175,9 @@ def knn_graph(P, k: int = 10, *, weights: str = "binary", sigma: float | None = 
     elif weights == "distance":
         w = dist
     else:
-        raise InvalidInputError(f"`weights` must be 'binary', 'gaussian' or 'distance'; got {weights!r}.")
+        raise InvalidInputError(
+            f"`weights` must be 'binary', 'gaussian' or 'distance'; got {weights!r}."
+        )
     rows = np.repeat(np.arange(n), k)
     W = sp.csr_matrix((w.ravel(), (rows, idx.ravel())), shape=(n, n))
     W.sum_duplicates()
@@ -190,7 +202,10 @@ def radius_graph(P, radius: float, *, max_pairs: int = 50_000_000) -> sp.csr_mat
     pairs = tree.query_pairs(r=radius, output_type="ndarray")
     n = P.shape[0]
     W = sp.csr_matrix(
-        (np.ones(2 * len(pairs)), (np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]])),
+        (
+            np.ones(2 * len(pairs)),
+            (np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]]),
+        ),
         shape=(n, n),
     )
     return W

@@ -56,11 +56,14 @@ def weighted_adjacency(V, F, *, kind: str = "binary", sigma: float | None = None
     if not s > 0:
         s = 1.0
     w = np.exp(-d2 / (2.0 * s * s))
-    return sp.csr_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(n, n))
+    return sp.csr_matrix(
+        (np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(n, n)
+    )
 
 
-def mesh_laplacian(V, F, *, kind: str = "binary", normalized: bool = False,
-                   sigma: float | None = None) -> sp.csr_matrix:
+def mesh_laplacian(
+    V, F, *, kind: str = "binary", normalized: bool = False, sigma: float | None = None
+) -> sp.csr_matrix:
     """Laplacian ``L = D - C`` of a triangle mesh (binary Eq. 4.1, Gaussian or cotangent Eq. 4.2).
 
     Parameters
@@ -73,11 +76,14 @@ def mesh_laplacian(V, F, *, kind: str = "binary", normalized: bool = False,
     sigma : float, optional
         Gaussian width (``alpha`` in the thesis); defaults to the mean edge length.
     """
-    return laplacian_from_adjacency(weighted_adjacency(V, F, kind=kind, sigma=sigma), normalized=normalized)
+    return laplacian_from_adjacency(
+        weighted_adjacency(V, F, kind=kind, sigma=sigma), normalized=normalized
+    )
 
 
-def point_cloud_laplacian(P, k: int = 10, *, kind: str = "binary", normalized: bool = False,
-                          sigma: float | None = None) -> sp.csr_matrix:
+def point_cloud_laplacian(
+    P, k: int = 10, *, kind: str = "binary", normalized: bool = False, sigma: float | None = None
+) -> sp.csr_matrix:
     """Laplacian ``L = D - C`` of the symmetrised kNN graph of a point cloud.
 
     ``kind``: ``"binary"`` or ``"gaussian"`` (cotangent weights need faces).

@@ -48,7 +48,9 @@ class Eigenbasis:
         return int(self.eigenvectors.shape[1])
 
     @classmethod
-    def from_laplacian(cls, L, k: int | None = None, *, method: str = "auto", tol: float = 0.0) -> Eigenbasis:
+    def from_laplacian(
+        cls, L, k: int | None = None, *, method: str = "auto", tol: float = 0.0
+    ) -> Eigenbasis:
         """Compute the ``k`` lowest eigenpairs of ``L`` (all of them when ``k`` is None).
 
         ``method``: ``"dense"`` (``numpy.linalg.eigh``, O(n^3), only for small graphs), ``"sparse"``
@@ -71,14 +73,18 @@ class Eigenbasis:
             w, U = w[:k], U[:, :k]
         elif method == "sparse":
             if k >= n - 1:
-                raise InvalidInputError(f"`k` = {k} too large for the sparse solver on n = {n}; use method='dense'.")
+                raise InvalidInputError(
+                    f"`k` = {k} too large for the sparse solver on n = {n}; use method='dense'."
+                )
             Ls = sp.csc_matrix(L, dtype=np.float64)
             scale = max(float(abs(Ls).max()), 1e-12)
             w, U = spla.eigsh(Ls, k=k, sigma=-1e-6 * scale, which="LM", tol=tol)
             order = np.argsort(w)
             w, U = w[order], U[:, order]
         else:
-            raise InvalidInputError(f"`method` must be 'auto', 'dense' or 'sparse'; got {method!r}.")
+            raise InvalidInputError(
+                f"`method` must be 'auto', 'dense' or 'sparse'; got {method!r}."
+            )
         return cls(np.asarray(w), fix_signs(np.asarray(U)))
 
     def gft(self, X) -> np.ndarray:
@@ -93,7 +99,9 @@ class Eigenbasis:
         X_hat = np.asarray(X_hat, dtype=np.float64)
         r = X_hat.shape[0]
         if r > self.k:
-            raise InvalidInputError(f"`X_hat` has {r} rows; the basis has only {self.k} components.")
+            raise InvalidInputError(
+                f"`X_hat` has {r} rows; the basis has only {self.k} components."
+            )
         return self.eigenvectors[:, :r] @ X_hat
 
     def lowpass(self, X, n_keep: int) -> np.ndarray:
@@ -131,12 +139,16 @@ def lowpass_whole(V, L, *, keep: float | int) -> np.ndarray:
 
 def _n_keep(keep: float | int, n: int) -> int:
     if isinstance(keep, bool):
-        raise InvalidInputError(f"`keep` must be a fraction in (0, 1] or a count >= 1; got {keep!r}.")
+        raise InvalidInputError(
+            f"`keep` must be a fraction in (0, 1] or a count >= 1; got {keep!r}."
+        )
     if isinstance(keep, (int, np.integer)):
         if not 1 <= keep <= n:
             raise InvalidInputError(f"`keep` must be in 1..{n} as a count; got {keep}.")
         return int(keep)
     keep = float(keep)
     if not 0.0 < keep <= 1.0:
-        raise InvalidInputError(f"`keep` must be a fraction in (0, 1] or a count >= 1; got {keep!r}.")
+        raise InvalidInputError(
+            f"`keep` must be a fraction in (0, 1] or a count >= 1; got {keep!r}."
+        )
     return max(1, int(round(keep * n)))

@@ -1,0 +1,61 @@
+"""Regenerate BENCHMARKS.md: run every benchmark script (sequentially, so timings do not compete)
+and assemble their sections.
+
+    python benchmarks/run_all.py                 # run all, then assemble
+    python benchmarks/run_all.py --assemble-only # only assemble benchmarks/_out/*.md
+    python benchmarks/run_all.py --only core,lowpass
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+# order of sections in BENCHMARKS.md: (section file stem, command producing it)
+SECTIONS = [
+    ("noisy_inputs", [sys.executable, str(HERE / "noisy_inputs.py")]),
+    ("core", [sys.executable, str(HERE / "core.py")]),
+    ("lowpass", [sys.executable, str(HERE / "lowpass.py")]),
+    ("rpca_large", [sys.executable, str(HERE / "rpca_large.py")]),
+    ("denoise", [sys.executable, "-m", "spectrageo.cli.main", "evaluate", "denoise", "--out", str(HERE / "_out" / "denoise")]),
+    ("outliers", [sys.executable, "-m", "spectrageo.cli.main", "evaluate", "outliers", "--out", str(HERE / "_out" / "outliers")]),
+    ("outliers_large", [sys.executable, str(HERE / "outliers_large.py")]),
+]
+
+HEADER = """# Benchmarks
+
+Every table below is produced by a command (named in its section) and assembled by
+`python benchmarks/run_all.py`. Figures come from one run on the machine named in each section;
+speed comparisons are ratios measured in the same run.
+"""
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--assemble-only", action="store_true")
+    ap.add_argument("--only", default=None)
+    args = ap.parse_args()
+    only = set(args.only.split(",")) if args.only else None
+    if not args.assemble_only:
+        for name, cmd in SECTIONS:
+            if only and name not in only:
+                continue
+            print(f"== {name}: {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
+            subprocess.run(cmd, check=True, cwd=ROOT)
+    parts = [HEADER]
+    for name, _ in SECTIONS:
+        f = HERE / "_out" / f"{name}.md"
+        if f.exists():
+            parts.append(f.read_text().rstrip() + "\n")
+    tmp = ROOT / "BENCHMARKS.md.tmp"
+    tmp.write_text("\n".join(parts))
+    tmp.replace(ROOT / "BENCHMARKS.md")
+    print(f"wrote {ROOT / 'BENCHMARKS.md'}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Command-line interface ``spectrageo``: a thin layer over the public API."""
