@@ -1,0 +1,63 @@
+"""Reading and writing meshes, point clouds, mesh animations and point-cloud sequences.
+
+Formats (each single-file format also gzip-compressed: ``.ply.gz``, ``.obj.gz``, ``.pcd.gz`` ...):
+
+==========  =========================================  ==========================================
+extension   read                                       write
+==========  =========================================  ==========================================
+``.ply``    mesh or points (plyfile), ascii/binary,    Mesh, PointCloud (binary or ascii)
+            normals, colours, extra properties
+``.obj``    mesh or points (meshio), polygons fanned   Mesh, PointCloud (meshio)
+``.off``    mesh or points, COFF/NOFF, polygons fanned Mesh, PointCloud (meshio)
+``.stl``    mesh (trimesh), corners unmerged unless    Mesh (binary or ascii, trimesh)
+            ``weld=True``
+``.pcd``    points, ascii/binary/binary_compressed     PointCloud (``pcd_format=``)
+``.xyz``    points, 3 or 6 columns (normals)           PointCloud
+``.npy``    points, (n, 3) array                       PointCloud
+``.las``    points (laspy, optional extra)             PointCloud
+``.laz``    points (laspy + lazrs, optional extra)     PointCloud
+``.npz``    MeshAnimation (``vertices``, ``faces``)    MeshAnimation, PointCloudSequence
+            or PointCloudSequence (``points``
+            (T, n, 3), or (N, 3) + ``counts`` (T,))
+folder/     numbered frames (``frame_000.obj`` ...,    MeshAnimation, PointCloudSequence
+            natural order) -> animation when all have  (``frame_format=".ply"`` default)
+            faces (shared connectivity), else sequence
+==========  =========================================  ==========================================
+
+Policies
+    * Order and counts are preserved exactly: no reader merges, drops or reorders vertices or faces
+      (ground-truth pairs and animations rely on it). Degenerate faces, duplicate and unreferenced
+      vertices are kept; repairs are explicit with :func:`spectrageo.geometry.clean_mesh`.
+    * Quads and polygons are triangulated as fans ``(v0, vi, vi+1)``, each polygon's triangles in
+      place, so face order follows the file; PLY face properties are repeated on a polygon's triangles.
+    * Bad input raises :class:`~spectrageo.InvalidInputError` naming the file (missing file, malformed
+      or truncated content, NaN coordinates, indices out of range, empty geometry, wrong shapes);
+      unknown extensions raise :class:`~spectrageo.UnsupportedFormatError` listing supported ones.
+      Library exceptions are caught and re-raised as these errors.
+    * NaN points: an error, except in PCD files whose organized clouds use NaN for "no measurement";
+      those points are dropped by default (``nan_points=``), their original indices kept in the
+      ``source_index`` attribute.
+    * Every write is atomic (:func:`atomic_write`): a failure leaves no partial file and no temporary.
+"""
+
+from ._api import (
+    read,
+    read_animation,
+    read_mesh,
+    read_point_cloud,
+    read_sequence,
+    supported_formats,
+    write,
+)
+from ._common import atomic_write
+
+__all__ = [
+    "atomic_write",
+    "read",
+    "read_animation",
+    "read_mesh",
+    "read_point_cloud",
+    "read_sequence",
+    "supported_formats",
+    "write",
+]

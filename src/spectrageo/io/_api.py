@@ -1,0 +1,743 @@
+"""Public read/write functions: dispatch on the extension, validation, atomic output."""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+import zipfile
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._errors import InvalidInputError, UnsupportedFormatError
+from ..geometry.data import Mesh, MeshAnimation, PointCloud, PointCloudSequence
+from ._common import (
+    atomic_dir,
+    atomic_write,
+    exc_text,
+    natural_key,
+    read_bytes,
+    split_suffix,
+    write_bytes,
+)
+from ._raw import RawGeometry
+
+Geometry = Mesh | PointCloud | MeshAnimation | PointCloudSequence
+
+KINDS = ("mesh", "points", "animation", "sequence")
+NAN_POLICIES = ("raise", "drop")
+
+
+# ------------------------------------------------------------------------------ format registry
+def _read_ply(raw, name):
+    from ._ply import read_ply
+
+    return read_ply(raw, name)
+
+
+def _read_obj(raw, name):
+    from ._obj import read_obj
+
+    return read_obj(raw, name)
+
+
+def _read_off(raw, name):
+    from ._off import read_off
+
+    return read_off(raw, name)
+
+
+def _read_stl(raw, name):
+    from ._simple import read_stl
+
+    return read_stl(raw, name)
+
+
+def _read_pcd(raw, name):
+    from ._pcd import read_pcd
+
+    return read_pcd(raw, name)
+
+
+def _read_xyz(raw, name):
+    from ._simple import read_xyz
+
+    return read_xyz(raw, name)
+
+
+def _read_npy(raw, name):
+    from ._simple import read_npy
+
+    return read_npy(raw, name)
+
+
+def _read_las(raw, name):
+    from ._las import read_las
+
+    return read_las(raw, name, compressed=False)
+
+
+def _read_laz(raw, name):
+    from ._las import read_las
+
+    return read_las(raw, name, compressed=True)
+
+
+_SINGLE_READERS: dict[str, Callable[[bytes, str], RawGeometry]] = {
+    ".ply": _read_ply,
+    ".obj": _read_obj,
+    ".off": _read_off,
+    ".stl": _read_stl,
+    ".pcd": _read_pcd,
+    ".xyz": _read_xyz,
+    ".npy": _read_npy,
+    ".las": _read_las,
+    ".laz": _read_laz,
+}
+_MESH_WRITE = (".ply", ".obj", ".off", ".stl")
+_POINTS_WRITE = (".ply", ".pcd", ".xyz", ".npy", ".las", ".laz", ".obj", ".off")
+_WRITE_OPTIONS = ("pcd_format", "dtype", "las_scale", "frame_format", "prefix", "compress")
+PCD_FORMATS = ("ascii", "binary", "binary_compressed")
+
+
+def supported_formats() -> dict[str, Any]:
+    """Extensions spectrageo reads and writes.
+
+    Returns
+    -------
+    dict
+        ``"read"``: extensions of single files (each also readable gzip-compressed, ``.ply.gz``...) plus
+        ``".npz"`` (animation or sequence) and ``"<folder>/"`` (numbered frame files);
+        ``"write"``: extensions per object type (``"mesh"``, ``"points"``, ``"animation"``,
+        ``"sequence"``); ``"compression"``: ``[".gz"]``, appendable to every single-file format.
+    """
+    return {
+        "read": [*_SINGLE_READERS, ".npz", "<folder>/"],
+        "write": {
+            "mesh": list(_MESH_WRITE),
+            "points": list(_POINTS_WRITE),
+            "animation": [".npz", "<folder>/"],
+            "sequence": [".npz", "<folder>/"],
+        },
+        "compression": [".gz"],
+    }
+
+
+def _unsupported(p: Path, suffix: str, allowed) -> UnsupportedFormatError:
+    shown = suffix if suffix else "(none)"
+    return UnsupportedFormatError(
+        f"{p.name}: unsupported file extension {shown!r}; supported: {', '.join(allowed)} "
+        "(each optionally gzip-compressed, e.g. .ply.gz)."
+    )
+
+
+# ------------------------------------------------------------------------------------- reading
+def _check_kind(kind: str | None) -> None:
+    if kind is not None and kind not in KINDS:
+        raise InvalidInputError(
+            f"`kind` must be one of {', '.join(map(repr, KINDS))} or None; got {kind!r}."
+        )
+
+
+def _format_suffix(p: Path, format: str | None) -> tuple[str, bool]:
+    suffix, gz = split_suffix(p)
+    if format is not None:
+        f = str(format).lower().strip()
+        gz = gz or f.endswith(".gz")
+        f = f.removesuffix(".gz")
+        suffix = f if f.startswith(".") else "." + f
+    return suffix, gz
+
+
+def read(
+    path: str | os.PathLike,
+    *,
+    kind: str | None = None,
+    weld: bool = False,
+    format: str | None = None,
+    nan_points: str | None = None,
+) -> Geometry:
+    """Read a mesh, point cloud, mesh animation or point-cloud sequence.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A file (``.ply .obj .off .stl .pcd .xyz .npy .las .laz``, each optionally ``.gz``), a ``.npz``
+        animation/sequence, or a folder of numbered frame files.
+    kind : {"mesh", "points", "animation", "sequence"} or None
+        Force the interpretation. None: a file with faces gives a :class:`Mesh`, without faces a
+        :class:`PointCloud`; ``.npz`` with ``faces`` a :class:`MeshAnimation`, with ``points`` a
+        :class:`PointCloudSequence`; a folder gives an animation when every frame has faces, else a
+        sequence. ``"points"`` reads a mesh file's vertices (with normals, colours, attributes) as a
+        point cloud; ``"sequence"`` reads an animation's frames as point clouds.
+    weld : bool
+        Merge exactly coincident vertices of a mesh (first occurrence kept, in order; per-vertex data
+        of the first occurrence kept). Off by default, so STL triangles keep their own 3 corners and
+        every other format keeps its vertex order and count exactly.
+    format : str, optional
+        Format to use instead of the one the extension implies (``"xyz"``, ``"ply.gz"``...).
+    nan_points : {"raise", "drop"} or None
+        What to do with points whose coordinates are NaN/inf. None: ``"drop"`` for PCD (NaN marks
+        "no measurement" in organized clouds; the kept points' original indices go to the attribute
+        ``source_index``), ``"raise"`` elsewhere. Mesh vertices are never dropped (indices would move).
+
+    Returns
+    -------
+    Mesh | PointCloud | MeshAnimation | PointCloudSequence
+
+    Raises
+    ------
+    InvalidInputError
+        Missing file ("file not found: ..."), malformed/truncated/empty file, NaN coordinates, face
+        indices out of range, shape errors; the message names the file.
+    UnsupportedFormatError
+        Unknown extension (the message lists the supported ones) or unsupported variant.
+
+    Notes
+    -----
+    Readers never repair: degenerate faces, duplicate and unreferenced vertices are kept as in the
+    file (order and count preserved). Repairs are explicit, see
+    :func:`spectrageo.geometry.clean_mesh`. Polygons are fan-triangulated in file order.
+    """
+    _check_kind(kind)
+    if nan_points is not None and nan_points not in NAN_POLICIES:
+        raise InvalidInputError(
+            f"`nan_points` must be one of {', '.join(map(repr, NAN_POLICIES))} or None; got {nan_points!r}."
+        )
+    p = Path(path)
+    if not p.exists():
+        raise InvalidInputError(f"file not found: {p}")
+    if p.is_dir():
+        return _read_folder(p, kind=kind, weld=weld, nan_points=nan_points, format=format)
+    suffix, gz = _format_suffix(p, format)
+    if suffix == ".npz":
+        return _read_npz(p, gz, kind=kind)
+    if suffix not in _SINGLE_READERS:
+        raise _unsupported(p, suffix, [*_SINGLE_READERS, ".npz"])
+    if kind in ("animation", "sequence"):
+        raise InvalidInputError(
+            f"{p.name}: a single {suffix} file cannot be read as {kind!r}; "
+            "use a .npz file or a folder of numbered frames."
+        )
+    raw = _read_raw(p, suffix, gz)
+    return _build(raw, p.name, kind=kind, weld=weld, nan_points=nan_points)
+
+
+def _read_raw(p: Path, suffix: str, gz: bool) -> RawGeometry:
+    data = read_bytes(p, gz)
+    if not data.strip():
+        raise InvalidInputError(f"{p.name}: empty file.")
+    return _SINGLE_READERS[suffix](data, p.name)
+
+
+def _nonfinite_rows(a: np.ndarray) -> np.ndarray:
+    return np.flatnonzero(~np.isfinite(a).all(axis=1))
+
+
+def _weld(rg: RawGeometry) -> RawGeometry:
+    from ..geometry.repair import merge_duplicate_vertices
+
+    V, F, index_map = merge_duplicate_vertices(rg.vertices, rg.faces)
+    first = np.empty(V.shape[0], dtype=np.int64)
+    first[index_map[::-1]] = np.arange(index_map.size - 1, -1, -1)
+
+    def pick(a):
+        return None if a is None else np.asarray(a)[first]
+
+    return RawGeometry(
+        V,
+        F,
+        pick(rg.normals),
+        pick(rg.colors),
+        {k: np.asarray(v)[first] for k, v in rg.vertex_attributes.items()},
+        dict(rg.face_attributes),
+    )
+
+
+def _build(
+    rg: RawGeometry, name: str, *, kind: str | None, weld: bool, nan_points: str | None
+) -> Mesh | PointCloud:
+    n = rg.vertices.shape[0]
+    if n == 0:
+        raise InvalidInputError(f"{name}: the file contains no vertices/points.")
+    as_mesh = kind == "mesh" or (kind is None and rg.has_faces)
+    if kind == "mesh" and not rg.has_faces:
+        raise InvalidInputError(
+            f"{name}: has no faces ({n} points only); read it as a point cloud (kind='points')."
+        )
+    bad = _nonfinite_rows(rg.vertices)
+    if as_mesh:
+        if bad.size:
+            raise InvalidInputError(
+                f"{name}: {bad.size} vertices have NaN or inf coordinates (first at index "
+                f"{int(bad[0])}); mesh vertices cannot be dropped without renumbering faces."
+            )
+        if weld:
+            rg = _weld(rg)
+        try:
+            return Mesh(
+                rg.vertices,
+                rg.faces,
+                vertex_normals=rg.normals,
+                vertex_colors=rg.colors,
+                vertex_attributes=rg.vertex_attributes,
+                face_attributes=rg.face_attributes,
+            )
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"{name}: {exc}") from exc
+    policy = nan_points or rg.nan_policy_default
+    normals, colors, attrs = rg.normals, rg.colors, dict(rg.vertex_attributes)
+    P = rg.vertices
+    if bad.size:
+        if policy == "raise":
+            raise InvalidInputError(
+                f"{name}: {bad.size} of {n} points have NaN or inf coordinates (first at index "
+                f"{int(bad[0])}); pass nan_points='drop' to drop them."
+            )
+        keep = np.ones(n, dtype=bool)
+        keep[bad] = False
+        if not keep.any():
+            raise InvalidInputError(f"{name}: all {n} points have NaN or inf coordinates.")
+        P = P[keep]
+        normals = None if normals is None else normals[keep]
+        colors = None if colors is None else colors[keep]
+        attrs = {k: v[keep] for k, v in attrs.items()}
+        attrs.setdefault("source_index", np.flatnonzero(keep))
+    if normals is not None and not np.isfinite(normals).all():
+        cnt = _nonfinite_rows(normals).size
+        raise InvalidInputError(f"{name}: {cnt} point normals are NaN or inf.")
+    try:
+        return PointCloud(P, normals, colors, attrs)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{name}: {exc}") from exc
+
+
+def _npz_array(d, key: str, name: str) -> np.ndarray:
+    try:
+        arr = d[key]
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as exc:
+        raise InvalidInputError(f"{name}: cannot read array {key!r} ({exc_text(exc)}).") from exc
+    if not isinstance(arr, np.ndarray):  # a member that is not in .npy format comes back as bytes
+        raise InvalidInputError(f"{name}: cannot read array {key!r} (not a .npy member).")
+    return arr
+
+
+def _read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCloudSequence:
+    data = read_bytes(p, gz)
+    if not data:
+        raise InvalidInputError(f"{p.name}: empty file.")
+    name = p.name
+    try:
+        d = np.load(io.BytesIO(data), allow_pickle=False)
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise InvalidInputError(f"{name}: not a valid .npz archive ({exc_text(exc)}).") from exc
+    if not isinstance(d, np.lib.npyio.NpzFile):
+        raise InvalidInputError(f"{name}: not a .npz archive (a single .npy array).")
+    with d:
+        keys = set(d.files)
+        if kind in ("mesh", "points"):
+            raise InvalidInputError(
+                f"{name}: a .npz file holds an animation or a sequence, not a single {kind!r}."
+            )
+        vkey = "vertices" if "vertices" in keys else "frames" if "frames" in keys else None
+        if "faces" in keys or kind == "animation" or (vkey is not None and "points" not in keys):
+            if "faces" not in keys and kind != "sequence":
+                raise InvalidInputError(
+                    f"{name}: animation .npz lacks key 'faces' (has {', '.join(sorted(keys))})."
+                )
+            if vkey is None:
+                raise InvalidInputError(
+                    f"{name}: animation .npz lacks key 'vertices' (has {', '.join(sorted(keys))})."
+                )
+            frames = _npz_array(d, vkey, name)
+            _check_frames(frames, name, vkey)
+            if kind == "sequence":
+                return PointCloudSequence([PointCloud(f) for f in frames.astype(np.float64)])
+            faces = _npz_array(d, "faces", name)
+            if faces.ndim != 2 or faces.shape[1] != 3:
+                raise InvalidInputError(
+                    f"{name}: 'faces' must have shape (m, 3); got {faces.shape}."
+                )
+            if faces.dtype.kind not in "iu":
+                raise InvalidInputError(f"{name}: 'faces' must hold integers; got {faces.dtype}.")
+            try:
+                return MeshAnimation(frames, faces)
+            except InvalidInputError as exc:
+                raise InvalidInputError(f"{name}: {exc}") from exc
+        if "points" in keys:
+            pts = _npz_array(d, "points", name)
+            if pts.ndim == 3:
+                _check_frames(pts, name, "points")
+                return PointCloudSequence([PointCloud(f) for f in pts.astype(np.float64)])
+            if pts.ndim == 2 and "counts" in keys:
+                counts = _npz_array(d, "counts", name)
+                if (
+                    counts.ndim != 1
+                    or counts.dtype.kind not in "iu"
+                    or (counts <= 0).any()
+                    or counts.sum() != pts.shape[0]
+                    or pts.shape[1] != 3
+                ):
+                    raise InvalidInputError(
+                        f"{name}: 'counts' must be positive integers summing to the {pts.shape[0]} "
+                        f"rows of 'points' (n, 3); got counts {counts.shape} summing to "
+                        f"{int(counts.sum()) if counts.dtype.kind in 'iu' else '?'}, points {pts.shape}."
+                    )
+                _check_frames(pts[None], name, "points")
+                parts = np.split(pts.astype(np.float64), np.cumsum(counts)[:-1])
+                return PointCloudSequence([PointCloud(f) for f in parts])
+            raise InvalidInputError(
+                f"{name}: 'points' must have shape (T, n, 3), or (N, 3) with 'counts' (T,); got {pts.shape}."
+            )
+        raise InvalidInputError(
+            f"{name}: .npz has keys {', '.join(sorted(keys)) or '(none)'}; expected 'vertices' and "
+            "'faces' (animation) or 'points' [+ 'counts'] (sequence)."
+        )
+
+
+def _check_frames(frames: np.ndarray, name: str, key: str) -> None:
+    if frames.ndim != 3 or frames.shape[2] != 3:
+        raise InvalidInputError(f"{name}: {key!r} must have shape (T, n, 3); got {frames.shape}.")
+    if frames.dtype.kind not in "iuf":
+        raise InvalidInputError(f"{name}: {key!r} must be numeric; got {frames.dtype}.")
+    if frames.shape[0] == 0 or frames.shape[1] == 0:
+        raise InvalidInputError(f"{name}: {key!r} is empty; got shape {frames.shape}.")
+    if frames.dtype.kind == "f":
+        finite = np.isfinite(frames).all(axis=2)
+        if not finite.all():
+            t, i = np.argwhere(~finite)[0]
+            raise InvalidInputError(
+                f"{name}: {int((~finite).sum())} vertex positions have NaN or inf coordinates "
+                f"(first at frame {t}, vertex {i})."
+            )
+
+
+def _frame_files(folder: Path, format: str | None) -> list[Path]:
+    files = []
+    for f in folder.iterdir():
+        if not f.is_file() or f.name.startswith("."):
+            continue
+        if _format_suffix(f, format)[0] in _SINGLE_READERS:
+            files.append(f)
+    if not files:
+        raise InvalidInputError(
+            f"{folder}: folder holds no frame files (expected numbered {', '.join(_SINGLE_READERS)} files)."
+        )
+    kinds = sorted({_format_suffix(f, format)[0] for f in files})
+    if len(kinds) > 1:
+        raise InvalidInputError(
+            f"{folder}: folder mixes frame formats ({', '.join(kinds)}); keep one format per sequence."
+        )
+    return sorted(files, key=lambda f: natural_key(f.name))
+
+
+def _read_folder(
+    folder: Path, *, kind: str | None, weld: bool, nan_points: str | None, format: str | None
+) -> MeshAnimation | PointCloudSequence:
+    if kind in ("mesh", "points"):
+        raise InvalidInputError(
+            f"{folder}: a folder holds an animation or a sequence, not a single {kind!r}."
+        )
+    files = _frame_files(folder, format)
+    raws = []
+    for f in files:
+        suffix, gz = _format_suffix(f, format)
+        raws.append((f, _read_raw(f, suffix, gz)))
+    with_faces = [rg.has_faces for _, rg in raws]
+    if kind is None:
+        if all(with_faces):
+            kind = "animation"
+        elif not any(with_faces):
+            kind = "sequence"
+        else:
+            first = raws[with_faces.index(False)][0].name
+            raise InvalidInputError(
+                f"{folder}: some frames have faces and others not (e.g. {first}); "
+                "read it with kind='sequence' to get point clouds."
+            )
+    if kind == "sequence":
+        return PointCloudSequence(
+            [_build(rg, f.name, kind="points", weld=False, nan_points=nan_points) for f, rg in raws]
+        )
+    meshes = [_build(rg, f.name, kind="mesh", weld=weld, nan_points=None) for f, rg in raws]
+    ref, ref_name = meshes[0], files[0].name
+    for f, m in zip(files[1:], meshes[1:]):
+        if m.n_vertices != ref.n_vertices:
+            raise InvalidInputError(
+                f"{f.name}: {m.n_vertices} vertices, but {ref_name} has {ref.n_vertices}; "
+                "animation frames must share one connectivity."
+            )
+        if m.faces.shape != ref.faces.shape or not np.array_equal(m.faces, ref.faces):
+            raise InvalidInputError(
+                f"{f.name}: faces differ from those of {ref_name}; animation frames must share "
+                "one connectivity (use kind='sequence' to read them as point clouds)."
+            )
+    return MeshAnimation(np.stack([m.vertices for m in meshes]), ref.faces)
+
+
+def read_mesh(path: str | os.PathLike, **kw: Any) -> Mesh:
+    """Read a triangle mesh (error when the file has no faces). Options as in :func:`read`."""
+    return read(path, kind="mesh", **kw)
+
+
+def read_point_cloud(path: str | os.PathLike, **kw: Any) -> PointCloud:
+    """Read a point cloud; a mesh file gives its vertices with normals, colours and attributes."""
+    return read(path, kind="points", **kw)
+
+
+def read_animation(path: str | os.PathLike, **kw: Any) -> MeshAnimation:
+    """Read a mesh animation from a ``.npz`` (``vertices`` (T, n, 3), ``faces`` (m, 3)) or a folder."""
+    return read(path, kind="animation", **kw)
+
+
+def read_sequence(path: str | os.PathLike, **kw: Any) -> PointCloudSequence:
+    """Read a point-cloud sequence from a folder of frames or a ``.npz`` (``points``...)."""
+    return read(path, kind="sequence", **kw)
+
+
+# ------------------------------------------------------------------------------------- writing
+def _is_folder_target(path: str | os.PathLike) -> bool:
+    s = os.fspath(path)
+    p = Path(s)
+    return s.endswith(("/", os.sep)) or p.is_dir() or p.suffix == ""
+
+
+def _as_geometry(obj: Any) -> Geometry:
+    if isinstance(obj, Mesh | PointCloud | MeshAnimation | PointCloudSequence):
+        return obj
+    if isinstance(obj, list | tuple) and obj and all(isinstance(o, PointCloud) for o in obj):
+        return PointCloudSequence(list(obj))
+    if isinstance(obj, np.ndarray) and obj.ndim == 2:
+        return PointCloud(obj)
+    raise InvalidInputError(
+        "`obj` must be a Mesh, PointCloud, MeshAnimation, PointCloudSequence, a list of "
+        f"PointCloud or an (n, 3) array; got {type(obj).__name__}."
+    )
+
+
+def write(path: str | os.PathLike, obj: Any, *, binary: bool = True, **kw: Any) -> None:
+    """Write geometry atomically (temporary file in the same folder, then :func:`os.replace`).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Target. Mesh: ``.ply .obj .off .stl``; PointCloud: ``.ply .pcd .xyz .npy .las .laz .obj .off``;
+        both optionally ``.gz``-compressed (``mesh.ply.gz``). MeshAnimation / PointCloudSequence:
+        ``.npz`` or a folder (a path without suffix, ending with ``/``, or an existing folder) that
+        receives numbered frames ``frame_000.ply, frame_001.ply, ...``.
+    obj : Mesh | PointCloud | MeshAnimation | PointCloudSequence | list[PointCloud] | (n, 3) array
+    binary : bool
+        Binary PLY/STL/PCD (default) or ascii. Text formats (OBJ, OFF, XYZ) ignore it.
+    pcd_format : {"ascii", "binary", "binary_compressed"}, optional
+        PCD encoding; default ``"binary"`` (``"ascii"`` when ``binary=False``).
+    dtype : numpy float dtype, optional
+        Coordinate type for PLY (default float64, lossless) and PCD (default float32, PCL's).
+    las_scale : float, optional
+        LAS/LAZ coordinate resolution (default: chosen from the extent, see :mod:`._las`).
+    frame_format : str, optional
+        Frame file format of folder outputs (default ``".ply"``; e.g. ``".obj"``, ``".pcd"``,
+        ``".ply.gz"``).
+    prefix : str, optional
+        Frame file name prefix of folder outputs (default ``"frame_"``).
+    compress : bool, optional
+        ``.npz`` outputs: zip-deflate the arrays (default False).
+
+    Notes
+    -----
+    PLY keeps vertex normals, colours and vertex/face attributes ((n,) scalars or (n, k) fixed-length
+    lists); PCD keeps normals, colours and attributes; OBJ keeps normals; OFF, STL, XYZ (normals
+    kept), NPY and LAS (colours, normals and attributes kept) store what the format can hold.
+    Writing a folder stages the frames in a temporary folder; frames named ``<prefix><number>.*``
+    left in an existing target folder from an earlier, longer sequence are removed.
+    """
+    unknown = set(kw) - set(_WRITE_OPTIONS)
+    if unknown:
+        raise InvalidInputError(
+            f"unexpected option(s) {', '.join(sorted(unknown))} for write; accepted: "
+            f"binary, {', '.join(_WRITE_OPTIONS)}."
+        )
+    geom = _as_geometry(obj)
+    if kw.get("pcd_format") is not None and kw["pcd_format"] not in PCD_FORMATS:
+        raise InvalidInputError(
+            f"`pcd_format` must be one of {', '.join(map(repr, PCD_FORMATS))}; got {kw['pcd_format']!r}."
+        )
+    p = Path(path)
+    if isinstance(geom, MeshAnimation | PointCloudSequence):
+        if _is_folder_target(path):
+            _write_folder(p, geom, binary=binary, **kw)
+            return
+        suffix, gz = split_suffix(p)
+        if suffix != ".npz":
+            raise _unsupported(p, suffix, [".npz", "<folder>/"])
+        _write_npz(p, geom, gz=gz, compress=bool(kw.get("compress", False)))
+        return
+    if _is_folder_target(path):
+        raise InvalidInputError(
+            f"{p}: a {type(geom).__name__} is written to a file with an extension "
+            f"(one of {', '.join(_MESH_WRITE if isinstance(geom, Mesh) else _POINTS_WRITE)})."
+        )
+    suffix, gz = split_suffix(p)
+    data = _serialise(p, geom, suffix, binary=binary, **kw)
+    write_bytes(p, data, gz)
+
+
+def _serialise(p: Path, geom: Mesh | PointCloud, suffix: str, *, binary: bool, **kw: Any) -> bytes:
+    dtype = kw.get("dtype")
+    if isinstance(geom, Mesh):
+        if suffix not in _MESH_WRITE:
+            extra = (
+                " To save only the vertices, write PointCloud(mesh.vertices) instead."
+                if suffix in _POINTS_WRITE
+                else ""
+            )
+            raise UnsupportedFormatError(
+                f"{p.name}: cannot write a Mesh as {suffix or '(no extension)'!r}; mesh formats: "
+                f"{', '.join(_MESH_WRITE)} (optionally .gz).{extra}"
+            )
+        V, F = geom.vertices, geom.faces
+        if suffix == ".ply":
+            from ._ply import write_ply
+
+            return write_ply(
+                V,
+                F,
+                normals=geom.vertex_normals,
+                colors=geom.vertex_colors,
+                vertex_attributes=geom.vertex_attributes,
+                face_attributes=geom.face_attributes,
+                binary=binary,
+                dtype=dtype if dtype is not None else np.float64,
+            )
+        if suffix == ".obj":
+            from ._obj import write_obj
+
+            return write_obj(V, F, normals=geom.vertex_normals)
+        if suffix == ".off":
+            from ._off import write_off
+
+            return write_off(V, F)
+        from ._simple import write_stl
+
+        return write_stl(V, F, binary=binary)
+    if suffix not in _POINTS_WRITE:
+        raise _unsupported(p, suffix, _POINTS_WRITE)
+    P = geom.points
+    if suffix == ".ply":
+        from ._ply import write_ply
+
+        return write_ply(
+            P,
+            None,
+            normals=geom.normals,
+            colors=geom.colors,
+            vertex_attributes=geom.attributes,
+            binary=binary,
+            dtype=dtype if dtype is not None else np.float64,
+        )
+    if suffix == ".pcd":
+        from ._pcd import write_pcd
+
+        fmt = kw.get("pcd_format") or ("binary" if binary else "ascii")
+        return write_pcd(
+            P,
+            normals=geom.normals,
+            colors=geom.colors,
+            attributes=geom.attributes,
+            pcd_format=fmt,
+            dtype=dtype if dtype is not None else np.float32,
+        )
+    if suffix == ".xyz":
+        from ._simple import write_xyz
+
+        return write_xyz(P, geom.normals)
+    if suffix == ".npy":
+        from ._simple import write_npy
+
+        return write_npy(P)
+    if suffix in (".las", ".laz"):
+        from ._las import write_las
+
+        return write_las(
+            P,
+            normals=geom.normals,
+            colors=geom.colors,
+            attributes=geom.attributes,
+            compressed=suffix == ".laz",
+            las_scale=kw.get("las_scale"),
+        )
+    if suffix == ".obj":
+        from ._obj import write_obj
+
+        return write_obj(P, None, normals=geom.normals)
+    from ._off import write_off
+
+    return write_off(P, None)
+
+
+def _write_npz(
+    p: Path, geom: MeshAnimation | PointCloudSequence, *, gz: bool, compress: bool
+) -> None:
+    buf = io.BytesIO()
+    save = np.savez_compressed if compress else np.savez
+    if isinstance(geom, MeshAnimation):
+        save(buf, vertices=geom.frames, faces=geom.faces)
+    elif geom.is_fixed_size():
+        save(buf, points=geom.as_array())
+    else:
+        save(
+            buf,
+            points=np.concatenate([f.points for f in geom.frames]),
+            counts=np.asarray(geom.n_points, dtype=np.int64),
+        )
+    write_bytes(p, buf.getvalue(), gz)
+
+
+def _write_folder(
+    folder: Path, geom: MeshAnimation | PointCloudSequence, *, binary: bool, **kw: Any
+) -> None:
+    fmt = str(kw.get("frame_format") or ".ply").lower()
+    if not fmt.startswith("."):
+        fmt = "." + fmt
+    prefix = str(kw.get("prefix", "frame_"))
+    if os.sep in prefix or "/" in prefix:
+        raise InvalidInputError(f"`prefix` must be a plain file name prefix; got {prefix!r}.")
+    suffix, _gz = split_suffix(Path("x" + fmt))
+    allowed = _MESH_WRITE if isinstance(geom, MeshAnimation) else _POINTS_WRITE
+    if suffix not in allowed:
+        raise UnsupportedFormatError(
+            f"`frame_format` {fmt!r} cannot hold {type(geom).__name__} frames; use one of "
+            f"{', '.join(allowed)} (optionally .gz)."
+        )
+    frames = list(geom) if isinstance(geom, MeshAnimation) else list(geom.frames)
+    width = max(3, len(str(len(frames) - 1)))
+    names = [f"{prefix}{t:0{width}d}{fmt}" for t in range(len(frames))]
+    opts = {k: v for k, v in kw.items() if k not in ("frame_format", "prefix", "compress")}
+    with atomic_dir(folder) as stage:
+        for name, fr in zip(names, frames):
+            sfx, gz = split_suffix(stage / name)
+            data = _serialise(stage / name, fr, sfx, binary=binary, **opts)
+            write_bytes(stage / name, data, gz)
+    # frames of an earlier, longer (or other-format) sequence with the same prefix would be read back
+    keep = set(names)
+    pattern = re.compile(re.escape(prefix) + r"\d+\.")
+    for f in folder.iterdir():
+        if f.name in keep or not f.is_file() or not pattern.match(f.name):
+            continue
+        if split_suffix(f)[0] in _SINGLE_READERS:
+            f.unlink()
+
+
+__all__ = [
+    "atomic_write",
+    "read",
+    "read_animation",
+    "read_mesh",
+    "read_point_cloud",
+    "read_sequence",
+    "supported_formats",
+    "write",
+]

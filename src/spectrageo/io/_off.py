@@ -1,0 +1,152 @@
+"""Object File Format (OFF, COFF, NOFF, CNOFF, STOFF...), read with numpy, written with meshio.
+
+The OFF readers of the libraries at hand do not fit: meshio's reads triangles only and rejects
+``COFF``; trimesh's drops vertex colours and regroups mixed triangle/quad faces (triangles first),
+which breaks per-face data. The format is three numbers per vertex line and ``k i1 ... ik`` per face
+line, so it is read here with :func:`numpy.loadtxt` on the vertex and face blocks (a per-line pass
+only for mixed polygon sizes), keeping vertex and face order exactly.
+
+Conventions: ``#`` starts a comment; the counts may sit on the keyword line (``OFF 8 6 0``); vertex
+colours of ``COFF`` become ``vertex_colors`` (uint8 when written as integers 0-255, floats otherwise);
+normals of ``NOFF`` become vertex normals; polygons are fan-triangulated in file order; per-face
+colours are ignored. ``4OFF``/``nOFF`` (other dimensions) are rejected.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+import tempfile
+
+import numpy as np
+
+from .._errors import InvalidInputError, UnsupportedFormatError
+from ._common import fan_triangulate, text_colors
+from ._raw import RawGeometry
+
+_KEYWORD = re.compile(r"(ST)?(C)?(N)?(4)?(n)?OFF(BINARY)?")
+
+
+def _table(lines: list[str]) -> np.ndarray | None:
+    if not lines:
+        return np.zeros((0, 0))
+    try:
+        return np.loadtxt(io.StringIO("\n".join(lines)), dtype=np.float64, ndmin=2)
+    except ValueError:
+        return None
+
+
+def read_off(raw: bytes, name: str) -> RawGeometry:
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    lines = []
+    for line in text.splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            lines.append(line)
+    if not lines:
+        raise InvalidInputError(f"{name}: empty OFF file.")
+    first = lines[0].split()
+    m = _KEYWORD.fullmatch(first[0])
+    if m is None:
+        raise InvalidInputError(f"{name}: not an OFF file (first keyword {first[0][:20]!r}).")
+    st, has_c, has_n, four, ndim, binary = m.groups()
+    if four or ndim or binary:
+        raise UnsupportedFormatError(
+            f"{name}: OFF variant {first[0]!r} is not supported (3-D ascii OFF only)."
+        )
+    if len(first) > 1:
+        counts, start = first[1:], 1
+    else:
+        if len(lines) < 2:
+            raise InvalidInputError(f"{name}: OFF file has no counts line.")
+        counts, start = lines[1].split(), 2
+    try:
+        nv, nf = int(counts[0]), int(counts[1])
+    except (IndexError, ValueError) as exc:
+        raise InvalidInputError(
+            f"{name}: malformed OFF counts line {' '.join(counts)!r} (expected 'n_vertices n_faces n_edges')."
+        ) from exc
+    if nv < 0 or nf < 0:
+        raise InvalidInputError(f"{name}: negative counts in OFF header ({nv}, {nf}).")
+    if nv == 0:
+        raise InvalidInputError(f"{name}: OFF file has no vertices.")
+    vlines = lines[start : start + nv]
+    if len(vlines) < nv:
+        raise InvalidInputError(
+            f"{name}: truncated OFF: {nv} vertices declared, {len(vlines)} vertex lines found."
+        )
+    vt = _table(vlines)
+    if vt is None:
+        raise InvalidInputError(
+            f"{name}: malformed OFF vertex lines (non-numeric values or varying column counts)."
+        )
+    base = 3 + (3 if has_n else 0) + (2 if st else 0)
+    ncol = vt.shape[1]
+    n_color = ncol - base
+    if ncol < base or (has_c and n_color not in (3, 4)) or (not has_c and n_color not in (0,)):
+        if not has_c and n_color > 0 and ncol >= 3:
+            n_color = 0  # extra values on plain OFF vertex lines are ignored
+        else:
+            raise InvalidInputError(
+                f"{name}: OFF vertex lines have {ncol} values; {first[0]} expects {base}"
+                + (" + 3 or 4 colour values." if has_c else ".")
+            )
+    V = vt[:, :3]
+    c = 3
+    normals = None
+    if has_n:
+        normals = vt[:, 3:6]
+        c = 6
+    colors = text_colors(vt[:, c : c + n_color]) if has_c and n_color else None
+    flines = lines[start + nv : start + nv + nf]
+    if len(flines) < nf:
+        raise InvalidInputError(
+            f"{name}: truncated OFF: {nf} faces declared, {len(flines)} face lines found."
+        )
+    faces = _faces(flines, name)
+    return RawGeometry(V, faces, normals, colors)
+
+
+def _faces(flines: list[str], name: str) -> np.ndarray:
+    if not flines:
+        return np.zeros((0, 3), dtype=np.int64)
+    ft = _table(flines)
+    if ft is not None and ft.shape[1] >= 1:
+        k = ft[:, 0]
+        if (k == k[0]).all() and k[0] == int(k[0]) and ft.shape[1] >= 1 + int(k[0]):
+            kk = int(k[0])
+            idx = ft[:, 1 : 1 + kk]
+            if (idx != np.round(idx)).any():
+                raise InvalidInputError(f"{name}: OFF face indices must be integers.")
+            return fan_triangulate(idx.astype(np.int64), name)[0]
+    polys = []
+    for i, line in enumerate(flines):
+        tok = line.split()
+        try:
+            k = int(tok[0])
+            idx = [int(t) for t in tok[1 : 1 + k]]
+        except (ValueError, IndexError) as exc:
+            raise InvalidInputError(f"{name}: malformed OFF face line {i}: {line[:60]!r}.") from exc
+        if len(idx) != k:
+            raise InvalidInputError(
+                f"{name}: OFF face line {i} declares {k} vertices but lists {len(idx)}."
+            )
+        polys.append(idx)
+    return fan_triangulate(polys, name)[0]
+
+
+def write_off(V: np.ndarray, faces: np.ndarray | None) -> bytes:
+    import meshio
+
+    cells = [("triangle", np.asarray(faces, dtype=np.int64))] if faces is not None else []
+    mesh = meshio.Mesh(np.asarray(V, dtype=np.float64), cells)
+    # meshio's OFF writer opens a path itself; write to a private temporary file and return its bytes
+    with tempfile.TemporaryDirectory(prefix="spectrageo-off-") as d:
+        tmp = os.path.join(d, "mesh.off")
+        meshio.off.write(tmp, mesh)
+        with open(tmp, "rb") as fh:
+            return fh.read()

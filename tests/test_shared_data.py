@@ -1,0 +1,294 @@
+"""Every file of the shared data folder reads, with the counts the data README gives.
+
+Counts below were checked against the README (fandisk 6475 v, armadillo 26k -> 26002, dragon
+437,645 / 100,250 / 22,998 v, crane 175 x 10002, horse-gallop 48 x 8431, horse-collapse 53 frames,
+chickenCrossing 400 x 3030, fragment.pcd ~113k -> 113,662, autzen 110k -> 110,000, face000 85,849,
+b9 22,300, parasaurolophus 6,700 / 28,291) and completed with the real counts of the other files.
+Organized Kinect PCD frames (640 x 480) hold NaN for pixels without depth; they read with those
+points dropped (PCD default), so the expected count is the number of valid points.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spectrageo import InvalidInputError, io
+from spectrageo.datasets import data_dir, denoise_pairs
+from spectrageo.geometry import Mesh, MeshAnimation, PointCloud, PointCloudSequence
+
+# Files that are not geometry (licences, notes, annotations, poses); skipped on purpose.
+NON_GEOMETRY_SUFFIXES = {".csv", ".yml", ".txt", ".md", ".conf", ".log"}
+NON_GEOMETRY_NAMES = {"README", "LICENSE_laspy", "LICENSE_abc-dataset-repo"}
+
+# relative path -> (type, counts...): mesh (n_vertices, n_faces), points (n_points,),
+# animation (n_frames, n_vertices, n_faces)
+EXPECTED: dict[str, tuple] = {
+    "animations/cat-poses.npz": ("animation", 9, 7207, 14410),
+    "animations/chickenCrossing.npz": ("animation", 400, 3030, 5664),
+    "animations/crane.npz": ("animation", 175, 10002, 20000),
+    "animations/horse-collapse.npz": ("animation", 53, 8431, 16843),
+    "animations/horse-gallop.npz": ("animation", 48, 8431, 16843),
+    "animations/lion-poses.npz": ("animation", 9, 5000, 9996),
+    # STL: 3 corners per triangle unless weld=True (welded counts in STL_WELDED)
+    "cad/abc_00000050.stl": ("mesh", 3 * 7614, 7614),
+    "cad/angle_block.STL": ("mesh", 3 * 704, 704),
+    "cad/featuretype.STL": ("mesh", 3 * 3476, 3476),
+    "cad/octagonal_pocket.stl": ("mesh", 3 * 3262, 3262),
+    "cad/plate_holes.STL": ("mesh", 3 * 1252, 1252),
+    "cad/cycloidal.ply": ("mesh", 21384, 43368),
+    "cad/joint.obj": ("mesh", 20902, 41808),
+    "cad/partLp.obj": ("mesh", 4261, 8530),
+    "cad/screwdriver.obj": ("mesh", 27152, 54300),
+    "denoise/Block0.4/Noisy.obj": ("mesh", 8771, 17550),
+    "denoise/Block0.4/Original.obj": ("mesh", 8771, 17550),
+    "denoise/BlockN1/Noisy.obj": ("mesh", 8771, 17550),
+    "denoise/BlockN1/Original.obj": ("mesh", 8771, 17550),
+    "denoise/Bunny0.2/Noisy.obj": ("mesh", 34834, 69451),
+    "denoise/Bunny0.2/Original.obj": ("mesh", 34834, 69451),
+    "denoise/Fandisk0.3/Noisy.obj": ("mesh", 6475, 12946),
+    "denoise/Fandisk0.3/Original.obj": ("mesh", 6475, 12946),
+    "denoise/Fandisk0.7/Noisy.obj": ("mesh", 6475, 12946),
+    "denoise/Fandisk0.7/Original.obj": ("mesh", 6475, 12946),
+    "denoise/SharpSphere0.3/Noisy.obj": ("mesh", 10443, 20882),
+    "denoise/SharpSphere0.3/Original.obj": ("mesh", 10443, 20882),
+    "denoise/TrimStar0.5/Noisy.obj": ("mesh", 5192, 10384),
+    "denoise/TrimStar0.5/Original.obj": ("mesh", 5192, 10384),
+    "denoise/Twelve0.5Impulsive/Noisy.obj": ("mesh", 4610, 9216),
+    "denoise/Twelve0.5Impulsive/Original.obj": ("mesh", 4610, 9216),
+    "denoise/real_scans/angel.obj": ("mesh", 24566, 48090),
+    "denoise/real_scans/iron.ply": ("mesh", 85574, 168285),
+    "denoise/real_scans/rabbit.obj": ("mesh", 37394, 73679),
+    "holes/elephant-with-holes.off": ("mesh", 2798, 4463),
+    "holes/elephant.off": ("mesh", 2775, 5558),
+    "holes/holes.off": ("mesh", 4291, 8288),
+    "holes/mech-holes-shark.off": ("mesh", 5246, 10192),
+    "meshes/ChineseDragon-10kv.off": ("mesh", 10000, 19994),
+    "meshes/anchor_dense.off": ("mesh", 3793, 7598),
+    "meshes/armadillo.off": ("mesh", 26002, 52000),
+    "meshes/bear.off": ("mesh", 13826, 27648),
+    "meshes/blade.off": ("mesh", 8231, 16222),
+    "meshes/bull.off": ("mesh", 6200, 12396),
+    "meshes/camel.off": ("mesh", 9770, 19536),
+    "meshes/cheese.off": ("mesh", 8629, 17786),
+    "meshes/cow.off": ("mesh", 2904, 5804),
+    "meshes/cube-meshed.off": ("mesh", 866, 1728),
+    "meshes/dino.off": ("mesh", 3916, 7828),
+    "meshes/diplodocus.off": ("mesh", 23982, 47960),
+    "meshes/dragon_vrip.ply.gz": ("mesh", 437645, 871414),
+    "meshes/dragon_vrip_res2.ply.gz": ("mesh", 100250, 202520),
+    "meshes/dragon_vrip_res3.ply.gz": ("mesh", 22998, 47794),
+    "meshes/elephant.off": ("mesh", 2775, 5558),
+    "meshes/fandisk.off": ("mesh", 6475, 12946),
+    "meshes/fandisk_large.off": ("mesh", 15843, 31682),
+    "meshes/joint.off": ("mesh", 221, 446),
+    "meshes/knot2.off": ("mesh", 5760, 11520),
+    "meshes/lion.off": ("mesh", 7529, 14859),
+    "meshes/man.off": ("mesh", 17495, 34986),
+    "meshes/mushroom.off": ("mesh", 2337, 4608),
+    "meshes/octahedron.off": ("mesh", 6, 8),
+    "meshes/rocker-arm.obj": ("mesh", 10044, 20088),
+    "meshes/rotor.off": ("mesh", 600, 1200),
+    "meshes/spot.obj": ("mesh", 2930, 5856),
+    "meshes/stanford-bunny.obj": ("mesh", 35947, 69451),
+    "meshes/turbine.off": ("mesh", 9210, 18460),
+    "saliency/block.obj": ("mesh", 8771, 17550),
+    "saliency/block_gt_test.obj": ("mesh", 8771, 17550),
+    "saliency/cad.obj": ("mesh", 19398, 38792),
+    "saliency/cad_gt_test.obj": ("mesh", 19398, 38792),
+    "saliency/casting.obj": ("mesh", 18410, 36852),
+    "saliency/casting_gt_test.obj": ("mesh", 18410, 36852),
+    "saliency/fandisk.obj": ("mesh", 6475, 12946),
+    "saliency/fandisk_gt_test.obj": ("mesh", 6475, 12946),
+    "scans/b9.ply": ("points", 22300),
+    "scans/bunny/bun000.ply.gz": ("points", 40256),
+    "scans/bunny/bun045.ply.gz": ("points", 40097),
+    "scans/bunny/bun090.ply.gz": ("points", 30379),
+    "scans/bunny/bun180.ply.gz": ("points", 40251),
+    "scans/bunny/bun270.ply.gz": ("points", 31701),
+    "scans/bunny/bun315.ply.gz": ("points", 35336),
+    "scans/bunny/chin.ply.gz": ("points", 37738),
+    "scans/bunny/ear_back.ply.gz": ("points", 32193),
+    "scans/bunny/top2.ply.gz": ("points", 38298),
+    "scans/bunny/top3.ply.gz": ("points", 36023),
+    "scans/lidar/autzen_trim.laz": ("points", 110000),
+    "scans/pcl/cturtle.pcd": ("points", 167198),
+    "scans/pcl/grabber_sequence/frame_20121214T142255.814212.pcd": ("points", 307200 - 35625),
+    "scans/pcl/grabber_sequence/frame_20121214T142256.068683.pcd": ("points", 307200 - 35805),
+    "scans/pcl/grabber_sequence/frame_20121214T142256.332395.pcd": ("points", 307200 - 35872),
+    "scans/pcl/milk.pcd": ("points", 13704),
+    "scans/pcl/milk_cartoon_all_small_clorox.pcd": ("points", 307200 - 65793),
+    "scans/pcl/milk_color.pcd": ("points", 13704),
+    "scans/pcl/noisy_slice_displaced.pcd": ("points", 3782),
+    "scans/pcl/office1.pcd": ("points", 307200 - 52744),
+    "scans/pcl/table_scene_mug_stereo_textured.pcd": ("points", 307200 - 97920),
+    "scans/rangemap/face000.ply": ("mesh", 85849, 166259),
+    "scans/registration/open3d/cloud_bin_0.pcd": ("points", 3903),
+    "scans/registration/open3d/cloud_bin_1.pcd": ("points", 3458),
+    "scans/registration/open3d/fragment.pcd": ("points", 113662),
+    "scans/registration/uwa/parasaurolophus_6700.ply": ("mesh", 6700, 9140),
+    "scans/registration/uwa/parasaurolophus_low_normals2.ply": ("mesh", 28291, 54839),
+}
+
+# Not geometry: licences and notes, the ABC feature annotation (.yml), per-face saliency values
+# (.csv), the bunny scan poses (bun.conf) and the Open3D registration initialisation (init.log).
+SKIPPED = {
+    "README.md",
+    "cad/LICENSE_abc-dataset-repo",
+    "cad/LICENSE_trimesh.md",
+    "cad/abc_00000050_features.yml",
+    "denoise/LICENSE_GuidedDenoising.txt",
+    "meshes/COPYRIGHT_CGAL_data.txt",
+    "saliency/README_source.md",
+    "saliency/block_saliencyValues_of_centroids.csv",
+    "saliency/cad_saliencyValues_of_centroids.csv",
+    "saliency/casting_saliencyValues_of_centroids.csv",
+    "saliency/fandisk_saliencyValues_of_centroids.csv",
+    "scans/bunny/README",
+    "scans/bunny/bun.conf",
+    "scans/lidar/LICENSE_laspy",
+    "scans/pcl/LICENSE.txt",
+    "scans/rangemap/LICENSE_pymeshlab.txt",
+    "scans/registration/open3d/LICENSE_Open3D.txt",
+    "scans/registration/open3d/init.log",
+}
+
+STL_WELDED = {
+    "cad/abc_00000050.stl": 3795,
+    "cad/angle_block.STL": 398,
+    "cad/featuretype.STL": 2010,
+    "cad/octagonal_pocket.stl": 1658,
+    "cad/plate_holes.STL": 618,
+}
+
+
+def _is_geometry(path) -> bool:
+    suffixes = [s.lower() for s in path.suffixes]
+    return not (
+        path.name in NON_GEOMETRY_NAMES or not suffixes or suffixes[-1] in NON_GEOMETRY_SUFFIXES
+    )
+
+
+def _discover() -> list[str]:
+    root = data_dir()
+    if root is None:
+        return []
+    return sorted(
+        str(p.relative_to(root)) for p in root.rglob("*") if p.is_file() and _is_geometry(p)
+    )
+
+
+FILES = _discover()
+
+
+def test_table_matches_folder(shared_data):
+    """Every geometry file is in the table and every table entry exists (no stale counts)."""
+    assert FILES, "no geometry files found in the shared data folder"
+    assert set(FILES) == set(EXPECTED)
+    skipped = sorted(
+        str(p.relative_to(shared_data))
+        for p in shared_data.rglob("*")
+        if p.is_file() and not _is_geometry(p)
+    )
+    # the skipped files are exactly the notes, licences, annotations and poses
+    assert skipped == sorted(SKIPPED)
+
+
+@pytest.mark.parametrize("rel", FILES)
+def test_shared_file_reads_with_expected_counts(shared_data, rel):
+    obj = io.read(shared_data / rel)
+    kind, *counts = EXPECTED[rel]
+    if kind == "mesh":
+        assert isinstance(obj, Mesh)
+        assert (obj.n_vertices, obj.n_faces) == tuple(counts)
+        assert np.isfinite(obj.vertices).all()
+        assert obj.faces.min() >= 0 and obj.faces.max() < obj.n_vertices
+    elif kind == "points":
+        assert isinstance(obj, PointCloud)
+        assert obj.n_points == counts[0]
+        assert np.isfinite(obj.points).all()
+    else:
+        assert isinstance(obj, MeshAnimation)
+        assert (obj.n_frames, obj.n_vertices, obj.n_faces) == tuple(counts)
+
+
+@pytest.mark.parametrize("rel", sorted(STL_WELDED))
+def test_stl_weld_counts(shared_data, rel):
+    raw = io.read_mesh(shared_data / rel)
+    welded = io.read_mesh(shared_data / rel, weld=True)
+    assert welded.n_vertices == STL_WELDED[rel] and welded.n_faces == raw.n_faces
+    np.testing.assert_array_equal(welded.vertices[welded.faces], raw.vertices[raw.faces])
+
+
+def test_denoise_pairs_share_connectivity(shared_data):
+    pairs = denoise_pairs(shared_data)
+    assert len(pairs) == 8
+    for name, noisy_path, orig_path in pairs:
+        noisy, orig = io.read_mesh(noisy_path), io.read_mesh(orig_path)
+        assert noisy.n_vertices == orig.n_vertices, name
+        np.testing.assert_array_equal(noisy.faces, orig.faces, err_msg=name)
+        # same vertex order: the noise moves vertices by a fraction of the model size
+        d = np.linalg.norm(noisy.vertices - orig.vertices, axis=1)
+        size = np.linalg.norm(np.ptp(orig.vertices, axis=0))
+        assert 0 < d.mean() < 0.05 * size, name
+
+
+def test_saliency_models_match_ground_truth_meshes(shared_data):
+    for name in ("block", "cad", "casting", "fandisk"):
+        mesh = io.read_mesh(shared_data / "saliency" / f"{name}.obj")
+        gt = io.read_mesh(shared_data / "saliency" / f"{name}_gt_test.obj")
+        np.testing.assert_array_equal(mesh.faces, gt.faces)
+        values = np.loadtxt(
+            shared_data / "saliency" / f"{name}_saliencyValues_of_centroids.csv", delimiter=","
+        )
+        assert len(values) == mesh.n_faces  # one saliency value per face centroid, face order kept
+
+
+def test_grabber_sequence_folder(shared_data):
+    seq = io.read(shared_data / "scans" / "pcl" / "grabber_sequence")
+    assert isinstance(seq, PointCloudSequence)
+    assert seq.n_points == [307200 - 35625, 307200 - 35805, 307200 - 35872]
+    for frame in seq:
+        assert frame.colors is not None and frame.colors.shape[1] == 4
+        idx = frame.attributes["source_index"]
+        assert idx.min() >= 0 and idx.max() < 640 * 480 and (np.diff(idx) > 0).all()
+
+
+def test_organized_pcd_nan_count(shared_data):
+    with pytest.raises(InvalidInputError, match="52744 of 307200 points have NaN"):
+        io.read(shared_data / "scans" / "pcl" / "office1.pcd", nan_points="raise")
+
+
+def test_pcd_fields_decoded(shared_data):
+    frag = io.read(shared_data / "scans" / "registration" / "open3d" / "fragment.pcd")
+    assert frag.normals is not None and "curvature" in frag.attributes
+    np.testing.assert_allclose(np.linalg.norm(frag.normals, axis=1), 1.0, atol=1e-3)
+    turtle = io.read(shared_data / "scans" / "pcl" / "cturtle.pcd")
+    assert turtle.attributes["intensity"].shape == (167198,)
+    milk = io.read(shared_data / "scans" / "pcl" / "milk_color.pcd")
+    assert milk.colors.dtype == np.uint8 and milk.colors.shape == (13704, 4)
+
+
+def test_autzen_las_fields(shared_data):
+    pytest.importorskip("laspy")
+    pytest.importorskip("lazrs")
+    pc = io.read(shared_data / "scans" / "lidar" / "autzen_trim.laz")
+    assert pc.colors.dtype == np.uint8 and pc.colors.shape == (110000, 3)
+    assert {"intensity", "classification", "gps_time"} <= set(pc.attributes)
+
+
+def test_ply_properties_decoded(shared_data):
+    face = io.read_mesh(shared_data / "scans" / "rangemap" / "face000.ply")
+    assert {"quality", "flags"} <= set(face.vertex_attributes)
+    assert {"quality", "flags"} <= set(face.face_attributes)
+    cyc = io.read_mesh(shared_data / "cad" / "cycloidal.ply")
+    assert cyc.vertex_colors.shape == (21384, 4) and "red" in cyc.face_attributes
+    para = io.read_mesh(shared_data / "scans" / "registration" / "uwa" / "parasaurolophus_6700.ply")
+    assert para.vertex_normals is not None
+
+
+def test_animation_npz_as_sequence(shared_data):
+    seq = io.read_sequence(shared_data / "animations" / "lion-poses.npz")
+    anim = io.read_animation(shared_data / "animations" / "lion-poses.npz")
+    assert seq.n_points == [5000] * 9
+    np.testing.assert_array_equal(seq.as_array(), anim.frames)
