@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 import sys
 import time
@@ -412,3 +413,17 @@ def register_all(sub) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--methods", default=None, help="comma-separated subset of denoisers")
     p.set_defaults(func=cmd_demo)
+
+    for name in _COMMAND_MODULES:
+        try:
+            mod = importlib.import_module(f"spectrageo.cli.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"spectrageo.cli.{name}":
+                raise
+            continue
+        mod.register(sub)
+
+
+# Further command groups live in their own modules, each exposing ``register(sub)``:
+# saliency/features/curves/simplify/inspect, the viewer.
+_COMMAND_MODULES = ("saliency_cmds", "view_cmd")

@@ -73,9 +73,20 @@ def read_stl(raw: bytes, name: str) -> RawGeometry:
     """
     from trimesh.exchange import stl
 
+    is_binary = len(raw) >= 84 and 84 + 50 * int(np.frombuffer(raw, "<u4", 1, 80)[0]) == len(raw)
+    if not is_binary:
+        try:
+            text_ok = raw[:5].lower() == b"solid" and raw.decode("ascii") is not None
+        except UnicodeDecodeError:
+            text_ok = False
+        if not text_ok:
+            raise InvalidInputError(
+                f"{name}: not a valid STL file (neither a binary STL whose size matches its "
+                "triangle count nor ascii 'solid' text; truncated or not STL)."
+            )
     try:
-        d = stl.load_stl(io.BytesIO(raw))
-    except (ValueError, stl.HeaderError, IndexError, TypeError, UnicodeDecodeError) as exc:
+        d = stl.load_stl_binary(io.BytesIO(raw)) if is_binary else stl.load_stl(io.BytesIO(raw))
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many types (even ImportError) on garbage
         raise InvalidInputError(f"{name}: malformed or truncated STL ({exc_text(exc)}).") from exc
     parts = list(d["geometry"].values()) if "geometry" in d else [d]
     parts = [p for p in parts if isinstance(p, dict) and "vertices" in p and len(p["vertices"])]
