@@ -10,10 +10,13 @@ points dropped (PCD default), so the expected count is the number of valid point
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from spectrageo import InvalidInputError, io
+from spectrageo.cli.main import main as cli
 from spectrageo.datasets import data_dir, denoise_pairs
 from spectrageo.geometry import Mesh, MeshAnimation, PointCloud, PointCloudSequence
 
@@ -195,21 +198,27 @@ def test_table_matches_folder(shared_data):
 
 
 @pytest.mark.parametrize("rel", FILES)
-def test_shared_file_reads_with_expected_counts(shared_data, rel):
+def test_shared_file_reads_with_expected_counts(shared_data, rel, capsys):
+    """Through ``spectrageo info --json`` (the user's path) and the Python reader."""
+    assert cli(["info", str(shared_data / rel), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
     obj = io.read(shared_data / rel)
     kind, *counts = EXPECTED[rel]
     if kind == "mesh":
-        assert isinstance(obj, Mesh)
+        assert isinstance(obj, Mesh) and info["kind"] == "mesh"
         assert (obj.n_vertices, obj.n_faces) == tuple(counts)
+        assert (info["n_vertices"], info["n_faces"], info["n_frames"]) == (*counts, 1)
         assert np.isfinite(obj.vertices).all()
         assert obj.faces.min() >= 0 and obj.faces.max() < obj.n_vertices
     elif kind == "points":
-        assert isinstance(obj, PointCloud)
-        assert obj.n_points == counts[0]
+        assert isinstance(obj, PointCloud) and info["kind"] == "point_cloud"
+        assert obj.n_points == counts[0] == info["n_vertices"]
         assert np.isfinite(obj.points).all()
     else:
-        assert isinstance(obj, MeshAnimation)
+        assert isinstance(obj, MeshAnimation) and info["kind"] == "animation"
         assert (obj.n_frames, obj.n_vertices, obj.n_faces) == tuple(counts)
+        assert (info["n_frames"], info["n_vertices"], info["n_faces"]) == tuple(counts)
+    assert np.all(np.isfinite(info["bbox"]))
 
 
 @pytest.mark.parametrize("rel", sorted(STL_WELDED))

@@ -1,0 +1,35 @@
+"""Synthetic noise and corruption with ground truth (Sections 3.4, 4.10).
+
+Design: the individual generators return a result object carrying the ground truth --
+:class:`NoiseResult` (``vertices``, ``displacement``, ``mask``, ``scale``, ``labels``) for noise,
+:class:`CorruptionResult` (kept ``vertices``/``faces``, ``removed`` mask, ``index_map``, ``kept``) for
+missing data -- while :func:`add_outliers` returns ``(P_out, labels)``. The dispatchers :func:`apply`
+and :func:`animation_noise` return plain arrays of noisy positions (``return_result=True`` gives the
+NoiseResult). Every random choice takes ``rng`` (seed or Generator; None = seed 0); inputs are never
+modified.
+
+Levels are relative to the mean edge length (Eq. 4.36): ``sigma = level * l``.
+"""
+
+from ._core import NoiseResult
+from .animation import ANIMATION_KINDS, animation_noise, spatial_mask
+from .corruption import CorruptionResult, add_outliers, make_holes, remove_vertices
+from .static import KINDS, apply, gaussian, impulsive, quantize, region_varying, uniform
+
+__all__ = [
+    "ANIMATION_KINDS",
+    "KINDS",
+    "CorruptionResult",
+    "NoiseResult",
+    "add_outliers",
+    "animation_noise",
+    "apply",
+    "gaussian",
+    "impulsive",
+    "make_holes",
+    "quantize",
+    "region_varying",
+    "remove_vertices",
+    "spatial_mask",
+    "uniform",
+]
