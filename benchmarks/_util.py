@@ -30,8 +30,12 @@ def run_isolated(code: str, *, timeout: float = 3600) -> dict:
         """
     )
     proc = subprocess.run(
-        [sys.executable, "-c", wrapper], input=textwrap.dedent(code), capture_output=True, text=True,
-        timeout=timeout, env={**os.environ, "SPECTRAGEO_PROGRESS": "0"},
+        [sys.executable, "-c", wrapper],
+        input=textwrap.dedent(code),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, "SPECTRAGEO_PROGRESS": "0"},
     )
     if proc.returncode != 0:
         raise RuntimeError(f"benchmark child failed:\n{proc.stderr[-4000:]}")

@@ -12,7 +12,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _util import machine_line, run_isolated, write_section  # noqa: E402
-
 from spectrageo.datasets import data_dir  # noqa: E402
 
 READ = """
@@ -48,13 +47,29 @@ def main() -> None:
     dragon = str(data / "meshes" / "dragon_vrip.ply.gz")
     rows = []
     r = run_isolated(READ.format(path=dragon))
-    rows.append(("read dragon_vrip.ply.gz", f"{r['n']:,} v / {r['m']:,} f", r["time_s"], r["peak_rss_mb"]))
+    rows.append(
+        ("read dragon_vrip.ply.gz", f"{r['n']:,} v / {r['m']:,} f", r["time_s"], r["peak_rss_mb"])
+    )
     for kind in ("binary", "cotangent"):
         r = run_isolated(LAPLACIAN.format(path=dragon, kind=kind))
-        rows.append((f"{kind} Laplacian of the dragon (incl. read)", f"nnz {r['nnz']:,}", r["time_s"], r["peak_rss_mb"]))
+        rows.append(
+            (
+                f"{kind} Laplacian of the dragon (incl. read)",
+                f"nnz {r['nnz']:,}",
+                r["time_s"],
+                r["peak_rss_mb"],
+            )
+        )
     n, k = 2_000_000, 10
     r = run_isolated(KNN.format(n=n, k=k))
-    rows.append((f"kNN graph, {n:,} points, k = {k} (symmetrised)", f"nnz {r['nnz']:,}", r["time_s"], r["peak_rss_mb"]))
+    rows.append(
+        (
+            f"kNN graph, {n:,} points, k = {k} (symmetrised)",
+            f"nnz {r['nnz']:,}",
+            r["time_s"],
+            r["peak_rss_mb"],
+        )
+    )
     lines = [
         "## Foundation: I/O, Laplacians, kNN graph",
         "",

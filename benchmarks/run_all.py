@@ -21,8 +21,30 @@ SECTIONS = [
     ("core", [sys.executable, str(HERE / "core.py")]),
     ("lowpass", [sys.executable, str(HERE / "lowpass.py")]),
     ("rpca_large", [sys.executable, str(HERE / "rpca_large.py")]),
-    ("denoise", [sys.executable, "-m", "spectrageo.cli.main", "evaluate", "denoise", "--out", str(HERE / "_out" / "denoise")]),
-    ("outliers", [sys.executable, "-m", "spectrageo.cli.main", "evaluate", "outliers", "--out", str(HERE / "_out" / "outliers")]),
+    (
+        "denoise",
+        [
+            sys.executable,
+            "-m",
+            "spectrageo.cli.main",
+            "evaluate",
+            "denoise",
+            "--out",
+            str(HERE / "_out" / "denoise"),
+        ],
+    ),
+    (
+        "outliers",
+        [
+            sys.executable,
+            "-m",
+            "spectrageo.cli.main",
+            "evaluate",
+            "outliers",
+            "--out",
+            str(HERE / "_out" / "outliers"),
+        ],
+    ),
     ("outliers_large", [sys.executable, str(HERE / "outliers_large.py")]),
 ]
 
