@@ -1,0 +1,183 @@
+"""Low-rank matrix completion by the augmented Lagrange multiplier method (Section 5.3.1)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from .._validation import as_rng, check_positive
+from ._common import check_on_nonconvergence, check_tol_iter, report_nonconvergence, top_svd
+
+__all__ = ["CompletionResult", "complete_matrix"]
+
+
+@dataclass(frozen=True)
+class CompletionResult:
+    """Result of :func:`complete_matrix`.
+
+    Attributes
+    ----------
+    completed : (m, n) ndarray
+        The completed matrix (observed entries equal to the data when ``keep_observed``).
+    n_iter : int
+    converged : bool
+    residual : float
+        ``||P_omega(M - E)||_F / ||P_omega(M)||_F`` at the last iteration (the stopping rule).
+    rank : int
+        Number of singular values kept in the last low-rank estimate ``E``.
+    n_singular : int
+        The progressive singular-value count ``n_lambda`` of Eq. 5.89 at the end.
+    """
+
+    completed: np.ndarray = field(repr=False)
+    n_iter: int
+    converged: bool
+    residual: float
+    rank: int = 0
+    n_singular: int = 0
+
+
+def complete_matrix(
+    M: Any,
+    observed: Any,
+    *,
+    tol: float = 1e-7,
+    max_iter: int = 500,
+    mu: float | None = None,
+    rho: float = 1.05,
+    sv_start: int | None = None,
+    sv_max: int | None = None,
+    keep_observed: bool = True,
+    on_nonconvergence: str = "warn",
+    rng: Any = None,
+) -> CompletionResult:
+    r"""Fill the unobserved entries of a low-rank matrix (Eq. 5.80-5.89).
+
+    Solves ``min ||E||_*  s.t.  E + S = D, P_omega(S) = 0`` (Eq. 5.80; ``D = P_omega(M)``, zeros at
+    the unknown entries as in Eq. 5.78) with the augmented Lagrangian of Eq. 5.81 and the updates
+
+    - ``(U, Lambda, V) = svd(D - S + Y / mu)`` and ``E = U S_{1/mu}[Lambda] V^T`` restricted to the
+      ``n_lambda`` leading singular values (Eq. 5.85-5.86);
+    - ``S = P_{omega-bar}(D - E + Y / mu) = -P_{omega-bar}(E)`` (Eq. 5.87; ``D`` and ``Y`` vanish off
+      ``omega``. Eq. 5.88 prints ``P_{omega-bar}(E) - E``, which is ``-P_omega(E)`` and contradicts
+      ``P_omega(S) = 0``: a sign/complement typo);
+    - ``Y <- Y + mu (D - E - S)``, ``mu <- rho mu`` (Eq. 5.84),
+
+    until ``||D - E - S||_F / ||D||_F < tol``. The thesis gives no values for ``mu`` and ``rho``:
+    ``mu_0 = 1 / ||D||_2`` follows Lin, Chen & Ma (2010); their growth ``rho = 1.2172 + 1.8588 p``
+    (``p`` the observed fraction) relies on their own rank prediction and, with the singular-value
+    count of Eq. 5.89, grows ``mu`` too fast and over-fits (rank 108 instead of 5 and 2.5e-2
+    relative error on a 150 x 150 rank-5 matrix with 60 % observed), so the default is the slower
+    ``rho = 1.05`` (exact recovery to ~1e-7 in 35-200 iterations on the cases tested).
+
+    Progressive scheme (Eq. 5.89): with ``k = min(m, n)``, ``n_lambda`` starts at ``floor(0.5 k)``
+    and grows by one per iteration, up to ``floor(0.75 k)``, unless
+    ``lambda_{n_lambda} / lambda_{n_lambda - 1} > 0.995`` (the trailing computed singular values
+    have flattened out). Only ``n_lambda`` singular triplets are computed: a full SVD for small
+    matrices, ARPACK (``scipy.sparse.linalg.svds``) when ``n_lambda`` is small compared with ``k``
+    (set ``sv_start``/``sv_max`` lower for large matrices of low rank).
+
+    Parameters
+    ----------
+    M : (m, n) array_like
+        Data; entries outside ``observed`` are ignored (they may be NaN).
+    observed : (m, n) array_like of bool
+        Mask of the known entries ``omega``.
+    tol : float
+        Relative residual on the observed entries that stops the iteration.
+    max_iter : int
+    mu : float, optional
+        Initial penalty (default ``1 / ||D||_2``).
+    rho : float
+        Growth factor of ``mu`` (``>= 1``).
+    sv_start, sv_max : int, optional
+        Initial and maximal ``n_lambda`` (defaults ``floor(0.5 k)`` and ``floor(0.75 k)``, at least 1).
+    keep_observed : bool
+        Replace the estimate by the data on the observed entries (as done for the mesh
+        reconstruction in Section 5.3.1); ``False`` returns the low-rank estimate ``E`` itself.
+    on_nonconvergence : {"warn", "raise", "ignore"}
+        See :func:`spectrageo.linalg.rpca`.
+    rng : int, Generator or None
+        Start vectors of the partial SVD.
+
+    Returns
+    -------
+    CompletionResult
+    """
+    check_on_nonconvergence(on_nonconvergence)
+    check_tol_iter(tol, max_iter)
+    try:
+        D = np.array(M, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(f"`M` must be a numeric 2-D array; got {type(M).__name__}.") from exc
+    if D.ndim != 2 or D.size == 0:
+        raise InvalidInputError(f"`M` must be a non-empty 2-D array (m, n); got shape {D.shape}.")
+    mask = np.asarray(observed)
+    if mask.shape != D.shape:
+        raise InvalidInputError(
+            f"`observed` must have the shape of `M` {D.shape}; got {tuple(mask.shape)}."
+        )
+    if mask.dtype != bool:
+        if mask.dtype.kind not in "iu" or not np.isin(mask, (0, 1)).all():
+            raise InvalidInputError("`observed` must be a boolean mask (or 0/1 integers).")
+        mask = mask.astype(bool)
+    n_obs = int(mask.sum())
+    if n_obs == 0:
+        raise InvalidInputError("`observed` selects no entry; at least one must be known.")
+    if not np.isfinite(D[mask]).all():
+        raise InvalidInputError("`M` contains NaN or inf values at observed entries.")
+    D[~mask] = 0.0
+    m, n = D.shape
+    k_all = min(m, n)
+    sv_lo = max(1, k_all // 2) if sv_start is None else sv_start
+    sv_hi = max(1, (3 * k_all) // 4) if sv_max is None else sv_max
+    check_positive(sv_lo, "sv_start", integer=True)
+    check_positive(sv_hi, "sv_max", integer=True)
+    if sv_lo > k_all or sv_hi > k_all:
+        raise InvalidInputError(
+            f"`sv_start` and `sv_max` must be <= min(m, n) = {k_all}; got {sv_lo} and {sv_hi}."
+        )
+    sv_hi = max(sv_hi, sv_lo)
+    gen = as_rng(rng)
+    normD = float(np.linalg.norm(D))
+    if normD == 0:
+        result = CompletionResult(np.zeros_like(D), 0, True, 0.0, 0, sv_lo)
+        return result
+    if mu is None:
+        mu = 1.0 / float(top_svd(D, 1, gen)[1][0])
+    else:
+        check_positive(mu, "mu")
+    check_positive(rho, "rho")
+    if rho < 1:
+        raise InvalidInputError(f"`rho` must be >= 1; got {rho!r}.")
+
+    Y = np.zeros_like(D)
+    S = np.zeros_like(D)
+    E = np.zeros_like(D)
+    n_lam = sv_lo
+    converged, residual, rank = False, np.inf, 0
+    it = 0
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
+        X = D - S
+        X += Y / mu
+        U, lam, Vt = top_svd(X, n_lam, gen)  # Eq. 5.85, n_lambda leading triplets
+        shr = np.maximum(lam - 1.0 / mu, 0.0)  # Eq. 5.86
+        rank = int(np.count_nonzero(shr))
+        E = (U[:, :rank] * shr[:rank]) @ Vt[:rank]
+        S = np.where(mask, 0.0, -E)  # Eq. 5.87
+        Z = np.where(mask, D - E, 0.0)  # D - E - S
+        residual = float(np.linalg.norm(Z)) / normD
+        Y += mu * Z  # Eq. 5.84
+        mu *= rho
+        if residual < tol:
+            converged = True
+            break
+        # Eq. 5.89: grow n_lambda unless the last two computed singular values are equal
+        if n_lam < 2 or lam.size < n_lam or lam[n_lam - 1] <= 0.995 * lam[n_lam - 2]:
+            n_lam = min(n_lam + 1, sv_hi)
+    completed = np.where(mask, D, E) if keep_observed else E
+    result = CompletionResult(completed, it, converged, residual, rank, n_lam)
+    return report_nonconvergence(result, on_nonconvergence, "Matrix completion (ALM)")
