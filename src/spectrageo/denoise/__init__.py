@@ -6,5 +6,6 @@ registry, so a new method joins them automatically.
 """
 
 from ._registry import DenoiserInfo, available, denoise, get, register
+from .dynamic import denoise_animation, dynamic_methods  # noqa: F401 (mesh animations)
 
 __all__ = ["DenoiserInfo", "available", "denoise", "get", "register"]

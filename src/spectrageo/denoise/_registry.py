@@ -69,6 +69,43 @@ def get(name: str) -> DenoiserInfo:
     return _REGISTRY[name]
 
 
-def denoise(V, F, *, method: str = "tsgsp", **options) -> np.ndarray:
-    """Denoise the vertex positions of mesh ``(V, F)`` with the registered ``method``."""
-    return get(method).func(V, F, **options)
+def denoise(
+    V, F, *, method: str = "tsgsp", preset: str | None = None, pre: str | None = None, **options
+) -> np.ndarray:
+    """Denoise the vertex positions of mesh ``(V, F)`` with the registered ``method``.
+
+    Parameters
+    ----------
+    V : (n, 3) float
+    F : (m, 3) int
+    method : str
+        A name from :func:`available`.
+    preset : str, optional
+        A parameter preset of the method (see ``get(method).presets``); methods without presets
+        refuse one.
+    pre : None or "coarse"
+        ``"coarse"`` first runs the TSGSP coarse step (:func:`spectrageo.denoise.tsgsp.coarse`,
+        Fig. 5.7) and hands its result to ``method``. TSGSP always includes that step.
+    **options
+        Keyword options of the method.
+
+    Returns
+    -------
+    (n, 3) float64 denoised positions, same vertex order.
+    """
+    info = get(method)
+    if pre is not None and pre != "coarse":
+        raise InvalidInputError(f"`pre` must be None or 'coarse'; got {pre!r}.")
+    if preset is not None:
+        if not info.presets:
+            raise InvalidInputError(f"method {method!r} has no presets; got `preset`={preset!r}.")
+        if preset not in info.presets:
+            raise InvalidInputError(
+                f"`preset` must be one of {', '.join(info.presets)} for {method!r}; got {preset!r}."
+            )
+        options["preset"] = preset
+    if pre == "coarse" and method != "tsgsp":
+        from .tsgsp import coarse
+
+        V = coarse(V, F, rng=options.get("rng", 0))
+    return info.func(V, F, **options)

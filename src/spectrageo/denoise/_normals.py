@@ -1,0 +1,491 @@
+"""Building blocks of face-normal filtering denoisers (thesis Section 4.2 and 4.7).
+
+Shared by the bilateral normal filter (:func:`spectrageo.denoise.bilateral.bnf`), guided mesh normal
+filtering (:func:`spectrageo.denoise.gnf.gnf`) and the fine step of TSGSP. Everything works on the
+faces of a triangle mesh and is vectorised with sparse matrices:
+
+* face neighbourhoods: :func:`face_neighbors` (faces sharing an edge or a vertex),
+  :func:`face_radius_neighbors` (faces whose centroids lie within a radius),
+  :func:`edge_face_pairs`, :func:`mean_centroid_distance` (the usual unit of the spatial kernel
+  width);
+* candidate patches and ideal-patch selection (Section 4.2.1, Eq. 4.8-4.10): :func:`patch_matrix`,
+  :class:`PatchSet` (patches plus reusable topology), :func:`candidate_scores`,
+  :func:`select_patches`;
+* guided normals (Section 4.2.2, Eq. 4.11): :func:`patch_mean_normals`, :func:`guided_normals`;
+* (joint) bilateral filtering of face normals: :func:`spatial_weights`,
+  :func:`joint_bilateral_normals`.
+
+Conventions: a *patch matrix* ``P`` is a binary CSR (m, m) matrix with ``P[j, l] = 1`` when face
+``l`` belongs to the patch ``P_j`` centred at face ``j``; the candidate patches of face ``i`` are the
+patches that contain it, i.e. the non-zeros of column ``i``. Normals are (m, 3) arrays; rows of
+degenerate faces may be zero and then carry no weight.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from .._errors import InvalidInputError
+from .._validation import check_choice, check_positive
+from ..geometry.primitives import _normalize_rows
+from ..graph import face_adjacency
+
+#: Patch consistency measures understood by :func:`candidate_scores`.
+MEASURES = ("thesis", "zhang2015")
+
+
+# --------------------------------------------------------------------------- neighbourhoods
+def face_neighbors(F, *, shared: str = "vertex", include_self: bool = True) -> sp.csr_matrix:
+    """Binary (m, m) CSR matrix of topological face neighbours.
+
+    Parameters
+    ----------
+    F : (m, 3) int
+    shared : {"vertex", "edge"}
+        ``"vertex"``: faces sharing at least one vertex (this includes the edge neighbours; the
+        1-ring face patch of Zhang et al. 2015 and the neighbourhood of Zheng et al. 2011).
+        ``"edge"``: faces sharing an edge.
+    include_self : bool
+        Put ones on the diagonal (each face is its own neighbour).
+    """
+    check_choice(shared, "shared", ("vertex", "edge"))
+    A = face_adjacency(F, shared=shared).tocsr()
+    if include_self:
+        A = (A + sp.identity(A.shape[0], format="csr")).tocsr()
+        A.data[:] = 1.0
+    A.sort_indices()
+    return A
+
+
+def face_radius_neighbors(
+    centroids: np.ndarray,
+    radius: float,
+    *,
+    adjacency: sp.spmatrix | None = None,
+    include_self: bool = True,
+) -> sp.csr_matrix:
+    """Binary (m, m) CSR matrix joining faces whose centroids are closer than ``radius``.
+
+    This is the geometric neighbourhood of guided mesh normal filtering (Zhang et al. 2015).
+
+    Parameters
+    ----------
+    centroids : (m, 3) float
+        Face centroids.
+    radius : float
+        Ball radius (inclusive).
+    adjacency : (m, m) sparse, optional
+        Face adjacency (e.g. :func:`face_neighbors`). When given, the neighbourhood of face ``i`` is
+        restricted to the faces reachable from ``i`` through adjacent faces that all lie inside the
+        ball, so that faces of a nearby but disconnected sheet (thin parts) are not mixed in.
+    include_self : bool
+        Keep each face in its own neighbourhood.
+    """
+    C = np.asarray(centroids, dtype=np.float64)
+    check_positive(radius, "radius")
+    m = C.shape[0]
+    pairs = cKDTree(C).query_pairs(r=float(radius), output_type="ndarray")
+    rows = np.r_[pairs[:, 0], pairs[:, 1], np.arange(m)]
+    cols = np.r_[pairs[:, 1], pairs[:, 0], np.arange(m)]
+    B = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(m, m))
+    B.sum_duplicates()
+    B.data[:] = 1.0
+    if adjacency is not None:
+        Adj = sp.csr_matrix(adjacency, dtype=np.float64) + sp.identity(m, format="csr")
+        Adj.data[:] = 1.0
+        S = sp.identity(m, format="csr")
+        for _ in range(m):  # breadth-first growth inside the ball; stops after a few rounds
+            grown = (S @ Adj).multiply(B).tocsr()
+            grown.data[:] = 1.0
+            if grown.nnz == S.nnz:
+                break
+            S = grown
+        B = S
+    if not include_self:
+        B = B.tolil()
+        B.setdiag(0)
+        B = B.tocsr()
+        B.eliminate_zeros()
+    B.sort_indices()
+    return B
+
+
+def edge_face_pairs(F) -> np.ndarray:
+    """Pairs ``(a, b)``, ``a < b``, of faces sharing an edge, shape (e, 2), sorted."""
+    A = sp.triu(face_adjacency(F, shared="edge"), k=1).tocoo()
+    order = np.lexsort((A.col, A.row))
+    return np.c_[A.row[order], A.col[order]].astype(np.int64)
+
+
+def mean_centroid_distance(
+    V: np.ndarray, F: np.ndarray, *, pairs: np.ndarray | None = None
+) -> float:
+    """Mean distance between the centroids of edge-adjacent faces.
+
+    The default spatial kernel width ``sigma_s`` of the bilateral normal filter (Zheng et al. 2011)
+    and of guided normal filtering, and the unit of the neighbourhood radius of the latter (Zhang et
+    al. 2015). ``pairs`` (from :func:`edge_face_pairs`) avoids recomputing the face adjacency.
+    Returns 0.0 for a mesh without adjacent faces.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    pairs = edge_face_pairs(F) if pairs is None else pairs
+    if len(pairs) == 0:
+        return 0.0
+    C = V[F].mean(axis=1)
+    return float(np.linalg.norm(C[pairs[:, 0]] - C[pairs[:, 1]], axis=1).mean())
+
+
+# --------------------------------------------------------------------------- patches
+def patch_matrix(F) -> sp.csr_matrix:
+    """Binary (m, m) patch matrix of the 1-ring face patches.
+
+    ``P[j, l] = 1`` when face ``l`` shares a vertex with face ``j`` (``l = j`` included): the patch
+    centred at ``f_j``. Since this relation is symmetric, the candidate patches of face ``f_i``
+    (those containing it, Section 4.2.1) are the patches centred at the faces of its own 1-ring.
+    """
+    return face_neighbors(F, shared="vertex", include_self=True)
+
+
+def padded_patches(P: sp.csr_matrix) -> np.ndarray:
+    """Patch members as a dense (m, k_max) index array, short rows padded with their first member.
+
+    Padding repeats an existing member, so maxima and minima over a row are unchanged.
+    Every patch must be non-empty.
+    """
+    P = sp.csr_matrix(P)
+    counts = np.diff(P.indptr)
+    if counts.size and counts.min() == 0:
+        raise InvalidInputError("`P` has an empty patch (a row without members).")
+    kmax = int(counts.max()) if counts.size else 0
+    rows = np.repeat(np.arange(P.shape[0]), counts)
+    pos = np.arange(P.indices.size) - np.repeat(P.indptr[:-1], counts)
+    first = P.indices[P.indptr[:-1]] if counts.size else np.zeros(0, dtype=np.int64)
+    out = np.repeat(first[:, None], kmax, axis=1).astype(np.int64)
+    out[rows, pos] = P.indices
+    return out
+
+
+@dataclass(frozen=True)
+class PatchSet:
+    """Candidate patches of a mesh with the topology-only data that patch selection reuses.
+
+    Build it once per mesh with :meth:`from_faces` (1-ring patches) or :meth:`from_matrix` (any
+    patch matrix); the scores then only depend on the current normals.
+
+    Attributes
+    ----------
+    P : (m, m) CSR binary
+        Patch matrix, ``P[j, l] = 1`` when face ``l`` belongs to the patch centred at ``j``.
+    members : (m, k_max) int64
+        Padded member lists (:func:`padded_patches`).
+    faces, centers : (q,) int64
+        Candidate pairs, sorted by face: patch ``centers[t]`` contains face ``faces[t]``.
+    starts : (m + 1,) int64
+        ``faces[starts[i]:starts[i + 1]] == i``.
+    edge_pairs : (e, 2) int64 or None
+        Edge-adjacent face pairs (:func:`edge_face_pairs`), when the faces are known.
+    inner_edges : (m, e) CSR binary or None
+        ``inner_edges[j, t] = 1`` when both faces of edge pair ``t`` belong to patch ``j`` (the
+        interior edges used by the consistency of Zhang et al. 2015).
+    """
+
+    P: sp.csr_matrix
+    members: np.ndarray
+    faces: np.ndarray
+    centers: np.ndarray
+    starts: np.ndarray
+    edge_pairs: np.ndarray | None = None
+    inner_edges: sp.csr_matrix | None = None
+
+    @property
+    def n_faces(self) -> int:
+        return self.P.shape[0]
+
+    @classmethod
+    def from_matrix(cls, P: sp.spmatrix, F=None) -> PatchSet:
+        """Patch set of an arbitrary binary (m, m) patch matrix (``F`` enables ``"zhang2015"``)."""
+        P = sp.csr_matrix(P, dtype=np.float64)
+        if P.shape[0] != P.shape[1]:
+            raise InvalidInputError(f"`P` must be square (m, m); got {P.shape}.")
+        P.sum_duplicates()
+        P.data[:] = 1.0
+        P.sort_indices()
+        PT = P.T.tocsr()
+        PT.sort_indices()
+        faces = np.repeat(np.arange(PT.shape[0]), np.diff(PT.indptr)).astype(np.int64)
+        edge_pairs = inner = None
+        if F is not None:
+            F = np.asarray(F, dtype=np.int64)
+            if F.shape != (P.shape[0], 3):
+                raise InvalidInputError(f"`F` must have shape ({P.shape[0]}, 3); got {F.shape}.")
+            edge_pairs = edge_face_pairs(F)
+            Pc = sp.csc_matrix(P)
+            inner = Pc[:, edge_pairs[:, 0]].multiply(Pc[:, edge_pairs[:, 1]]).tocsr()
+            inner.eliminate_zeros()
+            inner.sort_indices()
+        return cls(
+            P=P,
+            members=padded_patches(P),
+            faces=faces,
+            centers=PT.indices.astype(np.int64),
+            starts=PT.indptr.astype(np.int64),
+            edge_pairs=edge_pairs,
+            inner_edges=inner,
+        )
+
+    @classmethod
+    def from_faces(cls, F) -> PatchSet:
+        """1-ring patches of :func:`patch_matrix` (the candidate patches of Section 4.2.1)."""
+        return cls.from_matrix(patch_matrix(F), F)
+
+
+def _as_patch_set(patches, F=None) -> PatchSet:
+    if isinstance(patches, PatchSet):
+        return patches
+    return PatchSet.from_matrix(patches, F)
+
+
+def _row_reduce(values: np.ndarray, indptr: np.ndarray, ufunc, empty: float) -> np.ndarray:
+    """``ufunc.reduceat`` over CSR rows, with ``empty`` for rows without entries."""
+    n = indptr.size - 1
+    out = np.full(n, empty)
+    nonempty = np.diff(indptr) > 0
+    if values.size:
+        out[nonempty] = ufunc.reduceat(values, indptr[:-1][nonempty])
+    return out
+
+
+def _thesis_patch_term(N: np.ndarray, P: sp.csr_matrix) -> np.ndarray:
+    """``a_j = |lambda_j1 - lambda_j2|`` of Eq. (4.9) for every patch, shape (m,)."""
+    outer = (N[:, :, None] * N[:, None, :]).reshape(-1, 9)
+    R = np.asarray(P @ outer).reshape(-1, 3, 3)  # R_j = N_j^T N_j (sum of n n^T over the patch)
+    lam = np.linalg.eigvalsh(R)  # ascending
+    return np.abs(lam[:, 0] - lam[:, 1])
+
+
+@numba.njit(cache=True)
+def _max_distance_kernel(N, faces, centers, members):  # pragma: no cover - jitted
+    out = np.empty(faces.shape[0])
+    k = members.shape[1]
+    for t in range(faces.shape[0]):
+        i = faces[t]
+        c = centers[t]
+        best = 0.0
+        for q in range(k):
+            l = members[c, q]
+            d0 = N[i, 0] - N[l, 0]
+            d1 = N[i, 1] - N[l, 1]
+            d2 = N[i, 2] - N[l, 2]
+            d = d0 * d0 + d1 * d1 + d2 * d2
+            if d > best:
+                best = d
+        out[t] = np.sqrt(best)
+    return out
+
+
+@numba.njit(cache=True)
+def _patch_diameter_kernel(N, members):  # pragma: no cover - jitted
+    m, k = members.shape
+    out = np.empty(m)
+    for j in range(m):
+        best = 0.0
+        for p in range(k):
+            a = members[j, p]
+            for q in range(p + 1, k):
+                b = members[j, q]
+                d0 = N[a, 0] - N[b, 0]
+                d1 = N[a, 1] - N[b, 1]
+                d2 = N[a, 2] - N[b, 2]
+                d = d0 * d0 + d1 * d1 + d2 * d2
+                if d > best:
+                    best = d
+        out[j] = np.sqrt(best)
+    return out
+
+
+def _max_distance_to_patch(
+    N: np.ndarray, rows: np.ndarray, cols: np.ndarray, members: np.ndarray
+) -> np.ndarray:
+    """``b_ij = max_{l in P_j} ||n_i - n_l||`` (Eq. 4.10) for the pairs ``(rows[t], cols[t])``."""
+    return _max_distance_kernel(np.ascontiguousarray(N), rows, cols, np.ascontiguousarray(members))
+
+
+def _zhang_patch_scores(N: np.ndarray, ps: PatchSet) -> np.ndarray:
+    """Patch consistency ``H(P) = Phi(P) R(P)`` of Zhang et al. 2015, shape (m,).
+
+    ``Phi`` is the largest normal difference between two faces of the patch, ``R`` the ratio of the
+    largest to the summed (plus 1e-9) normal differences across the patch's interior edges.
+    """
+    phi = _patch_diameter_kernel(np.ascontiguousarray(N), ps.members)
+    a, b = ps.edge_pairs[:, 0], ps.edge_pairs[:, 1]
+    sal = np.linalg.norm(N[a] - N[b], axis=1)  # edge saliency
+    vals = sal[ps.inner_edges.indices]
+    ssum = _row_reduce(vals, ps.inner_edges.indptr, np.add, 0.0)
+    smax = _row_reduce(vals, ps.inner_edges.indptr, np.maximum, 0.0)
+    return phi * smax / (ssum + 1e-9)
+
+
+def candidate_scores(
+    N: np.ndarray, patches, *, measure: str = "thesis", F=None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Consistency scores of every (face, candidate patch) pair; lower is more consistent.
+
+    Parameters
+    ----------
+    N : (m, 3) float
+        Current face normals (unit; zero rows allowed for degenerate faces).
+    patches : PatchSet or (m, m) sparse binary patch matrix
+        Candidate patches (:class:`PatchSet`, or a matrix from :func:`patch_matrix`).
+    measure : {"thesis", "zhang2015"}
+        ``"thesis"``: Eq. (4.8)-(4.10), ``a_j * b_ij`` with ``a_j = |lambda_j1 - lambda_j2|`` the
+        difference of the two *smallest* eigenvalues of ``R_j = N_j^T N_j`` (the first two returned by
+        a symmetric eigen-solver in ascending order: both vanish on a flat patch, while a patch that
+        crosses a sharp edge spreads its normals in one direction, which makes one of the two
+        large) and ``b_ij = max_{l in P_j} ||n_i - n_l||`` the largest distance between the face's
+        normal and the normals of the patch. ``"zhang2015"``: the patch-only consistency
+        ``Phi(P) R(P)`` of the original paper (needs the faces: a :class:`PatchSet` built from them,
+        or ``F``).
+    F : (m, 3) int, optional
+        Faces, when ``patches`` is a bare matrix and ``measure="zhang2015"``.
+
+    Returns
+    -------
+    faces, patches, scores : (q,) arrays
+        Pair ``t`` scores the patch centred at ``patches[t]`` as the patch of face ``faces[t]``;
+        sorted by face.
+    """
+    check_choice(measure, "measure", MEASURES)
+    ps = _as_patch_set(patches, F)
+    N = np.asarray(N, dtype=np.float64)
+    if N.shape != (ps.n_faces, 3):
+        raise InvalidInputError(f"`N` must have shape ({ps.n_faces}, 3); got {N.shape}.")
+    if measure == "thesis":
+        a = _thesis_patch_term(N, ps.P)
+        b = _max_distance_to_patch(N, ps.faces, ps.centers, ps.members)
+        scores = a[ps.centers] * b
+    else:
+        if ps.inner_edges is None:
+            raise InvalidInputError('measure="zhang2015" needs the faces: pass `F`.')
+        scores = _zhang_patch_scores(N, ps)[ps.centers]
+    return ps.faces, ps.centers, scores
+
+
+def select_patches(N: np.ndarray, patches, *, measure: str = "thesis", F=None) -> np.ndarray:
+    """Ideal patch of every face (Eq. 4.8): the candidate with the lowest consistency score.
+
+    Ties go to the candidate with the lowest centre index (deterministic). Returns the centre face
+    index of the chosen patch for each face, shape (m,). A face in no patch keeps itself.
+    """
+    ps = _as_patch_set(patches, F)
+    faces, centers, scores = candidate_scores(N, ps, measure=measure)
+    best = np.arange(ps.n_faces, dtype=np.int64)
+    if scores.size == 0:
+        return best
+    lo = _row_reduce(scores, ps.starts, np.minimum, np.inf)
+    hit = np.flatnonzero(scores == lo[faces])  # centres are sorted within each face
+    first = np.r_[True, faces[hit][1:] != faces[hit][:-1]]
+    best[faces[hit[first]]] = centers[hit[first]]
+    return best
+
+
+def patch_mean_normals(N: np.ndarray, areas: np.ndarray, P: sp.spmatrix) -> np.ndarray:
+    """Area-weighted mean unit normal of every patch (Eq. 4.11), shape (m, 3); zero if degenerate."""
+    if isinstance(P, PatchSet):
+        P = P.P
+    return _normalize_rows(np.asarray(sp.csr_matrix(P) @ (np.asarray(areas)[:, None] * N)))
+
+
+def guided_normals(
+    N: np.ndarray,
+    areas: np.ndarray,
+    patches,
+    *,
+    measure: str = "thesis",
+    F=None,
+    return_patches: bool = False,
+):
+    """Guided normals (Section 4.2): the area-weighted mean normal of each face's ideal patch.
+
+    Eq. (4.8)-(4.10) select the patch (:func:`select_patches`), Eq. (4.11) averages it.
+
+    Parameters
+    ----------
+    N : (m, 3) float, current unit face normals
+    areas : (m,) float, face areas
+    patches : PatchSet or (m, m) sparse binary patch matrix (:func:`patch_matrix`)
+    measure : {"thesis", "zhang2015"}, see :func:`candidate_scores`
+    F : (m, 3) int, needed by ``measure="zhang2015"`` when ``patches`` is a bare matrix
+    return_patches : bool
+        Also return the (m,) centre index of each chosen patch.
+
+    Returns
+    -------
+    g : (m, 3) unit guided normals, or ``(g, best)`` with ``return_patches=True``.
+    """
+    ps = _as_patch_set(patches, F)
+    best = select_patches(N, ps, measure=measure)
+    g = patch_mean_normals(N, areas, ps.P)[best]
+    return (g, best) if return_patches else g
+
+
+# --------------------------------------------------------------------------- filtering
+def spatial_weights(
+    centroids: np.ndarray, areas: np.ndarray, nbr: sp.csr_matrix, sigma_s: float
+) -> sp.csr_matrix:
+    """Sparse (m, m) spatial part of the (joint) bilateral normal filter.
+
+    ``W[i, j] = A_j exp(-||c_i - c_j||^2 / (2 sigma_s^2))`` on the non-zeros of ``nbr``.
+    """
+    check_positive(sigma_s, "sigma_s")
+    nbr = sp.csr_matrix(nbr)
+    rows = np.repeat(np.arange(nbr.shape[0]), np.diff(nbr.indptr))
+    cols = nbr.indices
+    d2 = np.sum((centroids[rows] - centroids[cols]) ** 2, axis=1)
+    w = np.asarray(areas)[cols] * np.exp(-d2 / (2.0 * sigma_s**2))
+    return sp.csr_matrix((w, cols.copy(), nbr.indptr.copy()), shape=nbr.shape)
+
+
+def joint_bilateral_normals(
+    N: np.ndarray, guide: np.ndarray, W: sp.csr_matrix, sigma_r: float
+) -> np.ndarray:
+    """One (joint) bilateral filtering pass over face normals.
+
+    ``n_i <- normalize( sum_j W_ij exp(-||g_i - g_j||^2 / (2 sigma_r^2)) n_j )`` with ``W`` from
+    :func:`spatial_weights`. ``guide = N`` gives the bilateral normal filter of Zheng et al. (2011);
+    guided normals give the joint filter of Zhang et al. (2015). A face whose weighted sum vanishes
+    keeps its input normal.
+    """
+    check_positive(sigma_r, "sigma_r")
+    rows = np.repeat(np.arange(W.shape[0]), np.diff(W.indptr))
+    cols = W.indices
+    d2 = np.sum((guide[rows] - guide[cols]) ** 2, axis=1)
+    w = W.data * np.exp(-d2 / (2.0 * sigma_r**2))
+    out = np.asarray(sp.csr_matrix((w, cols, W.indptr), shape=W.shape) @ N)
+    out = _normalize_rows(out)
+    empty = ~out.any(axis=1)
+    out[empty] = N[empty]
+    return out
+
+
+__all__ = [
+    "MEASURES",
+    "PatchSet",
+    "edge_face_pairs",
+    "candidate_scores",
+    "face_neighbors",
+    "face_radius_neighbors",
+    "guided_normals",
+    "joint_bilateral_normals",
+    "mean_centroid_distance",
+    "padded_patches",
+    "patch_matrix",
+    "patch_mean_normals",
+    "select_patches",
+    "spatial_weights",
+]

@@ -1,0 +1,1 @@
+"""Evaluation harnesses: run methods on datasets and write tables."""

@@ -1,0 +1,264 @@
+"""Static mesh denoisers: every method lowers theta on a noisy analytic shape, registry options,
+determinism, GNF patch selection, TSGSP building blocks and validation."""
+
+import numpy as np
+import pytest
+
+from spectrageo import denoise, metrics, noise
+from spectrageo._errors import InvalidInputError
+from spectrageo.denoise import _normals, bilateral, gnf, smoothing, tsgsp
+from spectrageo.geometry import face_normals
+
+from conftest import cube, grid, icosphere
+
+
+@pytest.fixture(scope="module")
+def noisy_cube():
+    V, F = cube(5)
+    Vn = noise.apply(V, F, kind="gaussian", level=0.3, rng=7)
+    return V, F, Vn
+
+
+@pytest.fixture(scope="module")
+def noisy_sphere():
+    V, F = icosphere(4)
+    Vn = noise.apply(V, F, kind="gaussian", level=0.3, rng=3)
+    return V, F, Vn
+
+
+def test_registry_lists_all_methods():
+    names = denoise.available()
+    for m in ("laplacian", "taubin", "bilateral", "bnf", "gnf", "tsgsp"):
+        assert m in names
+    assert denoise.get("tsgsp").presets == ("default", "scan", "cad")
+
+
+@pytest.mark.parametrize("method", ["laplacian", "taubin", "bilateral", "bnf", "gnf", "tsgsp"])
+def test_every_method_lowers_theta_on_noisy_cube(noisy_cube, method):
+    V, F, Vn = noisy_cube
+    before = metrics.theta_deg(Vn, V, F)
+    out = denoise.denoise(Vn, F, method=method)
+    assert out.shape == V.shape and np.isfinite(out).all()
+    assert metrics.theta_deg(out, V, F) < 0.8 * before
+    assert not np.shares_memory(out, Vn)
+
+
+@pytest.mark.parametrize("method", ["taubin", "bnf", "tsgsp"])
+def test_methods_lower_theta_on_noisy_sphere(noisy_sphere, method):
+    V, F, Vn = noisy_sphere
+    out = denoise.denoise(Vn, F, method=method)
+    assert metrics.theta_deg(out, V, F) < 0.6 * metrics.theta_deg(Vn, V, F)
+
+
+def test_feature_aware_methods_beat_smoothing_on_cube(noisy_cube):
+    V, F, Vn = noisy_cube
+    th = {
+        m: metrics.theta_deg(denoise.denoise(Vn, F, method=m), V, F)
+        for m in ("taubin", "gnf", "tsgsp")
+    }
+    assert th["tsgsp"] < th["taubin"]
+    assert th["gnf"] < th["taubin"]
+
+
+def test_input_not_modified(noisy_cube):
+    V, F, Vn = noisy_cube
+    keep = Vn.copy()
+    denoise.denoise(Vn, F, method="tsgsp")
+    np.testing.assert_array_equal(Vn, keep)
+
+
+def test_tsgsp_deterministic_for_a_seed(noisy_cube):
+    _, F, Vn = noisy_cube
+    a = denoise.denoise(Vn, F, method="tsgsp", rng=5)
+    b = denoise.denoise(Vn, F, method="tsgsp", rng=5)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_pre_coarse_runs_coarse_first(noisy_cube):
+    V, F, Vn = noisy_cube
+    expected = smoothing.taubin(tsgsp.coarse(Vn, F, rng=0), F)
+    out = denoise.denoise(Vn, F, method="taubin", pre="coarse")
+    np.testing.assert_allclose(out, expected)
+    assert metrics.theta_deg(out, V, F) < metrics.theta_deg(Vn, V, F)
+
+
+def test_presets_change_the_result_and_are_checked(noisy_cube):
+    _, F, Vn = noisy_cube
+    a = denoise.denoise(Vn, F, method="tsgsp", preset="cad")
+    b = denoise.denoise(Vn, F, method="tsgsp", preset="scan")
+    assert not np.allclose(a, b)
+    with pytest.raises(InvalidInputError, match="has no presets"):
+        denoise.denoise(Vn, F, method="taubin", preset="cad")
+    with pytest.raises(InvalidInputError, match="`preset` must be one of"):
+        denoise.denoise(Vn, F, method="gnf", preset="nope")
+    with pytest.raises(InvalidInputError, match="`pre` must be None or 'coarse'"):
+        denoise.denoise(Vn, F, method="taubin", pre="fine")
+    with pytest.raises(InvalidInputError, match="unknown denoising method"):
+        denoise.denoise(Vn, F, method="nope")
+
+
+# ---------------------------------------------------------------- coarse step
+def test_estimate_noise_on_noisy_plane():
+    V, F = grid(60, 60)
+    rng = np.random.default_rng(0)
+    sigma = 0.004
+    Vn = V.copy()
+    Vn[:, 2] += rng.normal(0, sigma, len(V))
+    est = tsgsp.estimate_noise(Vn)
+    assert 0.75 * sigma**2 < est < 1.3 * sigma**2
+    est2, dirs = tsgsp.estimate_noise(Vn, return_directions=True)
+    assert est2 == est
+    assert np.median(np.abs(dirs[:, 2])) > 0.95  # minimum-variance direction = plane normal
+
+
+def test_coarse_result_fields(noisy_cube):
+    V, F, Vn = noisy_cube
+    r = tsgsp.coarse(Vn, F, full_output=True, submesh_size=500)
+    assert r.vertices.shape == V.shape
+    assert r.n_submeshes == r.subspace_sizes.shape[0] >= 3
+    assert (r.subspace_sizes >= 1).all() and (r.subspace_sizes <= 250).all()
+    assert (r.submesh_noise > 0).all()
+    assert r.noise_var > 0 and r.n_iter >= 3 * r.n_submeshes
+    assert metrics.dmean(r.vertices, V) < metrics.dmean(Vn, V)
+    # the learned per-coordinate noise variances are of the order of the global estimate
+    assert np.median(r.submesh_noise) < 3 * r.noise_var
+
+
+def test_coarse_exact_and_oi_agree_roughly(noisy_cube):
+    V, F, Vn = noisy_cube
+    a = tsgsp.coarse(Vn, F, method="oi", submesh_size=500)
+    b = tsgsp.coarse(Vn, F, method="exact", submesh_size=500)
+    assert abs(metrics.theta_deg(a, V, F) - metrics.theta_deg(b, V, F)) < 3.0
+
+
+def test_select_neighborhoods_keeps_feature_faces_on_their_side():
+    # folded grid: x < 0.5 flat, x > 0.5 tilted by 60 degrees
+    V, F = grid(21, 21)
+    V = V.copy()
+    right = V[:, 0] > 0.5
+    V[right, 2] = (V[right, 0] - 0.5) * np.tan(np.radians(60))
+    N = face_normals(V, F)
+    from spectrageo.graph.adjacency import knn
+
+    C = V[F].mean(axis=1)
+    nb, _ = knn(C, 12, include_self=True)
+    side = C[:, 0] > 0.5
+    crease = np.array([np.any(side[nb[i]] != side[i]) for i in range(len(F))])
+    best = tsgsp.select_neighborhoods(N, nb, crease)
+    # flat faces keep their own patch; crease faces pick a patch entirely on their own side
+    np.testing.assert_array_equal(best[~crease], np.flatnonzero(~crease))
+    pure = np.array([np.all(side[nb[j]] == side[j]) for j in range(len(F))])
+    n_checked = 0
+    for i in np.flatnonzero(crease):
+        assert i in nb[best[i]]  # the chosen patch contains the face
+        candidates = np.flatnonzero((nb == i).any(axis=1))
+        if np.any(pure[candidates] & (side[candidates] == side[i])):
+            # a one-sided candidate exists: it must be chosen
+            assert pure[best[i]] and side[best[i]] == side[i]
+            n_checked += 1
+    assert n_checked > 20
+
+
+def test_fine_returns_features(noisy_cube):
+    V, F, Vn = noisy_cube
+    out, feat = tsgsp.fine(tsgsp.coarse(Vn, F), F, return_features=True)
+    assert feat.shape == (F.shape[0],) and feat.dtype == bool
+    # cube faces touching two sides are (mostly) features
+    N0 = face_normals(V, F)
+    C = V[F].mean(axis=1)
+    near_edge = np.sort(np.abs(C), axis=1)[:, 1] > 0.9
+    assert feat[near_edge].mean() > 0.6
+    assert feat[~near_edge].mean() < 0.3
+    assert np.isfinite(out).all() and N0.shape == F.shape
+
+
+def test_tsgsp_validation(noisy_cube):
+    _, F, Vn = noisy_cube
+    with pytest.raises(InvalidInputError, match="`pre` must be None"):
+        tsgsp.tsgsp(Vn, F, pre="x")
+    with pytest.raises(InvalidInputError, match="`preset`"):
+        tsgsp.tsgsp(Vn, F, preset="x")
+    with pytest.raises(InvalidInputError, match="`submesh_size` must be >= 8"):
+        tsgsp.coarse(Vn, F, submesh_size=4)
+    with pytest.raises(InvalidInputError, match="`max_keep` must be in"):
+        tsgsp.coarse(Vn, F, max_keep=1.5)
+    with pytest.raises(InvalidInputError, match="`method`"):
+        tsgsp.coarse(Vn, F, method="svd")
+    with pytest.raises(InvalidInputError, match="`noise_var`"):
+        tsgsp.coarse(Vn, F, noise_var=-1.0)
+    with pytest.raises(InvalidInputError, match="at least 8 vertices"):
+        tsgsp.coarse(Vn[:6], np.array([[0, 1, 2], [3, 4, 5]]))
+    with pytest.raises(InvalidInputError, match="`patch` must be an integer >= 3"):
+        tsgsp.fine(Vn, F, patch=2)
+    with pytest.raises(InvalidInputError, match="exceeds the number of faces"):
+        tsgsp.fine(Vn, F, patch=10**6)
+    with pytest.raises(InvalidInputError, match="`range_guide`"):
+        tsgsp.fine(Vn, F, range_guide="x")
+    with pytest.raises(InvalidInputError, match="`sigma_c`"):
+        tsgsp.fine(Vn, F, sigma_c=0.0)
+    with pytest.raises(InvalidInputError, match="`patch` must be >= 4"):
+        tsgsp.estimate_noise(Vn, patch=3)
+    with pytest.raises(InvalidInputError, match="at least 4 vertices"):
+        tsgsp.estimate_noise(Vn[:3], patch=4)
+
+
+# ---------------------------------------------------------------- GNF patch selection
+def test_gnf_patch_selection_avoids_the_crease():
+    V, F = grid(15, 15)
+    V = V.copy()
+    right = V[:, 0] > 0.5
+    V[right, 2] = (V[right, 0] - 0.5) * 1.5
+    N = face_normals(V, F)
+    C = V[F].mean(axis=1)
+    side = C[:, 0] > 0.5
+    ps = _normals.PatchSet.from_faces(F)
+    for measure in ("thesis", "zhang2015"):
+        best = _normals.select_patches(N, ps, measure=measure)
+        members = ps.P[best]
+        # every face's chosen patch contains it and lies on one side of the crease
+        assert np.all(np.asarray(members[np.arange(len(F)), np.arange(len(F))]).ravel() == 1)
+        pure = [np.all(side[members[i].indices] == side[i]) for i in range(len(F))]
+        assert np.all(pure), measure
+    g = _normals.guided_normals(N, np.ones(len(F)), ps)
+    np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", g, N)), 1.0, atol=1e-12)
+
+
+def test_gnf_validation(noisy_cube):
+    _, F, Vn = noisy_cube
+    with pytest.raises(InvalidInputError, match="`preset`"):
+        gnf.gnf(Vn, F, preset="x")
+    with pytest.raises(InvalidInputError, match="`neighbors`"):
+        gnf.gnf(Vn, F, neighbors="x")
+    with pytest.raises(InvalidInputError, match="`measure`"):
+        gnf.gnf(Vn, F, measure="x")
+    with pytest.raises(InvalidInputError, match="only used with"):
+        gnf.gnf(Vn, F, neighbors="vertex", radius=1.0)
+    with pytest.raises(InvalidInputError, match="`radius`"):
+        gnf.gnf(Vn, F, radius=-1.0)
+
+
+def test_smoothing_and_bilateral_validation(noisy_cube):
+    _, F, Vn = noisy_cube
+    with pytest.raises(InvalidInputError, match="`lam` must be in"):
+        smoothing.laplacian(Vn, F, lam=2.0)
+    with pytest.raises(InvalidInputError, match="`lam` must be a number"):
+        smoothing.taubin(Vn, F, lam="a")
+    with pytest.raises(InvalidInputError, match="`mu` must be negative"):
+        smoothing.taubin(Vn, F, mu=0.1)
+    with pytest.raises(InvalidInputError, match="`neighborhood`"):
+        bilateral.bilateral(Vn, F, neighborhood="x")
+    with pytest.raises(InvalidInputError, match="`sigma_c`"):
+        bilateral.bilateral(Vn, F, sigma_c=-1)
+    with pytest.raises(InvalidInputError, match="`shared`"):
+        bilateral.bnf(Vn, F, shared="x")
+    with pytest.raises(InvalidInputError, match="`F`"):
+        denoise.denoise(Vn, F[:, :2], method="bnf")
+
+
+def test_taubin_preserves_a_plane_and_laplacian_shrinks_sphere():
+    V, F = grid(10, 10)
+    np.testing.assert_allclose(smoothing.taubin(V, F)[:, 2], 0.0, atol=1e-15)
+    S, Fs = icosphere(2)
+    r_lap = np.linalg.norm(smoothing.laplacian(S, Fs, n_iter=20), axis=1).mean()
+    r_tau = np.linalg.norm(smoothing.taubin(S, Fs, n_iter=20), axis=1).mean()
+    assert r_lap < 0.95 < 0.98 < r_tau < 1.05  # Taubin does not shrink (slight inflation allowed)
