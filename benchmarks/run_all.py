@@ -46,6 +46,8 @@ SECTIONS = [
         ],
     ),
     ("outliers_large", [sys.executable, str(HERE / "outliers_large.py")]),
+    ("saliency", [sys.executable, str(HERE / "saliency.py")]),
+    ("viewer", [sys.executable, str(HERE / "viewer.py")]),
 ]
 
 HEADER = """# Benchmarks

@@ -1,0 +1,527 @@
+// spectrageo viewer: two synchronised views (one canvas, two viewports, one camera) of the current
+// model; the right one shows feature vertices, feature curves, heatmaps or a compared model.
+import * as THREE from 'three';
+import { OrbitControls } from '/static/vendor/OrbitControls.js';
+
+const $ = (id) => document.getElementById(id);
+const GREY = [190, 190, 190];
+const RED = [255, 0, 0];
+const CURVE_COLORS = [[228, 26, 28], [55, 126, 184], [77, 175, 74], [152, 78, 163], [255, 127, 0]];
+
+// ------------------------------------------------------------------ API helpers
+async function errorOf(r) {
+  try { const j = await r.json(); return j.error || r.statusText; } catch { return r.statusText; }
+}
+async function getJSON(url, body) {
+  const opts = body === undefined ? {} : {
+    method: 'POST', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(body) };
+  const r = await fetch(url, opts);
+  if (!r.ok) throw new Error(await errorOf(r));
+  return r.json();
+}
+const TYPES = { float32: Float32Array, uint32: Uint32Array, uint8: Uint8Array, int8: Int8Array,
+  int32: Int32Array, float64: Float64Array };
+async function getArray(url) {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(await errorOf(r));
+  const T = TYPES[r.headers.get('X-Dtype')] || Uint8Array;
+  return new T(await r.arrayBuffer());
+}
+
+// ------------------------------------------------------------------ status, jobs
+const S = {
+  models: [], info: null, faces: null, frames: new Map(), frame: 0, playing: false,
+  features: null, curves: null, rightMode: 'features', heat: null, compare: null,
+  busy: 0, renders: 0, pointSize: 2, mode: 'both', renderedFrame: -1,
+};
+window.__spectrageo = S;
+
+function message(text, ok = false) {
+  const m = $('message');
+  m.textContent = text || '';
+  m.className = ok ? 'ok' : '';
+}
+function busy(delta) {
+  S.busy += delta;
+  document.body.dataset.busy = S.busy > 0 ? '1' : '0';
+}
+async function runJob(url, body, label) {
+  busy(+1);
+  const bar = $('progress');
+  bar.hidden = false; bar.removeAttribute('value');
+  $('progress-text').textContent = label + '…';
+  try {
+    const { job } = await getJSON(url, body);
+    for (;;) {
+      const j = await getJSON('/api/job/' + job);
+      if (j.progress === null) bar.removeAttribute('value'); else bar.value = j.progress;
+      $('progress-text').textContent = `${j.message} (${j.elapsed.toFixed(1)} s)`;
+      if (j.state === 'done') return j.result;
+      if (j.state === 'error') throw new Error(j.error);
+      await new Promise((res) => setTimeout(res, 100));
+    }
+  } finally {
+    bar.hidden = true;
+    busy(-1);
+  }
+}
+async function guard(fn) {
+  try { await fn(); } catch (e) { message(String(e.message || e)); }
+}
+
+// ------------------------------------------------------------------ rendering
+const canvas = $('canvas');
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio || 1);
+renderer.setScissorTest(true);
+const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 100);
+const controls = new OrbitControls(camera, canvas);
+controls.addEventListener('change', () => requestRender());
+
+function makeScene() {
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0xffffff);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x444444, 1.6));
+  const light = new THREE.DirectionalLight(0xffffff, 1.6);  // headlight, follows the camera
+  scene.add(light, light.target);
+  const geometry = new THREE.BufferGeometry();
+  const surface = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({ vertexColors: true,
+    side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 }));
+  const points = new THREE.Points(geometry, new THREE.PointsMaterial({ vertexColors: true,
+    size: 2, sizeAttenuation: false }));
+  surface.frustumCulled = false; points.frustumCulled = false;
+  scene.add(surface, points);
+  return { scene, geometry, surface, points, light };
+}
+const views = [makeScene(), makeScene()];
+
+let dirty = true;
+function requestRender() { dirty = true; }
+function resize() {
+  const w = canvas.clientWidth, h = canvas.clientHeight;
+  if (canvas.width !== Math.floor(w * renderer.getPixelRatio()) ||
+      canvas.height !== Math.floor(h * renderer.getPixelRatio())) {
+    renderer.setSize(w, h, false);
+    camera.aspect = (w / 2) / Math.max(h, 1);
+    camera.updateProjectionMatrix();
+    dirty = true;
+  }
+}
+function frameLoop() {
+  resize();
+  if (dirty) {
+    dirty = false;
+    const w = canvas.clientWidth, h = canvas.clientHeight, half = Math.floor(w / 2);
+    views.forEach((v, i) => {
+      v.light.position.copy(camera.position);
+      v.light.target.position.copy(controls.target);
+      renderer.setViewport(i * half, 0, half, h);
+      renderer.setScissor(i * half, 0, half, h);
+      renderer.render(v.scene, camera);
+    });
+    S.renders += 1;
+    S.renderedFrame = S.frame;
+  }
+  requestAnimationFrame(frameLoop);
+}
+requestAnimationFrame(frameLoop);
+
+function applyDisplay() {
+  views.forEach((v) => {
+    const hasFaces = !!(v.geometry.index && v.geometry.index.count);
+    v.surface.visible = hasFaces && S.mode !== 'points';
+    v.points.visible = !hasFaces || S.mode !== 'surface';
+    v.points.material.size = S.pointSize;
+  });
+  requestRender();
+}
+
+function setGeometry(v, positions, faces) {
+  const g = v.geometry;
+  const n = positions.length / 3;
+  const old = g.getAttribute('position');
+  if (old && old.count === n && g.userData.faces === faces) {
+    old.array.set(positions); old.needsUpdate = true;
+  } else {
+    g.setAttribute('position', new THREE.BufferAttribute(positions.slice(), 3));
+    g.setAttribute('color', new THREE.BufferAttribute(new Uint8Array(n * 3), 3, true));
+    g.setIndex(faces && faces.length ? new THREE.BufferAttribute(faces, 1) : null);
+    g.userData.faces = faces;
+  }
+  if (faces && faces.length) g.computeVertexNormals();
+  g.computeBoundingSphere();
+}
+function setColors(v, fn) {
+  const c = v.geometry.getAttribute('color');
+  if (!c) return;
+  const a = c.array, n = c.count;
+  for (let i = 0; i < n; i++) {
+    const rgb = fn(i);
+    a[3 * i] = rgb[0]; a[3 * i + 1] = rgb[1]; a[3 * i + 2] = rgb[2];
+  }
+  c.needsUpdate = true;
+  requestRender();
+}
+
+function fitCamera(bbox) {
+  resize();
+  const lo = new THREE.Vector3(...bbox[0]), hi = new THREE.Vector3(...bbox[1]);
+  const c = lo.clone().add(hi).multiplyScalar(0.5);
+  const r = Math.max(hi.clone().sub(lo).length() / 2, 1e-9);
+  controls.target.copy(c);
+  camera.near = r / 100; camera.far = r * 100;
+  const fovV = THREE.MathUtils.degToRad(camera.fov);
+  const fovH = 2 * Math.atan(Math.tan(fovV / 2) * camera.aspect);
+  const dist = (0.95 * r) / Math.sin(Math.min(fovV, fovH) / 2);
+  camera.position.copy(c).add(new THREE.Vector3(0.6, 0.5, 1.0).normalize().multiplyScalar(dist));
+  camera.updateProjectionMatrix();
+  controls.update();
+  requestRender();
+}
+
+// ------------------------------------------------------------------ model loading
+async function positionsOf(info, frame) {
+  const key = info.id + ':' + frame;
+  if (!S.frames.has(key)) {
+    S.frames.set(key, await getArray(`/api/model/${info.id}/positions?frame=${frame}`));
+  }
+  return S.frames.get(key);
+}
+
+async function selectModel(id) {
+  const info = S.models.find((m) => m.id === id);
+  if (!info) return;
+  busy(+1);
+  try {
+    S.info = info; S.frame = 0; S.features = null; S.curves = null; S.heat = null;
+    S.compare = null; S.rightMode = 'features'; S.playing = false;
+    $('model-select').value = id;
+    $('drop-hint').hidden = true;
+    $('metrics-table').innerHTML = '';
+    S.faces = info.n_faces ? await getArray(`/api/model/${id}/faces`) : null;
+    const pos = await positionsOf(info, 0);
+    for (const v of views) setGeometry(v, pos, S.faces);
+    fitCamera(info.bbox);
+    if (info.n_faces && info.n_vertices > 200000 && S.mode === 'both') {
+      S.mode = 'surface';  // large meshes: points off by default (half the draw work)
+      $('render-mode').value = 'surface';
+    }
+    applyDisplay();
+    fillInfo();
+    fillFieldList();
+    fillDownloadFormats();
+    const anim = info.n_frames > 1;
+    $('anim-panel').hidden = !anim;
+    $('frame-slider').max = String(info.n_frames - 1);
+    $('frame-slider').value = '0';
+    updateFrameLabel();
+    $('play-btn').textContent = 'Play';
+    recolor();
+    await updateFeatures();
+    if ($('show-curves').checked) await updateCurves();
+  } finally {
+    busy(-1);
+  }
+}
+
+function fillInfo() {
+  const i = S.info;
+  $('info-name').textContent = i.name;
+  $('info-vertices').textContent = String(i.n_vertices);
+  $('info-faces').textContent = String(i.n_faces);
+  $('info-features').textContent = S.features ? String(S.features.n_features) : '…';
+  $('row-frames').hidden = i.n_frames <= 1;
+  $('info-frames').textContent = String(i.n_frames);
+  $('row-curves').hidden = !S.curves;
+  $('info-curves').textContent = S.curves ? String(S.curves.n_curves) : '–';
+  $('info-method').textContent = S.features ? 'features: ' + S.features.method : '';
+}
+
+function fillModelLists() {
+  for (const sel of [$('model-select'), $('compare-select')]) {
+    const keep = sel.value;
+    sel.innerHTML = '';
+    for (const m of S.models) {
+      const o = document.createElement('option');
+      o.value = m.id; o.textContent = `${m.name} (${m.kind})`;
+      sel.appendChild(o);
+    }
+    if (keep) sel.value = keep;
+  }
+}
+function fillFieldList() {
+  const sel = $('heat-field');
+  sel.innerHTML = '';
+  for (const f of S.info.fields) {
+    const o = document.createElement('option'); o.value = f; o.textContent = f; sel.appendChild(o);
+  }
+}
+let FORMATS = null;
+function fillDownloadFormats() {
+  const sel = $('download-format');
+  sel.innerHTML = '';
+  for (const f of (FORMATS && FORMATS.write[S.info.kind]) || []) {
+    if (f.endsWith('/')) continue;
+    const o = document.createElement('option'); o.value = f; o.textContent = f; sel.appendChild(o);
+  }
+}
+
+async function refreshState() {
+  const st = await getJSON('/api/state');
+  S.models = st.models;
+  FORMATS = st.formats;
+  const dm = $('denoise-method');
+  if (!dm.options.length) {
+    for (const d of st.denoisers) {
+      const o = document.createElement('option'); o.value = d.name; o.textContent = d.name;
+      o.title = d.summary || ''; dm.appendChild(o);
+    }
+    for (const name of st.outlier_methods) {
+      const o = document.createElement('option'); o.value = name; o.textContent = name;
+      $('outlier-method').appendChild(o);
+    }
+  }
+  fillModelLists();
+  return st;
+}
+
+function addModel(info) {
+  if (!S.models.find((m) => m.id === info.id)) S.models.push(info);
+  else S.models = S.models.map((m) => (m.id === info.id ? info : m));
+  fillModelLists();
+}
+
+// ------------------------------------------------------------------ colouring of the right view
+function recolor() {
+  const left = views[0], right = views[1];
+  setColors(left, () => GREY);
+  const n = right.geometry.getAttribute('position') ? right.geometry.getAttribute('position').count : 0;
+  $('colorbar').hidden = true;
+  if ((S.rightMode === 'heat' || S.rightMode === 'compare') && S.heat && S.heat.colors.length === 3 * n) {
+    const c = S.heat.colors;
+    setColors(right, (i) => [c[3 * i], c[3 * i + 1], c[3 * i + 2]]);
+    showColorbar(S.heat);
+    $('caption-right').textContent = S.rightMode === 'compare'
+      ? `${S.compare.name}: ${S.heat.label}` : S.heat.label;
+  } else if (S.rightMode === 'curves' && S.curves && S.curves.labels.length === n) {
+    const l = S.curves.labels;
+    setColors(right, (i) => (l[i] < 0 ? GREY : CURVE_COLORS[l[i] % CURVE_COLORS.length]));
+    $('caption-right').textContent = `Feature curves (${S.curves.n_curves})`;
+  } else if (S.features && S.features.mask.length === n) {
+    const m = S.features.mask;
+    setColors(right, (i) => (m[i] ? RED : GREY));
+    $('caption-right').textContent = `Features (red), patch ${S.features.patch}`;
+  } else {
+    setColors(right, () => GREY);
+    $('caption-right').textContent = 'Features (red)';
+  }
+  $('caption-left').textContent = S.info ? `Original: ${S.info.name}` : 'Original';
+}
+
+function showColorbar(h) {
+  const cv = $('cb-canvas'), ctx = cv.getContext('2d');
+  h.colorbar.forEach((rgb, k) => {
+    ctx.fillStyle = `rgb(${rgb[0]},${rgb[1]},${rgb[2]})`;
+    ctx.fillRect(0, 63 - k, 16, 1);
+  });
+  $('cb-min').textContent = h.vmin.toPrecision(4);
+  $('cb-max').textContent = h.vmax.toPrecision(4);
+  $('cb-label').textContent = h.label;
+  $('colorbar').hidden = false;
+}
+
+// ------------------------------------------------------------------ features / curves / heat
+async function updateFeatures() {
+  if (!S.info) return;
+  const patch = Number($('patch-size').value);
+  const r = await runJob(`/api/model/${S.info.id}/features`, { patch, frame: S.frame },
+    `feature vertices (patch ${patch})`);
+  r.mask = await getArray(`/api/model/${S.info.id}/array/${r.key}`);
+  S.features = r;
+  S.curves = null;
+  if (S.rightMode !== 'heat' && S.rightMode !== 'compare') S.rightMode = 'features';
+  fillInfo();
+  recolor();
+  if ($('show-curves').checked) await updateCurves();
+}
+
+async function updateCurves() {
+  if (!S.info) return;
+  const patch = Number($('patch-size').value);
+  const r = await runJob(`/api/model/${S.info.id}/curves`, { patch, frame: S.frame },
+    'feature curves');
+  r.labels = await getArray(`/api/model/${S.info.id}/array/${r.key}`);
+  S.curves = r;
+  S.rightMode = 'curves';
+  fillInfo();
+  recolor();
+}
+
+async function loadHeat(result, modelId) {
+  result.colors = await getArray(`/api/model/${modelId}/array/${result.colors}`);
+  return result;
+}
+
+// ------------------------------------------------------------------ animation
+function updateFrameLabel() {
+  const l = $('frame-label');
+  l.textContent = `${S.frame} / ${S.info ? S.info.n_frames - 1 : 0}`;
+  l.dataset.frame = String(S.frame);
+}
+async function showFrame(t, stillWanted = () => true) {
+  const pos = await positionsOf(S.info, t);
+  if (!stillWanted()) return;
+  S.frame = t;
+  const faces = S.faces;
+  setGeometry(views[0], pos, faces);
+  if (S.rightMode !== 'compare') setGeometry(views[1], pos, faces);
+  if (S.info.kind === 'sequence') recolor(); else requestRender();
+  $('frame-slider').value = String(t);
+  updateFrameLabel();
+}
+let playToken = 0;
+async function play() {
+  const token = ++playToken;
+  const wanted = () => S.playing && token === playToken;
+  const t0 = performance.now();
+  let shown = 0;
+  while (wanted() && S.info && S.info.n_frames > 1) {
+    const t = (S.frame + 1) % S.info.n_frames;
+    await showFrame(t, wanted);
+    shown += 1;
+    const due = t0 + shown * 40;  // 25 frames per second at most
+    await new Promise((res) => setTimeout(res, Math.max(0, due - performance.now())));
+  }
+}
+
+// ------------------------------------------------------------------ uploads
+async function upload(file) {
+  message('');
+  busy(+1);
+  try {
+    $('progress-text').textContent = `uploading ${file.name}…`;
+    const r = await fetch('/api/upload?name=' + encodeURIComponent(file.name),
+      { method: 'POST', body: file });
+    if (!r.ok) throw new Error(await errorOf(r));
+    const { model } = await r.json();
+    addModel(model);
+    $('progress-text').textContent = '';
+    await selectModel(model.id);
+    message(`loaded ${model.name}`, true);
+  } finally {
+    busy(-1);
+  }
+}
+
+// ------------------------------------------------------------------ wiring
+$('file-input').addEventListener('change', (e) => guard(async () => {
+  const f = e.target.files[0];
+  e.target.value = '';
+  if (f) await upload(f);
+}));
+const main = $('views');
+main.addEventListener('dragover', (e) => e.preventDefault());
+main.addEventListener('drop', (e) => {
+  e.preventDefault();
+  const f = e.dataTransfer.files[0];
+  if (f) guard(() => upload(f));
+});
+$('model-select').addEventListener('change', (e) => guard(() => selectModel(e.target.value)));
+$('update-features').addEventListener('click', () => guard(async () => {
+  message('');
+  S.rightMode = 'features';
+  await updateFeatures();
+}));
+$('show-curves').addEventListener('change', (e) => guard(async () => {
+  if (e.target.checked) await updateCurves();
+  else { S.curves = null; S.rightMode = 'features'; fillInfo(); recolor(); }
+}));
+$('point-size').addEventListener('input', (e) => {
+  S.pointSize = Number(e.target.value);
+  $('point-size-value').textContent = S.pointSize.toFixed(1);
+  applyDisplay();
+});
+$('render-mode').addEventListener('change', (e) => { S.mode = e.target.value; applyDisplay(); });
+$('frame-slider').addEventListener('input', (e) => guard(() => showFrame(Number(e.target.value))));
+$('play-btn').addEventListener('click', () => {
+  S.playing = !S.playing;
+  if (!S.playing) playToken += 1;
+  $('play-btn').textContent = S.playing ? 'Pause' : 'Play';
+  if (S.playing) guard(play);
+});
+$('show-heat').addEventListener('click', () => guard(async () => {
+  if (!S.info) return;
+  message('');
+  const field = $('heat-field').value;
+  const r = await runJob(`/api/model/${S.info.id}/scalar`, { field, frame: S.frame }, field);
+  S.heat = await loadHeat(r, S.info.id);
+  S.rightMode = 'heat';
+  recolor();
+}));
+$('field-input').addEventListener('change', (e) => guard(async () => {
+  const f = e.target.files[0];
+  e.target.value = '';
+  if (!f || !S.info) return;
+  const r = await fetch(`/api/field-upload?model=${S.info.id}&name=${encodeURIComponent(f.name)}`,
+    { method: 'POST', body: f });
+  if (!r.ok) throw new Error(await errorOf(r));
+  const j = await r.json();
+  addModel(j.model); S.info = j.model; fillFieldList();
+  $('heat-field').value = j.field;
+  message(`scalar field ${j.field} attached`, true);
+}));
+$('compare-btn').addEventListener('click', () => guard(async () => {
+  if (!S.info) return;
+  message('');
+  const b = $('compare-select').value;
+  const bInfo = S.models.find((m) => m.id === b);
+  const r = await runJob('/api/compare', { a: S.info.id, b, frame: S.frame }, 'compare');
+  S.heat = await loadHeat(r.heat, b);
+  S.compare = bInfo;
+  S.rightMode = 'compare';
+  const pos = await positionsOf(bInfo, bInfo.n_frames > 1 ? S.frame : 0);
+  setGeometry(views[1], pos, S.faces);
+  recolor();
+  const t = $('metrics-table');
+  t.innerHTML = '<tr><th colspan="2">' + bInfo.name + ' vs ' + S.info.name + '</th></tr>';
+  for (const [k, v] of Object.entries(r.metrics)) {
+    const tr = document.createElement('tr');
+    tr.dataset.metric = k;
+    tr.innerHTML = `<th>${k}</th><td>${Number(v).toPrecision(5)}</td>`;
+    t.appendChild(tr);
+  }
+}));
+async function processAndShow(url, body, label, after) {
+  message('');
+  const r = await runJob(url, body, label);
+  addModel(r.model);
+  await selectModel(r.model.id);
+  if (after) after(r);
+}
+$('denoise-btn').addEventListener('click', () => guard(() => processAndShow(
+  `/api/model/${S.info.id}/denoise`, { method: $('denoise-method').value },
+  `denoising (${$('denoise-method').value})`,
+  (r) => message(`denoised: ${r.model.name} (download it below)`, true))));
+$('outlier-btn').addEventListener('click', () => guard(() => processAndShow(
+  `/api/model/${S.info.id}/outliers`,
+  { method: $('outlier-method').value, k: Number($('outlier-k').value) }, 'outlier removal',
+  (r) => message(`removed ${r.n_removed} points: ${r.model.name}`, true))));
+$('download-btn').addEventListener('click', () => guard(async () => {
+  if (!S.info) return;
+  const fmt = $('download-format').value;
+  const r = await fetch(`/api/model/${S.info.id}/download?format=${encodeURIComponent(fmt)}`);
+  if (!r.ok) throw new Error(await errorOf(r));
+  const blob = await r.blob();
+  const a = document.createElement('a');
+  a.href = URL.createObjectURL(blob);
+  a.download = S.info.name.split('.')[0] + fmt;
+  document.body.appendChild(a); a.click(); a.remove();
+  setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+}));
+
+// ------------------------------------------------------------------ start
+guard(async () => {
+  const st = await refreshState();
+  if (st.models.length) await selectModel(st.models[0].id);
+  document.body.dataset.ready = '1';
+});
