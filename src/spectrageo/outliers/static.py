@@ -1,0 +1,291 @@
+"""Outlier removal for static point clouds: the RPCA filter of Algorithm 14 (Section 5.4.1) and the
+statistical (SOR) and radius filters it is measured against.
+
+All three share one contract (:func:`remove_outliers`): a per-point score where larger means more
+outlying, a threshold on it, a boolean ``keep`` mask in input order (``True`` = kept) and the kept
+points with their normals, colours and attributes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from .._validation import check_choice, check_positive
+from ..geometry import PointCloud
+from ._common import check_k, knn_chunked, morton_order
+from .rpca import rpca_scores
+
+__all__ = ["OutlierResult", "auto_threshold", "radius_scores", "remove_outliers", "sor_scores"]
+
+METHODS = ("rpca", "sor", "radius")
+
+#: Smallest automatic RPCA threshold, in units of the point spacing (see :func:`auto_threshold`).
+RPCA_MIN_TAU = 0.5
+
+
+@dataclass(frozen=True)
+class OutlierResult:
+    """Result of :func:`remove_outliers`.
+
+    Attributes
+    ----------
+    keep : (n,) bool ndarray
+        ``True`` for kept points, input order.
+    scores : (n,) float ndarray
+        Outlier score per point (larger = more outlying); ``inf`` for non-finite input rows.
+    threshold : float
+        Threshold used: a point is kept when ``score < threshold`` (``<=`` for ``"sor"`` and
+        ``"radius"``, as in PCL/Open3D).
+    method : str
+    points : PointCloud or None
+        The kept points with their normals, colours and attributes (None when ``return_points``
+        is False or no point is kept).
+    smoothed : (n, 3) ndarray or None
+        ``"rpca"`` with ``smoothed=True``: the first column of the low-rank part ``E`` (Eq. 5.99),
+        a smoothed position for every input point (NaN rows for non-finite input rows).
+    info : dict
+        Method details (spacing, iterations, convergence, ...).
+    """
+
+    keep: np.ndarray = field(repr=False)
+    scores: np.ndarray = field(repr=False)
+    threshold: float
+    method: str
+    points: PointCloud | None = field(default=None, repr=False)
+    smoothed: np.ndarray | None = field(default=None, repr=False)
+    info: dict = field(default_factory=dict)
+
+    @property
+    def n_removed(self) -> int:
+        return int(self.keep.size - np.count_nonzero(self.keep))
+
+
+def _finite_rows(P: Any, nonfinite: str) -> tuple[np.ndarray, np.ndarray | None, PointCloud | None]:
+    """``(points, finite_mask_or_None, cloud_or_None)`` with the non-finite policy applied."""
+    if isinstance(P, PointCloud):
+        return P.points, None, P
+    if P is None:
+        raise InvalidInputError("`cloud` must be a PointCloud or an (n, 3) array; got None.")
+    try:
+        X = np.asarray(P, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(
+            f"`cloud` must be a numeric array of shape (n, 3); got {type(P).__name__}."
+        ) from exc
+    if X.ndim != 2 or X.shape[1] != 3:
+        raise InvalidInputError(f"`cloud` must have shape (n, 3); got {X.shape}.")
+    if X.shape[0] == 0:
+        raise InvalidInputError("`cloud` is empty; at least one point is required.")
+    ok = np.isfinite(X).all(axis=1)
+    if ok.all():
+        return np.ascontiguousarray(X), None, None
+    if nonfinite == "raise":
+        bad = np.flatnonzero(~ok)
+        raise InvalidInputError(
+            f"`cloud` contains NaN or inf coordinates at {bad.size} row(s), first at index "
+            f"{int(bad[0])}; pass nonfinite='remove' to drop them as outliers."
+        )
+    return np.ascontiguousarray(X[ok]), ok, None
+
+
+def sor_scores(P: Any, k: int = 10, *, workers: int = -1) -> np.ndarray:
+    """Statistical outlier scores: the z-score of each point's mean distance to its ``k`` neighbours.
+
+    ``d_i`` = mean distance of ``v_i`` to its ``k`` nearest neighbours (itself excluded);
+    ``score_i = (d_i - mean(d)) / std(d)``. Keeping ``score_i <= std_ratio`` is exactly the
+    statistical outlier removal of PCL (``StatisticalOutlierRemoval``) and Open3D
+    (``remove_statistical_outlier(nb_neighbors=k, std_ratio)``). Exact duplicates count as
+    neighbours at distance 0 (as in those libraries).
+
+    Returns
+    -------
+    (n,) ndarray
+        All zeros when every ``d_i`` is equal (no point stands out).
+    """
+    X = np.asarray(P, dtype=np.float64)
+    k = check_k(k, X.shape[0])
+    d = _knn_stat(X, k, "dmean", workers)
+    sd = float(d.std())
+    if sd == 0.0:
+        return np.zeros_like(d)
+    return (d - float(d.mean())) / sd
+
+
+def radius_scores(P: Any, k: int = 10, *, workers: int = -1) -> np.ndarray:
+    """Radius outlier scores: the distance from each point to its ``k``-th nearest neighbour.
+
+    A point has at least ``k`` other points within radius ``r`` exactly when this distance is
+    ``<= r``, so keeping ``score_i <= r`` is radius outlier removal with ``min_pts = k``
+    (PCL ``RadiusOutlierRemoval``, Open3D ``remove_radius_outlier(nb_points=k, radius=r)``).
+    """
+    X = np.asarray(P, dtype=np.float64)
+    k = check_k(k, X.shape[0])
+    return _knn_stat(X, k, "dlast", workers)
+
+
+def _knn_stat(X: np.ndarray, k: int, what: str, workers: int) -> np.ndarray:
+    order = morton_order(X)
+    nb = knn_chunked(X[order], k, workers=workers)
+    out = np.empty(X.shape[0])
+    out[order] = getattr(nb, what)
+    return out
+
+
+def auto_threshold(scores: Any, *, minimum: float = 0.0) -> float:
+    """Automatic threshold: Otsu's two-class split of ``log(1 + score)``, at least ``minimum``.
+
+    Outlier scores are heavy-tailed with a dense inlier mode near 0; Otsu's criterion (maximum
+    between-class variance of a 256-bin histogram) on ``log1p`` separates that mode from the tail
+    without knowing the outlier fraction. ``minimum`` guards clean clouds, where the split would
+    otherwise fall inside the inlier distribution.
+    """
+    s = np.asarray(scores, dtype=np.float64)
+    s = s[np.isfinite(s)]
+    if s.size == 0:
+        return float(minimum)
+    x = np.log1p(np.maximum(s, 0.0))
+    lo, hi = float(x.min()), float(x.max())
+    if hi <= lo:
+        return float(max(np.expm1(hi), minimum))
+    h, edges = np.histogram(x, bins=256, range=(lo, hi))
+    c = 0.5 * (edges[1:] + edges[:-1])
+    w0 = np.cumsum(h).astype(np.float64)
+    m0 = np.cumsum(h * c)
+    W, M = w0[-1], m0[-1]
+    w1 = W - w0
+    ok = (w0 > 0) & (w1 > 0)
+    between = np.zeros_like(c)
+    between[ok] = (M * w0[ok] / W - m0[ok]) ** 2 / (w0[ok] * w1[ok])
+    # threshold at the upper edge of the lower class
+    t = float(np.expm1(edges[int(np.argmax(between)) + 1]))
+    return float(max(t, minimum))
+
+
+def remove_outliers(
+    cloud: Any,
+    *,
+    method: str = "rpca",
+    k: int = 10,
+    threshold: float | None = None,
+    smoothed: bool = False,
+    nonfinite: str = "raise",
+    return_points: bool = True,
+    workers: int = -1,
+    **rpca_options: Any,
+) -> OutlierResult:
+    r"""Remove outliers from a point cloud (Algorithm 14 or a statistical baseline).
+
+    ``method="rpca"`` (Section 5.4.1, Algorithm 14): RPCA of the ``3n x (k+1)`` kNN patch matrix
+    ``M`` of Eq. (5.98) (:func:`spectrageo.outliers.rpca_scores`); the score of ``v_i`` is
+    ``||s_i||_2``, the norm of its first-column entries of the sparse part ``S`` (Eq. 5.99), in
+    units of the point spacing ``h`` (median over points of the mean kNN distance), so a threshold
+    carries over between clouds of different scales. Points with ``score < tau`` are kept.
+    ``threshold=None`` uses :func:`auto_threshold` with ``minimum=0.5`` (half a spacing).
+    The low-rank part's first column (a smoothed copy of every point) is returned with
+    ``smoothed=True``.
+
+    ``method="sor"``: statistical outlier removal (:func:`sor_scores`): keep points whose mean
+    kNN distance is within ``threshold`` (the ``std_ratio``, default 1.0) standard deviations
+    above the mean.
+
+    ``method="radius"``: keep points with at least ``k`` neighbours within radius
+    ``threshold`` (input units; :func:`radius_scores`); default radius ``2 * median`` of the
+    ``k``-th-neighbour distances.
+
+    Parameters
+    ----------
+    cloud : PointCloud or (n, 3) array_like
+        ``n >= k + 1`` points.
+    method : {"rpca", "sor", "radius"}
+    k : int
+        Neighbours per point (patch size ``k + 1`` for RPCA, ``nb_neighbors`` for SOR,
+        ``min_pts`` for radius).
+    threshold : float, optional
+        ``tau`` (RPCA, spacing units), ``std_ratio`` (SOR) or the radius (radius); see above.
+    smoothed : bool
+        RPCA only: also return the low-rank smoothed points.
+    nonfinite : {"raise", "remove"}
+        Policy for array rows with NaN/inf coordinates (a :class:`PointCloud` never holds them):
+        raise :class:`InvalidInputError` (default), or mark them as outliers (``keep = False``,
+        ``score = inf``) and filter the finite rows.
+    return_points : bool
+        Build ``result.points`` (the kept points with their attributes).
+    workers : int
+        Threads of the kd-tree queries.
+    **rpca_options
+        Passed to :func:`spectrageo.outliers.rpca_scores` (``lam``, ``rho``, ``tol``,
+        ``max_iter``, ``block_size``, ``on_nonconvergence``).
+
+    Returns
+    -------
+    OutlierResult
+
+    Notes
+    -----
+    Malformed input: an empty cloud, a wrong shape or fewer than ``k + 1`` (finite) points raise
+    :class:`InvalidInputError`; exact duplicate points are scored once per position by RPCA (all
+    copies get the same score) and count as zero-distance neighbours for SOR/radius (the
+    behaviour of PCL and Open3D).
+    """
+    check_choice(method, "method", METHODS)
+    check_choice(nonfinite, "nonfinite", ("raise", "remove"))
+    if threshold is not None:
+        check_positive(threshold, "threshold", allow_zero=method == "sor")
+    if rpca_options and method != "rpca":
+        raise InvalidInputError(
+            f"options {sorted(rpca_options)} apply to method='rpca' only; got method={method!r}."
+        )
+    X, finite, pc = _finite_rows(cloud, nonfinite)
+    k = check_k(k, X.shape[0])
+    info: dict[str, Any] = {}
+    sm = None
+    if method == "rpca":
+        r = rpca_scores(X, k, smoothed=smoothed, workers=workers, **rpca_options)
+        s = r.scores
+        tau = auto_threshold(s, minimum=RPCA_MIN_TAU) if threshold is None else float(threshold)
+        keep_f = s < tau
+        sm = r.smoothed
+        info.update(
+            spacing=r.spacing,
+            n_iter=r.n_iter,
+            converged=r.converged,
+            residual=r.residual,
+            n_blocks=r.n_blocks,
+        )
+    elif method == "sor":
+        s = sor_scores(X, k, workers=workers)
+        tau = 1.0 if threshold is None else float(threshold)
+        keep_f = s <= tau
+    else:
+        s = radius_scores(X, k, workers=workers)
+        tau = 2.0 * float(np.median(s)) if threshold is None else float(threshold)
+        keep_f = s <= tau
+    if finite is not None:
+        n = finite.size
+        keep = np.zeros(n, dtype=bool)
+        keep[finite] = keep_f
+        scores = np.full(n, np.inf)
+        scores[finite] = s
+        if sm is not None:
+            full = np.full((n, 3), np.nan)
+            full[finite] = sm
+            sm = full
+        info["n_nonfinite"] = int(n - np.count_nonzero(finite))
+    else:
+        keep, scores = keep_f, s
+    points = None
+    if return_points and keep.any():
+        points = pc.select(keep) if pc is not None else PointCloud(X[keep_f])
+    return OutlierResult(
+        keep=keep,
+        scores=scores,
+        threshold=tau,
+        method=method,
+        points=points,
+        smoothed=sm,
+        info=info,
+    )

@@ -1,0 +1,445 @@
+"""Outlier removal (thesis Section 5.4): RPCA patch filter, SOR/radius baselines, robot pipeline,
+sequence cleaning."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from spectrageo import noise
+from spectrageo._errors import InvalidInputError
+from spectrageo.geometry import PointCloud, PointCloudSequence
+from spectrageo.outliers import (
+    auto_threshold,
+    bilateral_point_filter,
+    clean_sequence,
+    knn_patch_matrix,
+    knn_triangles,
+    radius_scores,
+    remove_outliers,
+    robot_pipeline,
+    rpca_scores,
+    sor_scores,
+    weighted_laplacian,
+)
+
+
+def _plane(n_side=40, noise_level=0.0, seed=0):
+    rng = np.random.default_rng(seed)
+    x, y = np.meshgrid(np.linspace(0, 1, n_side), np.linspace(0, 1, n_side))
+    P = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    P[:, :2] += rng.uniform(-0.2, 0.2, (P.shape[0], 2)) / n_side  # irregular sampling
+    P[:, 2] += noise_level * rng.standard_normal(P.shape[0]) / n_side
+    return P
+
+
+def _sphere(n=3000, seed=0):
+    rng = np.random.default_rng(seed)
+    P = rng.standard_normal((n, 3))
+    return P / np.linalg.norm(P, axis=1, keepdims=True)
+
+
+def _f1(keep, labels):
+    pred = ~keep
+    tp = np.count_nonzero(pred & labels)
+    p = tp / max(np.count_nonzero(pred), 1)
+    r = tp / max(np.count_nonzero(labels), 1)
+    return 2 * p * r / max(p + r, 1e-12)
+
+
+# ----------------------------------------------------------------------------- patch matrix
+def test_knn_patch_matrix_layout():
+    P = _plane(6)
+    M = knn_patch_matrix(P, 4)
+    assert M.shape == (3 * P.shape[0], 5)
+    # column 0 holds the point itself, row triplets x, y, z
+    np.testing.assert_array_equal(M[0::3, 0], P[:, 0])
+    np.testing.assert_array_equal(M[2::3, 0], P[:, 2])
+    # columns 1..k: the k nearest other points, nearest first
+    d = np.linalg.norm(P[:, None] - P[None], axis=2)
+    np.fill_diagonal(d, np.inf)
+    i = 7
+    nn = np.argsort(d[i], kind="stable")[:4]
+    got = M[3 * i : 3 * i + 3, 1:].T
+    np.testing.assert_allclose(np.sort(np.linalg.norm(got - P[i], axis=1)), d[i, nn])
+
+
+def test_knn_patch_matrix_given_neighbours_and_errors():
+    P = _plane(5)
+    idx = np.tile(np.arange(1, 4), (P.shape[0], 1))
+    M = knn_patch_matrix(P, neighbors=idx)
+    np.testing.assert_array_equal(M[0::3, 1], np.full(P.shape[0], P[1, 0]))
+    with pytest.raises(InvalidInputError, match="neighbors"):
+        knn_patch_matrix(P, neighbors=idx[:3])
+    with pytest.raises(InvalidInputError, match="integer"):
+        knn_patch_matrix(P, neighbors=idx.astype(float))
+    with pytest.raises(InvalidInputError, match="outside"):
+        knn_patch_matrix(P, neighbors=idx + 100)
+
+
+def test_rpca_scores_match_linalg_rpca():
+    """The fused patch solver gives the decomposition of spectrageo.linalg.rpca on the explicit M."""
+    from spectrageo.linalg import rpca
+
+    P, _ = noise.add_outliers(_sphere(400), fraction=0.05, kind="far", rng=1)
+    k = 6
+    r = rpca_scores(P, k, rho=1.5, tol=1e-9, max_iter=500, block_size=10**6)
+    # explicit reference on the same normalised coordinates
+    M = knn_patch_matrix((P - P.mean(axis=0)) / r.spacing, k)
+    ref = rpca(M, method="ialm", rho=1.5, tol=1e-9, max_iter=500)
+    s_ref = np.linalg.norm(ref.sparse[:, 0].reshape(-1, 3), axis=1)
+    np.testing.assert_allclose(r.scores, s_ref, atol=1e-5 * max(1.0, s_ref.max()))
+
+
+def test_rpca_scores_invariances():
+    P, _ = noise.add_outliers(_sphere(800), fraction=0.1, kind="far", rng=2)
+    a = rpca_scores(P, 8).scores
+    rng = np.random.default_rng(3)
+    perm = rng.permutation(P.shape[0])
+    b = rpca_scores(P[perm] * 7.0 + [100.0, -5.0, 3.0], 8).scores
+    np.testing.assert_allclose(b, a[perm], rtol=1e-5, atol=1e-6)
+
+
+def test_rpca_blocks_bound_memory_and_agree():
+    P, lab = noise.add_outliers(_sphere(3000), fraction=0.1, kind="far", rng=4)
+    one = rpca_scores(P, 8)
+    many = rpca_scores(P, 8, block_size=700)
+    assert many.n_blocks == 5 and one.n_blocks == 1
+    # block-wise RPCA is a different (independent) decomposition but flags the same outliers
+    tau = auto_threshold(one.scores, minimum=0.5)
+    assert _f1(one.scores < tau, lab) > 0.9
+    assert _f1(many.scores < auto_threshold(many.scores, minimum=0.5), lab) > 0.9
+
+
+def test_rpca_smoothed_is_close_to_points():
+    P = _plane(30, noise_level=0.3)
+    r = rpca_scores(P, 8, smoothed=True)
+    assert r.smoothed.shape == P.shape
+    h = r.spacing
+    assert np.median(np.linalg.norm(r.smoothed - P, axis=1)) < 0.5 * h
+    # the low-rank copy is flatter than the noisy input
+    assert np.std(r.smoothed[:, 2]) < np.std(P[:, 2])
+
+
+def test_rpca_nonconvergence_policies():
+    P, _ = noise.add_outliers(_sphere(300), fraction=0.1, kind="far", rng=5)
+    with pytest.warns(Warning, match="did not converge"):
+        rpca_scores(P, 8, max_iter=1)
+    from spectrageo._errors import ConvergenceError
+
+    with pytest.raises(ConvergenceError):
+        rpca_scores(P, 8, max_iter=1, on_nonconvergence="raise")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = rpca_scores(P, 8, max_iter=1, on_nonconvergence="ignore")
+    assert not r.converged and r.n_iter == 1
+
+
+# ----------------------------------------------------------------------------- remove_outliers
+@pytest.mark.parametrize("method", ["rpca", "sor", "radius"])
+def test_remove_far_outliers_synthetic(method):
+    P, lab = noise.add_outliers(_sphere(4000), fraction=0.1, kind="far", rng=6, shuffle=True)
+    r = remove_outliers(P, method=method, k=10)
+    assert r.keep.dtype == bool and r.keep.shape == lab.shape
+    assert r.scores.shape == lab.shape and np.isfinite(r.scores).all()
+    assert _f1(r.keep, lab) > (0.9 if method == "rpca" else 0.8)
+    np.testing.assert_array_equal(r.points.points, P[r.keep])
+    # the threshold reproduces the mask
+    cmp = r.scores < r.threshold if method == "rpca" else r.scores <= r.threshold
+    np.testing.assert_array_equal(r.keep, cmp)
+
+
+def test_remove_outliers_carries_attributes():
+    P, lab = noise.add_outliers(_sphere(1500), fraction=0.1, kind="far", rng=7)
+    n = P.shape[0]
+    rng = np.random.default_rng(0)
+    cloud = PointCloud(
+        P,
+        normals=P / np.linalg.norm(P, axis=1, keepdims=True),
+        colors=rng.integers(0, 255, (n, 3)).astype(np.uint8),
+        attributes={"source_index": np.arange(n)},
+    )
+    r = remove_outliers(cloud, method="rpca")
+    kept = r.points
+    np.testing.assert_array_equal(kept.attributes["source_index"], np.flatnonzero(r.keep))
+    np.testing.assert_array_equal(kept.colors, cloud.colors[r.keep])
+    np.testing.assert_array_equal(kept.normals, cloud.normals[r.keep])
+
+
+def test_threshold_monotone_and_explicit():
+    P, _ = noise.add_outliers(_sphere(1500), fraction=0.1, kind="far", rng=8)
+    a = remove_outliers(P, threshold=0.5)
+    b = remove_outliers(P, threshold=2.0)
+    assert a.threshold == 0.5 and b.threshold == 2.0
+    assert np.all(b.keep[a.keep])  # a higher tau keeps a superset (Algorithm 14)
+    assert b.keep.sum() > a.keep.sum()
+
+
+def test_sor_matches_definition():
+    from scipy.spatial import cKDTree
+
+    P, _ = noise.add_outliers(_sphere(500), fraction=0.1, kind="far", rng=9)
+    d, _ = cKDTree(P).query(P, k=6)
+    dm = d[:, 1:].mean(axis=1)
+    np.testing.assert_allclose(sor_scores(P, 5), (dm - dm.mean()) / dm.std(), rtol=1e-10)
+    np.testing.assert_allclose(radius_scores(P, 5), d[:, 5], rtol=1e-12)
+    r = remove_outliers(P, method="sor", k=5, threshold=2.0)
+    np.testing.assert_array_equal(r.keep, dm <= dm.mean() + 2.0 * dm.std())
+    rr = remove_outliers(P, method="radius", k=5, threshold=0.2)
+    counts = np.array([len(x) - 1 for x in cKDTree(P).query_ball_point(P, 0.2)])
+    np.testing.assert_array_equal(rr.keep, counts >= 5)
+
+
+def test_sor_against_open3d():
+    try:
+        import open3d as o3d
+    except Exception as exc:  # noqa: BLE001 - a missing libusb raises OSError, not ImportError
+        pytest.skip(f"open3d not usable: {exc}")
+    P, _ = noise.add_outliers(_sphere(2000), fraction=0.1, kind="far", rng=10)
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
+    _, ind = pc.remove_statistical_outlier(nb_neighbors=10, std_ratio=1.5)
+    keep = np.zeros(P.shape[0], bool)
+    keep[np.asarray(ind)] = True
+    r = remove_outliers(P, method="sor", k=10, threshold=1.5)
+    # Open3D counts the point itself among its neighbours; agreement on nearly every point
+    assert np.mean(keep == r.keep) > 0.98
+
+
+def test_rpca_beats_sor_on_near_surface_outliers():
+    P = _sphere(4000)
+    Q, lab = noise.add_outliers(P, fraction=0.1, kind="near", normals=P, rng=11, distance=(1.5, 3))
+    rp = remove_outliers(Q, method="rpca")
+    best_sor = max(
+        _f1(remove_outliers(Q, method="sor", k=k, threshold=t).keep, lab)
+        for k in (10, 20)
+        for t in (0.5, 1.0, 2.0)
+    )
+    assert _f1(rp.keep, lab) > best_sor
+
+
+def test_clean_cloud_keeps_almost_everything():
+    r = remove_outliers(_plane(40), method="rpca")
+    assert r.keep.mean() > 0.97
+
+
+# ----------------------------------------------------------------------------- malformed input
+def test_malformed_inputs():
+    with pytest.raises(InvalidInputError, match="empty"):
+        remove_outliers(np.zeros((0, 3)))
+    with pytest.raises(InvalidInputError, match="shape"):
+        remove_outliers(np.zeros((10, 2)))
+    with pytest.raises(InvalidInputError, match="None"):
+        remove_outliers(None)
+    with pytest.raises(InvalidInputError, match="numeric"):
+        remove_outliers([["a", "b", "c"]] * 20)
+    with pytest.raises(InvalidInputError, match="need at least 11 points"):
+        remove_outliers(np.random.default_rng(0).random((8, 3)), k=10)
+    with pytest.raises(InvalidInputError, match="method"):
+        remove_outliers(_plane(5), method="lof")
+    with pytest.raises(InvalidInputError, match="threshold"):
+        remove_outliers(_plane(5), threshold=-1.0)
+    with pytest.raises(InvalidInputError, match="apply to method='rpca' only"):
+        remove_outliers(_plane(5), method="sor", rho=2.0)
+    with pytest.raises(InvalidInputError, match="`k`"):
+        remove_outliers(_plane(5), k=0)
+    with pytest.raises(InvalidInputError, match="rho"):
+        rpca_scores(_plane(5), 4, rho=1.0)
+    with pytest.raises(InvalidInputError, match="block_size"):
+        rpca_scores(_plane(5), 4, block_size=3)
+    with pytest.raises(InvalidInputError, match="nonfinite"):
+        remove_outliers(_plane(5), nonfinite="keep")
+
+
+def test_nonfinite_rows_policy():
+    P, lab = noise.add_outliers(_sphere(1000), fraction=0.1, kind="far", rng=12)
+    P[[3, 50]] = [np.nan, 0.0, 0.0]
+    P[70, 2] = np.inf
+    with pytest.raises(
+        InvalidInputError, match=r"NaN or inf coordinates at 3 row\(s\), first at index 3"
+    ):
+        remove_outliers(P)
+    r = remove_outliers(P, nonfinite="remove", smoothed=True)
+    assert not r.keep[[3, 50, 70]].any()
+    assert np.isinf(r.scores[[3, 50, 70]]).all()
+    assert r.info["n_nonfinite"] == 3
+    assert np.isfinite(r.points.points).all()
+    assert r.points.n_points == r.keep.sum()
+
+
+def test_duplicates_scored_once_per_position():
+    P, lab = noise.add_outliers(_sphere(1000), fraction=0.1, kind="far", rng=13)
+    D = np.concatenate([P, P[:200], P[:200]])  # many exact duplicates, in-place copies
+    r = remove_outliers(D, method="rpca", threshold=1.0)
+    ref = remove_outliers(P, method="rpca", threshold=1.0)
+    n = P.shape[0]
+    np.testing.assert_allclose(r.scores[:n], ref.scores, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(r.scores[n : n + 200], ref.scores[:200], rtol=1e-6, atol=1e-9)
+    np.testing.assert_array_equal(r.keep[n + 200 :], ref.keep[:200])
+    with pytest.raises(InvalidInputError, match="distinct"):
+        remove_outliers(np.repeat(_plane(3), 5, axis=0), k=10)
+
+
+def test_auto_threshold_splits_two_modes():
+    rng = np.random.default_rng(0)
+    s = np.concatenate([rng.uniform(0, 0.3, 900), rng.uniform(5, 10, 100)])
+    t = auto_threshold(s)
+    assert 0.3 <= t < 5
+    assert auto_threshold(np.full(10, 2.0)) == pytest.approx(2.0)
+    assert auto_threshold(s[:900], minimum=1.0) >= 1.0
+    assert auto_threshold(np.array([np.inf])) == 0.0
+
+
+# ----------------------------------------------------------------------------- robot pipeline
+def test_bilateral_filter_flattens_noisy_plane():
+    P = _plane(30, noise_level=0.5, seed=1)
+    Y = bilateral_point_filter(P, 7, n_iter=2)
+    assert np.std(Y[:, 2]) < 0.6 * np.std(P[:, 2])
+    # motion is along the (nearly vertical) normals: mostly in z
+    dxy = np.linalg.norm(Y[:, :2] - P[:, :2], axis=1)
+    assert np.median(dxy) < 0.2 * np.median(np.abs(Y[:, 2] - P[:, 2]))
+    # an exact plane is a fixed point
+    Q = _plane(20)
+    np.testing.assert_allclose(bilateral_point_filter(Q, 7), Q, atol=1e-12)
+    with pytest.raises(InvalidInputError, match="normals"):
+        bilateral_point_filter(Q, 7, normals=np.zeros((3, 3)))
+    with pytest.raises(InvalidInputError, match="sigma1"):
+        bilateral_point_filter(Q, 7, sigma1=0.0)
+
+
+def test_knn_triangles_are_cliques():
+    P = _plane(12)
+    F = knn_triangles(P, 7)
+    assert F.shape[1] == 3 and F.shape[0] > P.shape[0]  # n_f > n as in Section 5.4.2
+    assert np.all(F[:, 0] < F[:, 1]) and np.all(F[:, 1] < F[:, 2])
+    assert np.unique(F, axis=0).shape[0] == F.shape[0]
+    from scipy.spatial import cKDTree
+
+    _, idx = cKDTree(P).query(P, k=8)
+    E = {(i, j) for i in range(P.shape[0]) for j in idx[i, 1:]}
+    E |= {(j, i) for i, j in E}
+    assert all((a, b) in E and (b, c) in E and (a, c) in E for a, b, c in F)
+    # and every clique is found (brute force on a small cloud)
+    n = P.shape[0]
+    brute = {
+        (a, b, c)
+        for a in range(n)
+        for b in range(a + 1, n)
+        if (a, b) in E
+        for c in range(b + 1, n)
+        if (b, c) in E and (a, c) in E
+    }
+    assert brute == {tuple(f) for f in F}
+
+
+def test_robot_pipeline_mesh_and_cloud():
+    P = _plane(30, noise_level=0.3, seed=2)
+    Q, lab = noise.add_outliers(P, fraction=0.1, kind="far", rng=14)
+    cols = np.tile(np.arange(Q.shape[0])[:, None] % 255, (1, 3)).astype(np.uint8)
+    r = robot_pipeline(PointCloud(Q, colors=cols), output="mesh")
+    assert _f1(r.keep, lab) > 0.8
+    assert r.points.n_points == r.keep.sum()
+    np.testing.assert_array_equal(r.points.colors, cols[r.keep])
+    assert r.mesh.faces.shape[0] > r.points.n_points
+    assert np.std(r.points.points[~lab[r.keep], 2]) < np.std(P[:, 2])
+    with pytest.raises(InvalidInputError, match="output"):
+        robot_pipeline(Q, output="ply")
+
+
+# ----------------------------------------------------------------------------- sequences
+def _moving_sequence(T=12, n_side=25, frac=0.1, seed=0):
+    rng = np.random.default_rng(seed)
+    P = _plane(n_side)
+    frames = []
+    for t in range(T):
+        a = 0.05 * t
+        R = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+        V = P @ R.T + [0.02 * t, 0, 0]
+        V[:, 2] += 0.1 * np.sin(3 * V[:, 0] + 0.3 * t)  # non-rigid bending
+        frames.append(V)
+    clean = np.stack(frames)
+    noisy = clean.copy()
+    lab = np.zeros(clean.shape[:2], bool)
+    n = clean.shape[1]
+    for t in range(T):
+        idx = rng.choice(n, int(frac * n), replace=False)
+        lab[t, idx] = True
+        d = rng.standard_normal((idx.size, 3))
+        noisy[t, idx] += 0.1 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    return clean, noisy, lab
+
+
+def test_clean_sequence_detects_and_refills():
+    clean, noisy, lab = _moving_sequence()
+    r = clean_sequence(PointCloudSequence(list(noisy)), k=8, tau="auto")
+    keep = np.stack(r.keep)
+    assert keep.shape == lab.shape
+    assert _f1(keep, lab) > 0.9
+    Y = np.stack([f.points for f in r.frames])
+    err = np.linalg.norm(Y - clean, axis=2)
+    err0 = np.linalg.norm(noisy - clean, axis=2)
+    assert err.mean() < 0.2 * err0.mean()
+    assert r.low_rank.shape == clean.shape
+
+
+def test_clean_sequence_default_tau_and_no_refill():
+    clean, noisy, lab = _moving_sequence(T=8, n_side=20)
+    r = clean_sequence(noisy, k=8)  # thesis tau = 1e-4
+    keep = np.stack(r.keep)
+    assert np.mean(~keep[lab]) > 0.95
+    r2 = clean_sequence(noisy, k=8, tau="auto", refill=False)
+    assert [f.n_points for f in r2.frames] == [int(k.sum()) for k in r2.keep]
+
+
+def test_clean_sequence_partitioned_matches_quality():
+    clean, noisy, lab = _moving_sequence(T=10, n_side=30, seed=1)
+    r = clean_sequence(noisy, k=8, tau="auto", submesh_size=300)
+    assert _f1(np.stack(r.keep), lab) > 0.85
+
+
+def test_clean_sequence_variable_size_falls_back_per_frame():
+    frames = []
+    labs = []
+    for t in range(3):
+        Q, lab = noise.add_outliers(_sphere(800 + 50 * t, seed=t), fraction=0.1, rng=t)
+        frames.append(PointCloud(Q))
+        labs.append(lab)
+    r = clean_sequence(PointCloudSequence(frames), k=10)
+    assert [k.size for k in r.keep] == [f.n_points for f in frames]
+    assert [f.n_points for f in r.frames] == [int(k.sum()) for k in r.keep]
+    for k_, lab in zip(r.keep, labs, strict=True):
+        assert _f1(k_, lab) > 0.8
+
+
+def test_clean_sequence_errors():
+    with pytest.raises(InvalidInputError, match="None"):
+        clean_sequence(None)
+    with pytest.raises(InvalidInputError, match=r"\(T, n, 3\)"):
+        clean_sequence(np.zeros((4, 3)))
+    with pytest.raises(InvalidInputError, match="empty"):
+        clean_sequence(np.zeros((0, 5, 3)))
+    with pytest.raises(InvalidInputError, match="tau"):
+        clean_sequence(np.random.default_rng(0).random((3, 20, 3)), tau=0.0)
+    with pytest.raises(InvalidInputError, match="overlap"):
+        clean_sequence(np.random.default_rng(0).random((3, 20, 3)), overlap=1.0)
+    with pytest.raises(InvalidInputError, match="need at least"):
+        clean_sequence(np.random.default_rng(0).random((3, 5, 3)), k=10)
+    with pytest.raises(InvalidInputError, match="no spatial extent"):
+        clean_sequence(np.zeros((3, 20, 3)))
+
+
+def test_weighted_laplacian_rows():
+    import scipy.sparse as sp
+
+    # path graph 0-1-2, vertex 1 unknown
+    C = sp.csr_matrix(np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], float))
+    prev = np.array([[0.0, 0, 0], [1, 0, 0], [3, 0, 0]])
+    motion = np.array([[1.0, 0, 0], [0, 0, 0], [1, 0, 0]])
+    known = np.array([True, False, True])
+    L = weighted_laplacian(C, prev, motion, known).toarray()
+    np.testing.assert_allclose(L.sum(axis=1), 0.0, atol=1e-12)  # L = D - C_w
+    # row 1: W1 = 1/d^2 (scaled by the median d^2 = 2.5), W2 = 1 (zero motion), W3 = 4 (known)
+    np.testing.assert_allclose(-L[1, [0, 2]], [4 * 2.5 / 1.0, 4 * 2.5 / 4.0])
+    # row 0: neighbour 1 unknown at 1 hop -> W3 = 1/2; motions (1,0,0)/(0) -> W2 = 1
+    np.testing.assert_allclose(-L[0, 1], 0.5 * 2.5 / 1.0)
