@@ -427,3 +427,89 @@ def test_cli_serves_until_interrupted(monkeypatch, capsys):
     assert rc == 0
     assert seen["url"].startswith("http://127.0.0.1:") and seen["state"]["models"] == []
     assert "spectrageo viewer on http://127.0.0.1:" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- level of detail
+def _cells_of(V, h):
+    """Independent cell coordinates of every vertex (cubic cells of size h from the bbox corner)."""
+    lo, ext = V.min(axis=0), V.max(axis=0) - V.min(axis=0)
+    top = np.maximum(np.ceil(ext / h).astype(int), 1) - 1
+    return [tuple(c) for c in np.minimum(np.floor((V - lo) / h).astype(int), top)]
+
+
+def test_vertex_clustering_is_a_clustering_within_budget():
+    from spectrageo.viewer._lod import vertex_clustering
+
+    V, F = grid(60, 40)
+    rng = np.random.default_rng(3)
+    V = V + np.c_[np.zeros((len(V), 2)), 0.01 * rng.standard_normal(len(V))]
+    p = vertex_clustering(V, F, max_faces=800)
+    assert 0.8 * 800 < len(p.faces) <= 800  # close to the budget, never above
+    assert p.resolution > 1 and p.cell_size > 0
+    reps, faces = p.reps, p.faces
+    assert np.all(np.diff(reps) > 0) and reps.min() >= 0 and reps.max() < len(V)
+    assert faces.min() >= 0 and faces.max() < len(reps)
+    # one representative per occupied cell: the vertex nearest the mean of its cell's vertices
+    cells = _cells_of(V, p.cell_size)
+    members = {}
+    for i, c in enumerate(cells):
+        members.setdefault(c, []).append(i)
+    assert len(members) == len(reps)
+    rep_of = {}
+    for idx in members.values():
+        d = ((V[idx] - V[idx].mean(axis=0)) ** 2).sum(axis=1)
+        rep_of[cells[idx[0]]] = idx[int(np.argmin(d))]
+    assert sorted(rep_of.values()) == reps.tolist()
+    # faces: the input faces mapped to representatives, without collapsed or repeated ones
+    ref = set()
+    for f in F:
+        t = tuple(rep_of[cells[v]] for v in f)
+        if len(set(t)) == 3:
+            ref.add(frozenset(t))
+    got = [frozenset(reps[f]) for f in faces]
+    assert len(got) == len(set(got)) and set(got) == ref
+    # orientation kept: the grid faces +z, so do the proxy faces (clustering may fold a few and
+    # flatten a few to collinear representatives)
+    P = V[reps]
+    nz = np.cross(P[faces[:, 1]] - P[faces[:, 0]], P[faces[:, 2]] - P[faces[:, 0]])[:, 2]
+    assert (nz > 0).mean() > 0.95 and (nz < 0).mean() < 0.02
+
+
+def test_vertex_clustering_small_models_and_point_clouds():
+    from spectrageo.viewer._lod import vertex_clustering
+
+    V, F = cube(3)
+    p = vertex_clustering(V, F, max_faces=len(F))  # fits: the model is its own proxy
+    assert p.resolution == 0
+    np.testing.assert_array_equal(p.reps, np.arange(len(V)))
+    np.testing.assert_array_equal(p.faces, F)
+    P = np.random.default_rng(0).random((5000, 3))
+    q = vertex_clustering(P, max_points=400)
+    assert q.faces is None and 0.5 * 400 < len(q.reps) <= 400
+    assert len(set(_cells_of(P, q.cell_size))) == len(q.reps)
+    assert len(vertex_clustering(P, max_points=5000).reps) == 5000
+    for bad in (0, -3, 1.5, True, "10"):
+        with pytest.raises(InvalidInputError, match="`max_faces` must be a positive integer"):
+            vertex_clustering(V, F, max_faces=bad)
+    with pytest.raises(InvalidInputError, match="`max_points` must be a positive integer"):
+        vertex_clustering(P, max_points=0)
+    with pytest.raises(InvalidInputError, match="`F` must have shape"):
+        vertex_clustering(V, F[:, :2])
+
+
+def test_lod_api_matches_library(server):
+    from spectrageo.viewer._lod import vertex_clustering
+
+    V, F = server.files["V"], server.files["F"]
+    status, r = _json(server, "api/model/m1/lod?max_faces=40")
+    assert status == 200, r
+    ref = vertex_clustering(V, F, max_faces=40)
+    reps, h = _get(server, f"api/model/m1/array/{r['reps']}")
+    assert h["X-Dtype"] == "uint32"
+    np.testing.assert_array_equal(np.frombuffer(reps, np.uint32), ref.reps)
+    faces, _ = _get(server, f"api/model/m1/array/{r['faces']}")
+    np.testing.assert_array_equal(np.frombuffer(faces, np.uint32).reshape(-1, 3), ref.faces)
+    assert (r["n_vertices"], r["n_faces"]) == (len(ref.reps), len(ref.faces))
+    assert r["n_faces"] <= 40 and r["resolution"] == ref.resolution
+    status, r = _json(server, "api/model/m1/lod?max_faces=zero")
+    assert status == 400 and "`max_faces` must be an integer" in r["error"]

@@ -29,6 +29,7 @@ if not Path(CHROMIUM).exists():
 ROOT = Path(__file__).resolve().parents[1]
 ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"]
 TIMEOUT = 60_000
+LOD_SETTLE_WAIT = 600  # ms; longer than the viewer's 250 ms settle delay
 
 
 # --------------------------------------------------------------------------- PNG decoding
@@ -142,6 +143,8 @@ def test_model_features_curves_and_screenshot(page, shared_data):
     assert int(got["faces"]) == mesh.n_faces
     assert int(got["features"]) == int(mask15.sum())
     assert page.input_value("#patch-size") == "15"
+    assert page.evaluate("window.__spectrageo.lod") is None  # small model: no proxy
+    assert page.is_hidden("#lod-info")
     assert not page.is_checked("#show-curves")
 
     left, right = panel_pixels(page, "left"), panel_pixels(page, "right")
@@ -268,3 +271,138 @@ def test_broken_upload_compare_and_denoise(page, shared_data, tmp_path):
     got = io.read(out)
     ref = denoise.denoise(noisy.vertices, noisy.faces, method="laplacian")
     np.testing.assert_allclose(got.vertices, ref, rtol=1e-5, atol=1e-6)
+
+
+PROXY_MATCHES = """() => {
+  // proxy attributes == full attributes gathered at the representative vertices, both views
+  const S = window.__spectrageo, reps = S.lod.reps;
+  let bad = 0;
+  for (const v of S.views) {
+    for (const name of ['position', 'color']) {
+      const full = v.geometry.getAttribute(name).array;
+      const prox = v.proxy.geometry.getAttribute(name).array;
+      for (let i = 0; i < reps.length; i++)
+        for (let c = 0; c < 3; c++) if (prox[3 * i + c] !== full[3 * reps[i] + c]) bad++;
+    }
+  }
+  return bad;
+}"""
+
+
+def test_level_of_detail_proxy_while_moving(page, shared_data):
+    from spectrageo.viewer._lod import vertex_clustering
+
+    path = Path(shared_data) / "meshes" / "fandisk.off"
+    mesh = io.read(path)
+    # thresholds lowered so that fandisk (12,946 faces) gets a proxy, as a 500k mesh does by default
+    page.goto(page.server.url + "?lod_faces=5000&lod_budget=3000")
+    page.wait_for_selector("body[data-ready='1']")
+    load(page, path)
+    page.wait_for_function("window.__spectrageo.lod !== null")
+    ref = vertex_clustering(mesh.vertices, mesh.faces, max_faces=3000)
+    lod = page.evaluate(
+        "[Array.from(window.__spectrageo.lod.reps), window.__spectrageo.lod.nFaces]"
+    )
+    np.testing.assert_array_equal(lod[0], ref.reps)
+    assert lod[1] == len(ref.faces) <= 3000
+    assert f"{len(ref.faces):,} faces" in page.inner_text("#lod-info")
+    assert page.evaluate(PROXY_MATCHES) == 0  # feature colours and positions map onto the proxy
+    assert page.evaluate("window.__spectrageo.detail") == "full"
+
+    # on demand: nothing redraws while nothing changes
+    n = page.evaluate("window.__spectrageo.renders")
+    page.wait_for_timeout(400)
+    assert page.evaluate("window.__spectrageo.renders") == n
+
+    # dragging: the proxy is drawn, in both panels, with the features in red on the right
+    before = panel_pixels(page, "left"), panel_pixels(page, "right")
+    n_full = page.evaluate("window.__spectrageo.rendersFull")
+    box = page.locator("#canvas").bounding_box()
+    x, y = box["x"] + box["width"] * 0.25, box["y"] + box["height"] / 2
+    page.mouse.move(x, y)
+    page.mouse.down()
+    page.mouse.move(x + 120, y, steps=4)
+    page.wait_for_function("window.__spectrageo.rendersProxy > 0")
+    page.wait_for_timeout(LOD_SETTLE_WAIT)  # held still, button down: still the proxy
+    assert page.evaluate("window.__spectrageo.detail") == "proxy"
+    assert page.evaluate("window.__spectrageo.rendersFull") == n_full
+    during = panel_pixels(page, "left"), panel_pixels(page, "right")
+    for b, d in zip(before, during):
+        assert d.reshape(-1, 3).astype(float).std(axis=0).max() > 20  # not blank
+        assert np.abs(b.astype(int) - d.astype(int)).mean() > 1.0  # both panels turned
+    assert red_fraction(during[0]) == 0.0 and red_fraction(during[1]) > 0.005
+    page.mouse.up()
+    # released: full detail again, same camera
+    page.wait_for_function("n => window.__spectrageo.rendersFull > n", arg=n_full)
+    assert page.evaluate("window.__spectrageo.detail") == "full"
+    after = panel_pixels(page, "left"), panel_pixels(page, "right")
+    for d, a in zip(during, after):
+        assert a.reshape(-1, 3).astype(float).std(axis=0).max() > 20
+        assert np.abs(d.astype(int) - a.astype(int)).mean() < 8.0  # same view, finer mesh
+    assert red_fraction(after[1]) > 0.005
+
+    # a heatmap carries over to the proxy; a wheel zoom draws the proxy, then full detail
+    page.select_option("#heat-field", "curvature")
+    page.click("#show-heat")
+    page.wait_for_selector("#colorbar", state="visible")
+    idle(page)
+    assert page.evaluate(PROXY_MATCHES) == 0
+    n_proxy, n_full = page.evaluate(
+        "[window.__spectrageo.rendersProxy, window.__spectrageo.rendersFull]"
+    )
+    page.mouse.move(x, y)
+    page.mouse.wheel(0, -200)
+    page.wait_for_function("n => window.__spectrageo.rendersProxy > n", arg=n_proxy)
+    page.wait_for_function("n => window.__spectrageo.rendersFull > n", arg=n_full)
+    assert page.evaluate("window.__spectrageo.detail") == "full"
+
+
+def test_level_of_detail_follows_animation_frames(page, shared_data):
+    path = Path(shared_data) / "animations" / "horse-gallop.npz"
+    anim = io.read(path)
+    page.goto(page.server.url + f"?lod_faces={anim.faces.shape[0] // 2}&lod_budget=2000")
+    page.wait_for_selector("body[data-ready='1']")
+    load(page, path)
+    page.wait_for_function("window.__spectrageo.lod !== null")
+    page.fill("#frame-slider", "7")
+    page.dispatch_event("#frame-slider", "input")
+    page.wait_for_selector("#frame-label[data-frame='7']")
+    idle(page)
+    assert page.evaluate(PROXY_MATCHES) == 0
+    reps = np.array(page.evaluate("Array.from(window.__spectrageo.lod.reps)"))
+    got = np.array(
+        page.evaluate(
+            "Array.from(window.__spectrageo.views[0].proxy.geometry.getAttribute('position').array)"
+        )
+    ).reshape(-1, 3)
+    np.testing.assert_allclose(got, anim.frames[7][reps], rtol=1e-6, atol=1e-6)
+
+
+def test_level_of_detail_point_cloud(page, tmp_path):
+    from spectrageo.geometry import PointCloud
+    from spectrageo.viewer._lod import vertex_clustering
+
+    rng = np.random.default_rng(1)
+    P = rng.standard_normal((4000, 3))
+    P /= np.linalg.norm(P, axis=1, keepdims=True)
+    path = tmp_path / "sphere.ply"
+    io.write(path, PointCloud(P))
+    page.goto(page.server.url + "?lod_points=2000&lod_point_budget=1000")
+    page.wait_for_selector("body[data-ready='1']")
+    load(page, path)
+    page.wait_for_function("window.__spectrageo.lod !== null")
+    ref = vertex_clustering(io.read(path).points, max_points=1000)
+    reps = page.evaluate("Array.from(window.__spectrageo.lod.reps)")
+    np.testing.assert_array_equal(reps, ref.reps)
+    assert page.evaluate(PROXY_MATCHES) == 0
+    box = page.locator("#canvas").bounding_box()
+    x, y = box["x"] + box["width"] * 0.25, box["y"] + box["height"] / 2
+    page.mouse.move(x, y)
+    page.mouse.down()
+    page.mouse.move(x + 80, y, steps=3)
+    page.wait_for_function("window.__spectrageo.detail === 'proxy'")
+    drawn = (panel_pixels(page, "left").min(axis=2) < 240).mean()  # pixels with a point
+    page.mouse.up()
+    page.wait_for_function("window.__spectrageo.detail === 'full'")
+    drawn_full = (panel_pixels(page, "left").min(axis=2) < 240).mean()
+    assert 0.001 < drawn < drawn_full  # the proxy's 1000 points show, fewer than the 4000

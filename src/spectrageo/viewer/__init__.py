@@ -8,7 +8,12 @@ Start it with ``spectrageo view [FILE ...]`` or from Python::
     print(srv.url)
 
 The page renders with three.js (vendored under ``static/vendor``, MIT licence); the core library
-never imports this package.
+never imports this package. It redraws on demand only. Models above 150,000 faces (300,000 points)
+get a level-of-detail proxy (vertex clustering to at most 100,000 faces / 150,000 points, see
+``_lod``) drawn while the camera moves; the full model is drawn once the motion stops. Page URL
+options: ``?lod=0`` (always full detail), ``lod_faces=``, ``lod_points=``, ``lod_budget=``,
+``lod_point_budget=``, ``lod_settle_ms=`` (thresholds, budgets, delay before the full redraw) and
+``aa=0|1`` (multisampling; by default on for GPUs, off for software renderers such as SwiftShader).
 """
 
 from .server import ViewerServer, ViewerSession, colorbar

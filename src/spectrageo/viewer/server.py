@@ -15,6 +15,7 @@ API (every JSON answer is an object; errors are ``{"error": message}`` with stat
 ``GET  /api/model/ID/positions?frame=T``  float32 (n, 3) of frame ``T``
 ``GET  /api/model/ID/faces``              uint32 (m, 3) (empty for point clouds)
 ``GET  /api/model/ID/array/KEY``          a computed array (dtype in the ``X-Dtype`` header)
+``GET  /api/model/ID/lod?max_faces=N``     level-of-detail proxy (``reps``/``faces`` array keys)
 ``GET  /api/model/ID/download?format=.ply`` the model written with :func:`spectrageo.io.write`
 ``POST /api/model/ID/features``           ``{"patch": 15, "frame": 0}`` -> job
 ``POST /api/model/ID/curves``             ``{"patch": 15, "frame": 0}`` -> job
@@ -338,6 +339,34 @@ class ViewerSession:
             raise InvalidInputError(f"unknown scalar field {name!r}.")
         return self._heat(m, f"scalar-{name}-{t}", vals, label)
 
+    def lod(self, m: Model, max_faces=100_000, max_points=150_000) -> dict:
+        """Vertex-clustering proxy of frame 0 drawn while the camera moves (see ``_lod``).
+
+        Its vertices are original vertices (``reps``), so the browser gathers positions of any frame
+        and per-vertex colours at ``reps``; ``faces`` index into ``reps``. Cached per budget.
+        """
+        from ._lod import vertex_clustering
+
+        max_faces = _as_int(max_faces, "max_faces", 1)
+        max_points = _as_int(max_points, "max_points", 1)
+        key = f"lod-{max_faces}-{max_points}"
+        if key + "-reps" not in m.arrays:
+            V, F, _ = m.geometry(0)
+            p = vertex_clustering(V, F, max_faces=max_faces, max_points=max_points)
+            faces = np.zeros((0, 3), np.uint32) if p.faces is None else p.faces.astype(np.uint32)
+            m.arrays[key + "-faces"] = faces
+            m.arrays[key + "-reps"] = p.reps.astype(np.uint32)
+            m.arrays[key + "-meta"] = np.array([p.resolution, p.cell_size])
+        meta = m.arrays[key + "-meta"]
+        return {
+            "reps": key + "-reps",
+            "faces": key + "-faces",
+            "n_vertices": int(len(m.arrays[key + "-reps"])),
+            "n_faces": int(len(m.arrays[key + "-faces"])),
+            "resolution": int(meta[0]),
+            "cell_size": float(meta[1]),
+        }
+
     def _heat(self, m: Model, key: str, vals, label: str) -> dict:
         from .._colormap import jet
 
@@ -640,6 +669,8 @@ class _Handler(BaseHTTPRequestHandler):
             elif what == "faces":
                 _, F, _ = m.geometry(0)
                 self._array(np.zeros((0, 3), np.uint32) if F is None else F.astype(np.uint32))
+            elif what == "lod":
+                self._json(s.lod(m, q.get("max_faces", 100_000), q.get("max_points", 150_000)))
             elif what == "array" and len(rest) == 2:
                 if rest[1] not in m.arrays:
                     raise InvalidInputError(f"unknown array {rest[1]!r}.")

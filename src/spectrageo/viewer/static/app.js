@@ -70,20 +70,62 @@ async function guard(fn) {
 }
 
 // ------------------------------------------------------------------ rendering
+// Rendering is on demand: requestRender() schedules one animation frame, nothing redraws otherwise.
+// Level of detail: models above LOD.faces faces (LOD.points points) get a vertex-clustered proxy from
+// the server (original vertices `reps`, faces into them); while the camera moves the proxy is drawn,
+// and the full model once the motion has stopped for LOD.settleMs. Positions and colours of the
+// proxy are gathered from the full model's attributes, so features/heatmaps/frames carry over.
+const params = new URLSearchParams(window.location.search);
+const LOD = {
+  enabled: params.get('lod') !== '0',
+  faces: Number(params.get('lod_faces')) || 150000,    // proxy for meshes with more faces
+  points: Number(params.get('lod_points')) || 300000,  // ... and point clouds with more points
+  budget: Number(params.get('lod_budget')) || 100000,  // proxy faces at most
+  pointBudget: Number(params.get('lod_point_budget')) || 150000,
+  settleMs: Number(params.get('lod_settle_ms')) || 250,
+};
+S.lod = null; S.interacting = false; S.detail = null;
+S.rendersFull = 0; S.rendersProxy = 0; S.renderLog = [];
+S.lodSettings = LOD;
+
+// Multisampling costs a software rasteriser (SwiftShader, llvmpipe) about 3x per frame and a GPU
+// almost nothing: it is on for GPUs only, unless the URL says `aa=1` or `aa=0`.
+function rendererName() {
+  try {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    if (!gl) return '';
+    const ext = gl.getExtension('WEBGL_debug_renderer_info');
+    const name = String(gl.getParameter(ext ? ext.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+    const lose = gl.getExtension('WEBGL_lose_context');
+    if (lose) lose.loseContext();
+    return name;
+  } catch { return ''; }
+}
+const GL_NAME = rendererName();
+const SOFTWARE = /swiftshader|llvmpipe|softpipe|software/i.test(GL_NAME);
+const ANTIALIAS = params.has('aa') ? params.get('aa') !== '0' : !SOFTWARE;
+S.gl = { renderer: GL_NAME, software: SOFTWARE, antialias: ANTIALIAS };
+
 const canvas = $('canvas');
-const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: ANTIALIAS,
+  preserveDrawingBuffer: true });
 renderer.setPixelRatio(window.devicePixelRatio || 1);
 renderer.setScissorTest(true);
 const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 100);
 const controls = new OrbitControls(camera, canvas);
+let settleTimer = null;
+controls.addEventListener('start', () => {
+  clearTimeout(settleTimer);
+  S.interacting = true;
+});
 controls.addEventListener('change', () => requestRender());
+controls.addEventListener('end', () => {
+  clearTimeout(settleTimer);
+  // wheel zooms send start/change/end at once: wait a moment before the (slow) full redraw
+  settleTimer = setTimeout(() => { S.interacting = false; requestRender(); }, LOD.settleMs);
+});
 
-function makeScene() {
-  const scene = new THREE.Scene();
-  scene.background = new THREE.Color(0xffffff);
-  scene.add(new THREE.HemisphereLight(0xffffff, 0x444444, 1.6));
-  const light = new THREE.DirectionalLight(0xffffff, 1.6);  // headlight, follows the camera
-  scene.add(light, light.target);
+function makeLayer(scene) {
   const geometry = new THREE.BufferGeometry();
   const surface = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({ vertexColors: true,
     side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 }));
@@ -91,12 +133,29 @@ function makeScene() {
     size: 2, sizeAttenuation: false }));
   surface.frustumCulled = false; points.frustumCulled = false;
   scene.add(surface, points);
-  return { scene, geometry, surface, points, light };
+  return { geometry, surface, points };
+}
+function makeScene() {
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0xffffff);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x444444, 1.6));
+  const light = new THREE.DirectionalLight(0xffffff, 1.6);  // headlight, follows the camera
+  scene.add(light, light.target);
+  const full = makeLayer(scene), proxy = makeLayer(scene);
+  return { scene, geometry: full.geometry, surface: full.surface, points: full.points, light,
+    proxy };
 }
 const views = [makeScene(), makeScene()];
+S.views = views;  // for tests and benchmarks
 
-let dirty = true;
-function requestRender() { dirty = true; }
+let scheduled = false;
+function requestRender() {
+  if (scheduled) return;
+  scheduled = true;
+  requestAnimationFrame(() => { scheduled = false; render(); });
+}
+window.addEventListener('resize', () => requestRender());
+if (window.ResizeObserver) new ResizeObserver(() => requestRender()).observe(canvas);
 function resize() {
   const w = canvas.clientWidth, h = canvas.clientHeight;
   if (canvas.width !== Math.floor(w * renderer.getPixelRatio()) ||
@@ -104,34 +163,119 @@ function resize() {
     renderer.setSize(w, h, false);
     camera.aspect = (w / 2) / Math.max(h, 1);
     camera.updateProjectionMatrix();
-    dirty = true;
   }
 }
-function frameLoop() {
+function proxyReady() {
+  return !!(LOD.enabled && S.lod && S.info && S.lod.modelId === S.info.id &&
+    views[1].proxy.geometry.getAttribute('position'));
+}
+// Draws both viewports with one camera, so the panels always show the same view.
+function render(detail) {
   resize();
-  if (dirty) {
-    dirty = false;
-    const w = canvas.clientWidth, h = canvas.clientHeight, half = Math.floor(w / 2);
-    views.forEach((v, i) => {
-      v.light.position.copy(camera.position);
-      v.light.target.position.copy(controls.target);
-      renderer.setViewport(i * half, 0, half, h);
-      renderer.setScissor(i * half, 0, half, h);
-      renderer.render(v.scene, camera);
-    });
-    S.renders += 1;
-    S.renderedFrame = S.frame;
-  }
-  requestAnimationFrame(frameLoop);
+  const useProxy = detail ? detail === 'proxy' : S.interacting && proxyReady();
+  const w = canvas.clientWidth, h = canvas.clientHeight, half = Math.floor(w / 2);
+  views.forEach((v, i) => {
+    setVisibility(v, useProxy);
+    v.light.position.copy(camera.position);
+    v.light.target.position.copy(controls.target);
+    renderer.setViewport(i * half, 0, half, h);
+    renderer.setScissor(i * half, 0, half, h);
+    renderer.render(v.scene, camera);
+  });
+  S.renders += 1;
+  S.detail = useProxy ? 'proxy' : 'full';
+  if (useProxy) S.rendersProxy += 1; else S.rendersFull += 1;
+  S.renderLog.push([performance.now(), S.detail]);
+  if (S.renderLog.length > 200) S.renderLog.splice(0, 100);
+  S.renderedFrame = S.frame;
 }
-requestAnimationFrame(frameLoop);
+// Synchronous redraw timing (benchmarks): `n` redraws at a given detail, each waited for with a
+// one-pixel read-back, mean milliseconds per redraw.
+S.timeRender = (detail, n = 3) => {
+  const gl = renderer.getContext(), px = new Uint8Array(4);
+  render(detail); gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  const t0 = performance.now();
+  for (let k = 0; k < n; k++) {
+    render(detail);
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  }
+  const ms = (performance.now() - t0) / n;
+  requestRender();
+  return ms;
+};
+
+function setVisibility(v, useProxy) {
+  const hasFaces = !!(v.geometry.index && v.geometry.index.count);
+  const surface = hasFaces && S.mode !== 'points';
+  const points = !hasFaces || S.mode !== 'surface';
+  v.surface.visible = !useProxy && surface;
+  v.points.visible = !useProxy && points;
+  const pHasFaces = !!(v.proxy.geometry.index && v.proxy.geometry.index.count);
+  v.proxy.surface.visible = useProxy && surface && pHasFaces;
+  v.proxy.points.visible = useProxy && (points || !pHasFaces);
+}
+
+// ---- the proxy: gathered from the full model's attributes at the representative vertices
+function gather(dst, src, reps) {
+  for (let i = 0, n = reps.length; i < n; i++) {
+    const j = 3 * reps[i];
+    dst[3 * i] = src[j]; dst[3 * i + 1] = src[j + 1]; dst[3 * i + 2] = src[j + 2];
+  }
+}
+function syncProxyPositions(v) {
+  const pg = v.proxy.geometry, pos = pg.getAttribute('position');
+  const src = v.geometry.getAttribute('position');
+  if (!S.lod || !pos || !src || src.count !== S.lod.nFull) return;
+  gather(pos.array, src.array, S.lod.reps);
+  pos.needsUpdate = true;
+  if (pg.index && pg.index.count) pg.computeVertexNormals();
+  pg.computeBoundingSphere();
+}
+function syncProxyColors(v) {
+  const col = v.proxy.geometry.getAttribute('color');
+  const src = v.geometry.getAttribute('color');
+  if (!S.lod || !col || !src || src.count !== S.lod.nFull) return;
+  gather(col.array, src.array, S.lod.reps);
+  col.needsUpdate = true;
+}
+function clearProxy() {
+  S.lod = null;
+  for (const v of views) {
+    const g = v.proxy.geometry;
+    g.deleteAttribute('position'); g.deleteAttribute('color'); g.setIndex(null);
+  }
+  $('lod-info').hidden = true;
+}
+async function loadLod(info) {
+  clearProxy();
+  const big = info.n_faces ? info.n_faces > LOD.faces : info.n_vertices > LOD.points;
+  if (!LOD.enabled || !big) return;
+  const r = await getJSON(`/api/model/${info.id}/lod?max_faces=${LOD.budget}` +
+    `&max_points=${LOD.pointBudget}`);
+  const [reps, faces] = await Promise.all([
+    getArray(`/api/model/${info.id}/array/${r.reps}`),
+    getArray(`/api/model/${info.id}/array/${r.faces}`)]);
+  if (!S.info || S.info.id !== info.id) return;  // another model was chosen meanwhile
+  S.lod = { modelId: info.id, reps, faces, nFull: info.n_vertices, nVertices: r.n_vertices,
+    nFaces: r.n_faces };
+  for (const v of views) {
+    const g = v.proxy.geometry, k = reps.length;
+    g.setAttribute('position', new THREE.BufferAttribute(new Float32Array(3 * k), 3));
+    g.setAttribute('color', new THREE.BufferAttribute(new Uint8Array(3 * k), 3, true));
+    g.setIndex(faces.length ? new THREE.BufferAttribute(faces, 1) : null);
+    syncProxyPositions(v);
+    syncProxyColors(v);
+  }
+  const li = $('lod-info');
+  li.textContent = `While moving: proxy of ${r.n_vertices.toLocaleString('en')} vertices` +
+    (info.n_faces ? ` / ${r.n_faces.toLocaleString('en')} faces` : '') + ' (vertex clustering)';
+  li.hidden = false;
+}
 
 function applyDisplay() {
   views.forEach((v) => {
-    const hasFaces = !!(v.geometry.index && v.geometry.index.count);
-    v.surface.visible = hasFaces && S.mode !== 'points';
-    v.points.visible = !hasFaces || S.mode !== 'surface';
     v.points.material.size = S.pointSize;
+    v.proxy.points.material.size = S.pointSize;
   });
   requestRender();
 }
@@ -150,6 +294,8 @@ function setGeometry(v, positions, faces) {
   }
   if (faces && faces.length) g.computeVertexNormals();
   g.computeBoundingSphere();
+  syncProxyPositions(v);
+  requestRender();
 }
 function setColors(v, fn) {
   const c = v.geometry.getAttribute('color');
@@ -160,6 +306,7 @@ function setColors(v, fn) {
     a[3 * i] = rgb[0]; a[3 * i + 1] = rgb[1]; a[3 * i + 2] = rgb[2];
   }
   c.needsUpdate = true;
+  syncProxyColors(v);
   requestRender();
 }
 
@@ -200,8 +347,10 @@ async function selectModel(id) {
     $('metrics-table').innerHTML = '';
     S.faces = info.n_faces ? await getArray(`/api/model/${id}/faces`) : null;
     const pos = await positionsOf(info, 0);
+    clearProxy();
     for (const v of views) setGeometry(v, pos, S.faces);
     fitCamera(info.bbox);
+    const lod = loadLod(info);  // alongside the features job
     if (info.n_faces && info.n_vertices > 200000 && S.mode === 'both') {
       S.mode = 'surface';  // large meshes: points off by default (half the draw work)
       $('render-mode').value = 'surface';
@@ -217,8 +366,7 @@ async function selectModel(id) {
     updateFrameLabel();
     $('play-btn').textContent = 'Play';
     recolor();
-    await updateFeatures();
-    if ($('show-curves').checked) await updateCurves();
+    await Promise.all([updateFeatures(), lod.then(() => requestRender())]);
   } finally {
     busy(-1);
   }
