@@ -47,7 +47,8 @@ def main() -> None:
         f"Machine: {machine_line()}.",
         "",
         "Per-face maps against the reference maps in `saliency/` (Pearson / Spearman), the time "
-        "of one map (best of 3, wall clock, guided normals and patches included), the fast "
+        "of one map (best of 3, wall clock and process CPU time, guided normals and patches "
+        "included), the fast "
         "variant against the original (Table 6.1), and the Pearson correlation of per-vertex "
         "maps with those of a rotated + scaled (x3.7) + translated copy, a copy with 30 % of the "
         "vertices removed (compared at the remaining vertices) and a copy with Gaussian noise "

@@ -1,4 +1,4 @@
-"""Fused element-wise kernels of the patch RPCA (one pass over the matrix per iteration)."""
+"""Fused kernel of the patch RPCA (one pass over the matrix per iteration)."""
 
 from __future__ import annotations
 
@@ -6,67 +6,81 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True, parallel=True)
-def ialm_sparse_step(
+@numba.njit(cache=True)
+def ialm_fused_step(
     M: np.ndarray,
-    L: np.ndarray,
+    A: np.ndarray,
     Y: np.ndarray,
-    S: np.ndarray,
-    A_next: np.ndarray,
+    Qk: np.ndarray,
+    W: np.ndarray,
     mu: float,
     mu_next: float,
     thr: float,
     group: bool,
 ) -> float:  # pragma: no cover - jitted
-    """One sparse/multiplier update of the inexact ALM, in place; returns ``||M - L - S||_F^2``.
+    """One inexact-ALM iteration once the SVT basis is known, row by row, in place.
 
-    ``S = shrink(M - L + Y / mu, thr)`` (group shrinkage of consecutive 3-vectors when ``group``,
-    element-wise soft thresholding otherwise), ``Y += mu (M - L - S)`` and the next SVT input
-    ``A_next = M - S + Y / mu_next``.
+    The low-rank row is rebuilt on the fly, ``L_i = (A_i Qk) W`` with ``W = diag(1 - tau / sigma)
+    Qk^T`` (singular value thresholding of ``A``), then ``S_i = shrink(M_i - L_i + Y_i / mu, thr)``
+    (group shrinkage of consecutive 3-vectors when ``group``, element-wise soft thresholding
+    otherwise), ``Y_i += mu (M_i - L_i - S_i)`` and ``A_i`` is overwritten with the next SVT input
+    ``M_i - S_i + Y_i / mu_next``. Neither ``L`` nor ``S`` is stored (the caller recovers the last
+    ``S = M - A + Y / mu_next``), which keeps the pass to three arrays read and two written.
+    Returns ``||M - L - S||_F^2``. Serial on purpose: the pass is memory bound and on a loaded
+    machine a second thread mostly waits.
     """
     m, p = M.shape
+    r = Qk.shape[1]
     inv = 1.0 / mu
     inv_next = 1.0 / mu_next
-    acc = np.zeros(m)
-    for i in numba.prange(m):
-        zz = 0.0
+    t = np.empty(r)
+    L = np.empty(p)
+    acc = 0.0
+    for i in range(m):
+        t[:] = 0.0
+        for j in range(p):
+            a = A[i, j]
+            for c in range(r):
+                t[c] += a * Qk[j, c]
+        L[:] = 0.0
+        for c in range(r):
+            tc = t[c]
+            for j in range(p):
+                L[j] += tc * W[c, j]
         if group:
             for j in range(0, p, 3):
-                t0 = M[i, j] - L[i, j] + Y[i, j] * inv
-                t1 = M[i, j + 1] - L[i, j + 1] + Y[i, j + 1] * inv
-                t2 = M[i, j + 2] - L[i, j + 2] + Y[i, j + 2] * inv
+                t0 = M[i, j] - L[j] + Y[i, j] * inv
+                t1 = M[i, j + 1] - L[j + 1] + Y[i, j + 1] * inv
+                t2 = M[i, j + 2] - L[j + 2] + Y[i, j + 2] * inv
                 nrm = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
                 sc = 0.0
                 if nrm > thr:
                     sc = 1.0 - thr / nrm
                 for q in range(3):
                     if q == 0:
-                        t = t0
+                        u = t0
                     elif q == 1:
-                        t = t1
+                        u = t1
                     else:
-                        t = t2
-                    s = t * sc
-                    S[i, j + q] = s
-                    z = M[i, j + q] - L[i, j + q] - s
-                    zz += z * z
+                        u = t2
+                    s = u * sc
+                    z = M[i, j + q] - L[j + q] - s
+                    acc += z * z
                     y = Y[i, j + q] + mu * z
                     Y[i, j + q] = y
-                    A_next[i, j + q] = M[i, j + q] - s + y * inv_next
+                    A[i, j + q] = M[i, j + q] - s + y * inv_next
         else:
             for j in range(p):
-                t = M[i, j] - L[i, j] + Y[i, j] * inv
-                if t > thr:
-                    s = t - thr
-                elif t < -thr:
-                    s = t + thr
+                u = M[i, j] - L[j] + Y[i, j] * inv
+                if u > thr:
+                    s = u - thr
+                elif u < -thr:
+                    s = u + thr
                 else:
                     s = 0.0
-                S[i, j] = s
-                z = M[i, j] - L[i, j] - s
-                zz += z * z
+                z = M[i, j] - L[j] - s
+                acc += z * z
                 y = Y[i, j] + mu * z
                 Y[i, j] = y
-                A_next[i, j] = M[i, j] - s + y * inv_next
-        acc[i] = zz
-    return acc.sum()
+                A[i, j] = M[i, j] - s + y * inv_next
+    return acc

@@ -72,29 +72,31 @@ def coherence_matrix(normals: np.ndarray, patches: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(normals[patches].reshape(patches.shape[0], -1), dtype=np.float64)
 
 
-def _svt_tall(A: np.ndarray, tau: float, out: np.ndarray) -> int:
-    """``out = D_tau(A)`` (singular value thresholding) for a tall ``A`` via its Gram matrix."""
-    G = A.T @ A
-    w, Q = np.linalg.eigh(G)
+def _svt_basis(A: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
+    """Right singular basis of ``D_tau(A)`` for a tall ``A``, from its (p, p) Gram matrix.
+
+    Returns ``(Qk, W)``, (p, r) and (r, p), with ``D_tau(A) = (A Qk) W`` (singular value
+    thresholding, ``W = diag(1 - tau / sigma) Qk^T`` over the singular values above ``tau``).
+    """
+    w, Q = np.linalg.eigh(A.T @ A)
     sv = np.sqrt(np.maximum(w, 0.0))
     keep = sv > tau
-    r = int(keep.sum())
-    if r == 0:
-        out[:] = 0.0
-        return 0
-    Qk = Q[:, keep]
-    if 2 * r < A.shape[1]:  # low rank (the usual case: 3-6 of 78): two thin products
-        np.matmul(A @ Qk, (1.0 - tau / sv[keep])[:, None] * Qk.T, out=out)
-    else:
-        np.matmul(A, (Qk * (1.0 - tau / sv[keep])) @ Qk.T, out=out)
-    return r
+    Qk = np.ascontiguousarray(Q[:, keep])
+    W = np.ascontiguousarray(((1.0 - tau / sv[keep])[:, None]) * Qk.T)
+    return Qk, W
 
 
 def _ialm_tall(
     M: np.ndarray, *, lam: float, tol: float, max_iter: int, group: bool
 ) -> tuple[np.ndarray, int, bool, float, int]:
-    """Inexact ALM for ``min ||E||_* + lam ||S||_(1 | 2,1)  s.t.  M = E + S`` with ``M`` tall."""
-    from ._kernels import ialm_sparse_step
+    """Inexact ALM for ``min ||E||_* + lam ||S||_(1 | 2,1)  s.t.  M = E + S`` with ``M`` tall.
+
+    Per iteration: one (p, p) Gram matrix and its eigendecomposition (the SVT basis,
+    :func:`_svt_basis`), then one fused pass over the rows (:func:`._kernels.ialm_fused_step`)
+    that rebuilds the low-rank row, shrinks, updates the multiplier and forms the next SVT input;
+    neither the low-rank nor the sparse matrix is stored during the iterations. Cost O(q p^2) per iteration, linear in the rows.
+    """
+    from ._kernels import ialm_fused_step
 
     m, p = M.shape
     norm_fro = float(np.linalg.norm(M))
@@ -109,19 +111,19 @@ def _ialm_tall(
     mu = 1.25 / two
     mu_bar = mu * 1e7
     rho = 1.5
-    S = np.zeros_like(M)
-    L = np.empty_like(M)
     A = M + Y / mu  # M - S + Y / mu with S = 0
     converged, resid, rank, it = False, np.inf, 0, 0
     for it in range(1, max_iter + 1):  # noqa: B007 - returned below
-        rank = _svt_tall(A, 1.0 / mu, L)
+        Qk, W = _svt_basis(A, 1.0 / mu)
+        rank = Qk.shape[1]
         mu_next = min(mu * rho, mu_bar)
-        zz = ialm_sparse_step(M, L, Y, S, A, mu, mu_next, lam / mu, group)
+        zz = ialm_fused_step(M, A, Y, Qk, W, mu, mu_next, lam / mu, group)
         mu = mu_next
         resid = float(np.sqrt(zz)) / norm_fro
         if resid <= tol:
             converged = True
             break
+    S = M - A + Y / mu  # A = M - S + Y / mu after the last step
     return S, it, converged, resid, rank
 
 
