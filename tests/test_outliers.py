@@ -113,6 +113,30 @@ def test_rpca_blocks_bound_memory_and_agree():
     assert _f1(many.scores < auto_threshold(many.scores, minimum=0.5), lab) > 0.9
 
 
+def test_rpca_threaded_ranges_match_single_thread(monkeypatch):
+    """Splitting a block into point ranges on threads sums the same Gram matrices and residuals."""
+    import spectrageo.outliers.rpca as rp
+
+    P, _ = noise.add_outliers(_sphere(2500), fraction=0.1, kind="far", rng=6)
+    one = rpca_scores(P, 8, workers=1, smoothed=True)
+    monkeypatch.setattr(rp, "_MIN_PER_THREAD", 500)
+    many = rpca_scores(P, 8, workers=3, smoothed=True)
+    assert rp._n_threads(3, P.shape[0]) == 3
+    assert many.n_iter == one.n_iter
+    np.testing.assert_allclose(many.scores, one.scores, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(many.smoothed, one.smoothed, rtol=1e-9, atol=1e-9)
+
+
+def test_oracle_threshold_is_best_cut():
+    from spectrageo.evaluate.outliers import _oracle_threshold
+
+    s = np.array([0.1, 0.2, 5.0, 3.0, 0.3, 4.0, 0.25, 3.0])
+    lab = np.array([0, 0, 1, 1, 0, 1, 1, 0], bool)
+    tau = _oracle_threshold(s, lab)
+    best = max(_f1(s < t, lab) for t in np.unique(s))
+    assert _f1(s < tau, lab) == best and tau == 0.25
+
+
 def test_rpca_smoothed_is_close_to_points():
     P = _plane(30, noise_level=0.3)
     r = rpca_scores(P, 8, smoothed=True)

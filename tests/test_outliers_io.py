@@ -84,13 +84,14 @@ def test_evaluate_outliers_on_real_scan(shared_data, tmp_path):
         scans=(("kinect milk", "scans/pcl/milk.pcd"),),
     )
     by = {r["method"]: r for r in rows}
-    assert set(by) == {"rpca", "sor", "sor-grid"}
+    assert set(by) == {"rpca", "rpca-oracle", "sor", "sor-grid"}
     assert by["rpca"]["f1"] >= 0.85  # the target at 10 % outliers
     assert by["sor-grid"]["f1"] >= by["sor"]["f1"]  # the oracle grid contains std_ratio 1, k 10
+    assert by["rpca-oracle"]["f1"] >= by["rpca"]["f1"]  # the best cut of the same scores
     md = (tmp_path / "o.md").read_text()
     assert "kinect milk" in md and "| rpca |" in md
     csv = (tmp_path / "o.csv").read_text().splitlines()
-    assert csv[0].startswith("dataset,kind,fraction,method") and len(csv) == 4
+    assert csv[0].startswith("dataset,kind,fraction,method") and len(csv) == 5
     assert "F1" in format_markdown(rows)
     with pytest.raises(InvalidInputError, match="unknown method"):
         evaluate_outliers(shared_data, methods=("lof",))

@@ -15,6 +15,9 @@ from ..geometry import PointCloud
 
 #: Query points per kNN chunk: bounds the temporaries of a query to O(chunk * k).
 KNN_CHUNK = 131_072
+#: Below this many query points the kd-tree is queried on the calling thread (starting the
+#: query threads costs more than it saves).
+KNN_SERIAL_BELOW = 16_384
 
 
 def as_cloud(P: Any, name: str = "P") -> tuple[np.ndarray, PointCloud | None]:
@@ -111,6 +114,8 @@ def knn_chunked(
     nq = Q.shape[0]
     if query is None:
         self_index = np.arange(nq)
+    if nq < KNN_SERIAL_BELOW:
+        workers = 1
     kk = k + 1
     itype = np.int32 if P.shape[0] < 2**31 - 1 else np.int64
     idx = np.empty((nq, k), dtype=itype)

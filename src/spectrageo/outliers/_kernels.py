@@ -5,9 +5,10 @@ points as ``[P[centers[r], c], P[nbrs[r, 0], c], ..., P[nbrs[r, k-1], c]]``. The
 single array ``R = M - E + Y / mu`` of the shape of ``M``; the sparse part and the Lagrange
 multiplier follow from it (``S = R - clip(R, lam/mu)``, ``Y / mu = clip(R, lam/mu)``), as in the
 row-chunked engine of :func:`spectrageo.linalg.rpca`. One call of :func:`patch_ialm_pass` is one
-IALM iteration (Eq. 4.22) over all rows: it forms the SVT argument, applies the low-rank operator
-``W`` (``E = X W``), updates ``R``, accumulates ``||M - E - S||_F^2`` and the Gram matrix of the
-next SVT argument, block by block (one partial sum per block, reduced afterwards).
+IALM iteration (Eq. 4.22) over the rows of a range of points: it forms the SVT argument, applies
+the low-rank operator ``W`` (``E = X W``), updates ``R``, and returns ``||M - E - S||_F^2`` and the
+Gram matrix of the next SVT argument over that range. The kernels are serial and release the GIL;
+the caller runs disjoint point ranges on threads and sums the partial results.
 """
 
 from __future__ import annotations
@@ -15,122 +16,115 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+#: Points per tile of the patch kernels (``3 * TILE`` rows of ``M`` in the tile buffers).
+TILE = 128
 
-@njit(cache=True, parallel=True)
-def patch_gram(Pn, centers, nbrs, gram_parts, l1_parts):  # pragma: no cover - compiled
-    """Gram matrix ``M^T M`` (partial per block) and ``||M||_1`` of the patch matrix."""
-    m = centers.shape[0]
+
+@njit(cache=True, nogil=True)
+def _gather_tile(Pn, centers, nbrs, s, nt, Mt):  # pragma: no cover - compiled
+    """Rows ``3s .. 3(s + nt)`` of the patch matrix ``M`` into the tile buffer ``Mt``."""
     K = nbrs.shape[1] + 1
-    nb = gram_parts.shape[0]
-    for b in prange(nb):
-        lo = b * m // nb
-        hi = (b + 1) * m // nb
-        G = gram_parts[b]
-        G[:, :] = 0.0
-        row = np.empty(K)
-        l1 = 0.0
-        for r in range(lo, hi):
+    for p in range(nt):
+        r = s + p
+        ci = centers[r]
+        for c in range(3):
+            Mt[3 * p + c, 0] = Pn[ci, c]
+        for j in range(1, K):
+            q = nbrs[r, j - 1]
             for c in range(3):
-                row[0] = Pn[centers[r], c]
-                for j in range(1, K):
-                    row[j] = Pn[nbrs[r, j - 1], c]
-                for j in range(K):
-                    l1 += abs(row[j])
-                    rj = row[j]
-                    for q in range(j, K):
-                        G[j, q] += rj * row[q]
-        l1_parts[b] = l1
+                Mt[3 * p + c, j] = Pn[q, c]
 
 
-@njit(cache=True, parallel=True, fastmath=True)
+@njit(cache=True, nogil=True)
+def patch_gram(Pn, centers, nbrs, G, lo, hi):  # pragma: no cover - compiled
+    """``G = M^T M`` over the patch rows of the points ``lo .. hi`` (``G`` (K, K) overwritten)."""
+    K = nbrs.shape[1] + 1
+    Mt = np.empty((3 * TILE, K))
+    Gt = np.empty((K, K))
+    G[:, :] = 0.0
+    for s in range(lo, hi, TILE):
+        nt = min(hi, s + TILE) - s
+        _gather_tile(Pn, centers, nbrs, s, nt, Mt)
+        if nt == TILE:
+            np.dot(Mt.T, Mt, Gt)
+        else:
+            Gt[:, :] = np.dot(Mt[: 3 * nt].T, Mt[: 3 * nt])
+        G += Gt
+
+
+@njit(cache=True, nogil=True, fastmath=True)
 def patch_ialm_pass(
-    Pn, centers, nbrs, R, A, B, tp, fp, t, f, E0, gram_parts, res_parts
+    Pn, centers, nbrs, R, W, tp, fp, t, f, E0, G, lo, hi
 ):  # pragma: no cover - compiled
-    """One IALM iteration over all rows of the implicit patch matrix.
+    """One IALM iteration (Eq. 4.22) over the patch rows of the points ``lo .. hi``.
 
-    The low-rank step is ``E = (X A) B`` with ``A`` (K, r) and ``B`` (r, K) the factors of the
-    singular value thresholding operator (``r`` = singular values above the threshold).
-    ``tp = lam / mu_prev`` and ``fp = mu_prev / mu`` decode the stored ``R`` into the current
-    ``S`` and ``Y / mu``; ``t = lam / mu`` and ``f = mu / mu_next`` encode the next SVT argument
-    ``M - S + Y_new / mu_next`` whose Gram matrix is accumulated (upper triangle) in
-    ``gram_parts``. ``E0`` receives the first column of ``E`` (the smoothed point, Eq. 5.99).
+    ``W`` (K, K) is the singular value thresholding operator of the current SVT argument ``X``
+    (``D_{1/mu}(X) = X W``). ``tp = lam / mu_prev`` and ``fp = mu_prev / mu`` decode the stored
+    ``R`` into the current ``S`` and ``Y / mu``; ``t = lam / mu`` and ``f = mu / mu_next`` encode
+    the next SVT argument ``M - S + Y_new / mu_next``, whose Gram matrix is written to ``G``.
+    ``E0`` receives the first column of ``E`` (the smoothed point, Eq. 5.99). Returns the partial
+    ``||M - E - S||_F^2``. Rows are processed in tiles of ``TILE`` points: the elementwise steps
+    run over contiguous tile buffers and the two small products (``X W`` and ``X^T X``) go to BLAS.
     """
-    m = centers.shape[0]
     K = nbrs.shape[1] + 1
-    rk = A.shape[1]
-    nb = gram_parts.shape[0]
-    for b in prange(nb):
-        lo = b * m // nb
-        hi = (b + 1) * m // nb
-        G = gram_parts[b]
-        G[:, :] = 0.0
-        mrow = np.empty(K)
-        x = np.empty(K)
-        ymu = np.empty(K)
-        xn = np.empty(K)
-        e = np.empty(K)
-        a = np.empty(rk)
-        res = 0.0
-        for r in range(lo, hi):
+    Mt = np.empty((3 * TILE, K))
+    Xt = np.empty((3 * TILE, K))
+    Yt = np.empty((3 * TILE, K))
+    Et = np.empty((3 * TILE, K))
+    Gt = np.empty((K, K))
+    Mf = Mt.ravel()
+    Xf = Xt.ravel()
+    Yf = Yt.ravel()
+    Ef = Et.ravel()
+    Rf = R.ravel()
+    G[:, :] = 0.0
+    res = 0.0
+    f1 = 1.0 + f
+    for s in range(lo, hi, TILE):
+        nt = min(hi, s + TILE) - s
+        nr = 3 * nt
+        ne = nr * K
+        _gather_tile(Pn, centers, nbrs, s, nt, Mt)
+        base = 3 * s * K
+        for i in range(ne):
+            rv = Rf[base + i]
+            cl = min(max(rv, -tp), tp)
+            y = cl * fp
+            Yf[i] = y
+            Xf[i] = Mf[i] - rv + cl + y
+        if nt == TILE:
+            np.dot(Xt, W, Et)
+        else:
+            Et[:nr] = np.dot(Xt[:nr], W)
+        for i in range(ne):
+            rn = Mf[i] - Ef[i] + Yf[i]
+            Rf[base + i] = rn
+            cl = min(max(rn, -t), t)
+            z = cl - Yf[i]  # M - E - S = R - Y/mu - S = clip(R) - Y/mu
+            res += z * z
+            Xf[i] = Mf[i] - rn + f1 * cl
+        for p in range(nt):
             for c in range(3):
-                i = 3 * r + c
-                mrow[0] = Pn[centers[r], c]
-                for j in range(1, K):
-                    mrow[j] = Pn[nbrs[r, j - 1], c]
-                for j in range(K):
-                    rv = R[i, j]
-                    cl = min(max(rv, -tp), tp)
-                    y = cl * fp
-                    ymu[j] = y
-                    x[j] = mrow[j] - rv + cl + y
-                for q in range(rk):
-                    a[q] = 0.0
-                for j in range(K):
-                    xj = x[j]
-                    for q in range(rk):
-                        a[q] += xj * A[j, q]
-                for j in range(K):
-                    e[j] = 0.0
-                for q in range(rk):
-                    aq = a[q]
-                    for j in range(K):
-                        e[j] += aq * B[q, j]
-                E0[r, c] = e[0]
-                for j in range(K):
-                    rn = mrow[j] - e[j] + ymu[j]
-                    R[i, j] = rn
-                    cl = min(max(rn, -t), t)
-                    z = cl - ymu[j]  # M - E - S = R - Y/mu - S = clip(R) - Y/mu
-                    res += z * z
-                    xn[j] = mrow[j] - rn + cl + f * cl
-                for j in range(K):
-                    xj = xn[j]
-                    for q in range(j, K):
-                        G[j, q] += xj * xn[q]
-        res_parts[b] = res
+                E0[s + p, c] = Et[3 * p + c, 0]
+        if nt == TILE:
+            np.dot(Xt.T, Xt, Gt)
+        else:
+            Gt[:, :] = np.dot(Xt[:nr].T, Xt[:nr])
+        G += Gt
+    return res
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def first_column_scores(R, t, out):  # pragma: no cover - compiled
     """``out[r] = || S[3r:3r+3, 0] ||_2`` with ``S = R - clip(R, t)`` (Eq. 5.99)."""
     m = out.shape[0]
-    for r in prange(m):
+    for r in range(m):
         acc = 0.0
         for c in range(3):
             v = R[3 * r + c, 0]
             s = v - min(max(v, -t), t)
             acc += s * s
         out[r] = np.sqrt(acc)
-
-
-@njit(cache=True, parallel=True)
-def sparse_part(R, t, out):  # pragma: no cover - compiled
-    """``out = R - clip(R, -t, t)`` (the shrinkage of Eq. 4.20)."""
-    m, n = R.shape
-    for i in prange(m):
-        for j in range(n):
-            v = R[i, j]
-            out[i, j] = v - min(max(v, -t), t)
 
 
 @njit(cache=True, parallel=True)

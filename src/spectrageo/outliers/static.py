@@ -142,6 +142,13 @@ def auto_threshold(scores: Any, *, minimum: float = 0.0) -> float:
     between-class variance of a 256-bin histogram) on ``log1p`` separates that mode from the tail
     without knowing the outlier fraction. ``minimum`` guards clean clouds, where the split would
     otherwise fall inside the inlier distribution.
+
+    Measured on the RPCA scores of the shared scans with 5/10/20 % injected far outliers, this
+    rule is within 0.007 F1 (mean; 0.023 at worst) of the best threshold chosen with the labels
+    (``rpca-oracle`` in ``spectrageo evaluate outliers``). Rules that split ``log(score)``
+    (Otsu, Kittler-Illingworth minimum error, a two-Gaussian mixture) were tried and rejected:
+    the inlier scores spread over decades in the log domain, so they split inside the inlier
+    mode (mean far-outlier F1 0.75-0.77 instead of 0.96).
     """
     s = np.asarray(scores, dtype=np.float64)
     s = s[np.isfinite(s)]
