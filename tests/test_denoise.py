@@ -159,6 +159,40 @@ def test_select_neighborhoods_keeps_feature_faces_on_their_side():
     assert n_checked > 20
 
 
+def test_select_neighborhoods_matches_brute_force(noisy_sphere):
+    # independent per-face evaluation of Eq. (5.16)-(5.19) on a noisy sphere
+    _, F, Vn = noisy_sphere
+    from spectrageo.graph.adjacency import knn
+
+    N = face_normals(Vn, F)
+    nb, _ = knn(Vn[F].mean(axis=1), 10, include_self=True)
+    feature = np.random.default_rng(0).random(len(F)) < 0.3
+    best = tsgsp.select_neighborhoods(N, nb, feature)
+    lam = np.linalg.eigvalsh(np.einsum("mki,mkj->mij", N[nb], N[nb]))
+    psi = np.abs(lam[:, 0] - lam[:, 2]) / lam[:, 2]
+    for i in np.flatnonzero(feature)[:200]:
+        cands = np.flatnonzero((nb == i).any(axis=1))
+        scores = [
+            psi[j]
+            * (N[i] @ N[nb[j]].mean(axis=0))
+            / (np.linalg.norm(N[i] - N[nb[j]], axis=1).max() + 1e-12)
+            for j in cands
+        ]
+        assert best[i] == cands[int(np.argmax(scores))]
+    np.testing.assert_array_equal(best[~feature], np.flatnonzero(~feature))
+
+
+def test_tsgsp_saliency_lowers_theta_and_is_deterministic(noisy_sphere):
+    pytest.importorskip("spectrageo.saliency")
+    V, F, Vn = noisy_sphere
+    a = denoise.denoise(Vn, F, method="tsgsp-saliency")
+    b = denoise.denoise(Vn, F, method="tsgsp-saliency")
+    np.testing.assert_array_equal(a, b)
+    assert metrics.theta_deg(a, V, F) < 0.7 * metrics.theta_deg(Vn, V, F)
+    with pytest.raises(InvalidInputError, match="`pre` must be None"):
+        tsgsp.tsgsp_saliency(Vn, F, pre="x")
+
+
 def test_fine_returns_features(noisy_cube):
     V, F, Vn = noisy_cube
     out, feat = tsgsp.fine(tsgsp.coarse(Vn, F), F, return_features=True)
@@ -196,6 +230,8 @@ def test_tsgsp_validation(noisy_cube):
         tsgsp.fine(Vn, F, range_guide="x")
     with pytest.raises(InvalidInputError, match="`sigma_c`"):
         tsgsp.fine(Vn, F, sigma_c=0.0)
+    with pytest.raises(InvalidInputError, match="`min_feature`"):
+        tsgsp.fine(Vn, F, min_feature=-1.0)
     with pytest.raises(InvalidInputError, match="`patch` must be >= 4"):
         tsgsp.estimate_noise(Vn, patch=3)
     with pytest.raises(InvalidInputError, match="at least 4 vertices"):
