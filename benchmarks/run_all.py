@@ -15,39 +15,30 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+
+
+def _script(name: str) -> list[str]:
+    return [sys.executable, str(HERE / f"{name}.py")]
+
+
+def _evaluate(what: str, stem: str) -> list[str]:
+    out = str(HERE / "_out" / stem)
+    return [sys.executable, "-m", "spectrageo.cli.main", "evaluate", what, "--out", out]
+
+
 # order of sections in BENCHMARKS.md: (section file stem, command producing it)
 SECTIONS = [
-    ("noisy_inputs", [sys.executable, str(HERE / "noisy_inputs.py")]),
-    ("core", [sys.executable, str(HERE / "core.py")]),
-    ("lowpass", [sys.executable, str(HERE / "lowpass.py")]),
-    ("rpca_large", [sys.executable, str(HERE / "rpca_large.py")]),
-    (
-        "denoise",
-        [
-            sys.executable,
-            "-m",
-            "spectrageo.cli.main",
-            "evaluate",
-            "denoise",
-            "--out",
-            str(HERE / "_out" / "denoise"),
-        ],
-    ),
-    (
-        "outliers",
-        [
-            sys.executable,
-            "-m",
-            "spectrageo.cli.main",
-            "evaluate",
-            "outliers",
-            "--out",
-            str(HERE / "_out" / "outliers"),
-        ],
-    ),
-    ("outliers_large", [sys.executable, str(HERE / "outliers_large.py")]),
-    ("saliency", [sys.executable, str(HERE / "saliency.py")]),
-    ("viewer", [sys.executable, str(HERE / "viewer.py")]),
+    ("noisy_inputs", _script("noisy_inputs")),
+    ("core", _script("core")),
+    ("lowpass", _script("lowpass")),
+    ("rpca_large", _script("rpca_large")),
+    ("denoise", _evaluate("denoise", "denoise")),
+    ("denoise_large", _script("denoise_large")),
+    ("denoise_dynamic", _evaluate("denoise-dynamic", "denoise_dynamic")),
+    ("outliers", _evaluate("outliers", "outliers")),
+    ("outliers_large", _script("outliers_large")),
+    ("saliency", _script("saliency")),
+    ("viewer", _script("viewer")),
 ]
 
 HEADER = """# Benchmarks
@@ -71,10 +62,13 @@ def main() -> None:
             print(f"== {name}: {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
             subprocess.run(cmd, check=True, cwd=ROOT)
     parts = [HEADER]
-    for name, _ in SECTIONS:
+    for name, cmd in SECTIONS:
         f = HERE / "_out" / f"{name}.md"
         if f.exists():
             parts.append(f.read_text().rstrip() + "\n")
+        else:
+            run = " ".join(Path(c).name if c == sys.executable else c for c in cmd)
+            parts.append(f"## {name}\n\nNot measured yet: `{run}`.\n")
     tmp = ROOT / "BENCHMARKS.md.tmp"
     tmp.write_text("\n".join(parts))
     tmp.replace(ROOT / "BENCHMARKS.md")
