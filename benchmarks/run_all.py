@@ -34,7 +34,7 @@ SECTIONS = [
     ("rpca_large", _script("rpca_large")),
     ("denoise", _evaluate("denoise", "denoise")),
     ("denoise_large", _script("denoise_large")),
-    ("denoise_dynamic", _evaluate("denoise-dynamic", "denoise_dynamic")),
+    ("denoise_dynamic", [*_script("denoise_dynamic"), "--max-frames", "40"]),
     ("outliers", _evaluate("outliers", "outliers")),
     ("outliers_large", _script("outliers_large")),
     ("saliency", _script("saliency")),
