@@ -9,14 +9,13 @@ the wall time. Optional peers run in the same session when their package is impo
 
 from __future__ import annotations
 
-import csv
-import io as _io
 import time
 from pathlib import Path
 
 import numpy as np
 
 from .._errors import InvalidInputError
+from ._tables import rows_to_csv, write_md_csv
 
 #: columns of the table, in order
 COLUMNS = (
@@ -202,33 +201,19 @@ def format_markdown(rows: list[dict]) -> str:
 
 def format_csv(rows: list[dict]) -> str:
     """CSV text of the rows (full precision)."""
-    buf = _io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(COLUMNS), lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: r[k] for k in COLUMNS})
-    return buf.getvalue()
+    return rows_to_csv(rows, COLUMNS)
 
 
 def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
     """Write ``<out>.md`` and ``<out>.csv`` atomically; returns both paths."""
-    from ..io import atomic_write
-
-    out = Path(out)
-    if out.suffix in (".md", ".csv"):
-        out = out.with_suffix("")
-    md, cs = out.with_name(out.name + ".md"), out.with_name(out.name + ".csv")
-    with atomic_write(md) as tmp:
-        Path(tmp).write_text(
-            "## Static mesh denoising\n\n"
-            "Produced by `spectrageo evaluate denoise`; every method with its default settings.\n\n"
-            + format_markdown(rows)
-            + "\n",
-            encoding="utf-8",
-        )
-    with atomic_write(cs) as tmp:
-        Path(tmp).write_text(format_csv(rows), encoding="utf-8")
-    return md, cs
+    return write_md_csv(
+        out,
+        "## Static mesh denoising\n\n"
+        "Produced by `spectrageo evaluate denoise`; every method with its default settings.\n\n"
+        + format_markdown(rows)
+        + "\n",
+        format_csv(rows),
+    )
 
 
 __all__ = ["COLUMNS", "PEERS", "evaluate_denoise", "format_csv", "format_markdown", "write_tables"]

@@ -13,8 +13,6 @@ Used by ``spectrageo evaluate denoise-dynamic [--methods ...] [--out FILE]``.
 
 from __future__ import annotations
 
-import csv
-import io as _io
 import time
 import warnings
 from pathlib import Path
@@ -23,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+from ._tables import rows_to_csv, write_md_csv
 
 ANIMATIONS = ("crane", "horse-gallop", "horse-collapse", "chickenCrossing")
 DEFAULT_METHODS = ("gft-rpca", "normals-rpca", "bnf", "gnf", "tsgsp")
@@ -194,32 +193,18 @@ def format_markdown(rows: list[dict]) -> str:
 
 def format_csv(rows: list[dict]) -> str:
     """CSV text of the rows (full precision)."""
-    buf = _io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(COLUMNS), lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: r[k] for k in COLUMNS})
-    return buf.getvalue()
+    return rows_to_csv(rows, COLUMNS)
 
 
 def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
     """Write ``<out>.md`` and ``<out>.csv`` atomically; returns both paths."""
-    from ..io import atomic_write
-
-    out = Path(out)
-    if out.suffix in (".md", ".csv"):
-        out = out.with_suffix("")
-    md, cs = out.with_name(out.name + ".md"), out.with_name(out.name + ".csv")
-    with atomic_write(md) as tmp:
-        Path(tmp).write_text(
-            "## Mesh animation denoising\n\n"
-            "Produced by `spectrageo evaluate denoise-dynamic`; every method with its default "
-            "settings, static methods run frame by frame.\n\n" + format_markdown(rows) + "\n",
-            encoding="utf-8",
-        )
-    with atomic_write(cs) as tmp:
-        Path(tmp).write_text(format_csv(rows), encoding="utf-8")
-    return md, cs
+    return write_md_csv(
+        out,
+        "## Mesh animation denoising\n\n"
+        "Produced by `spectrageo evaluate denoise-dynamic`; every method with its default "
+        "settings, static methods run frame by frame.\n\n" + format_markdown(rows) + "\n",
+        format_csv(rows),
+    )
 
 
 __all__ = ["ANIMATIONS", "COLUMNS", "DEFAULT_METHODS", "NOISES", "evaluate", "format_csv",

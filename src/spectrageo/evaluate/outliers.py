@@ -19,8 +19,6 @@ reconstruction (the thesis' comparison).
 
 from __future__ import annotations
 
-import csv
-import io as _io
 import time
 from pathlib import Path
 from typing import Any
@@ -28,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+from ._tables import rows_to_csv, write_md_csv
 
 __all__ = ["DEFAULT_METHODS", "SCANS", "evaluate_outliers", "format_markdown"]
 
@@ -305,30 +304,13 @@ def _fmt(v: Any) -> str:
 
 
 def _write(rows: list[dict], out: Any) -> tuple[Path, Path]:
-    from ..io import atomic_write
-
-    base = Path(out)
-    if base.suffix in (".md", ".csv"):
-        base = base.with_suffix("")
-    base.parent.mkdir(parents=True, exist_ok=True)
-    md, cs = base.with_name(base.name + ".md"), base.with_name(base.name + ".csv")
-    with atomic_write(md) as tmp:
-        Path(tmp).write_text(
-            "## Outlier removal\n\n"
-            "Produced by `spectrageo evaluate outliers`; injected, labelled outliers on the shared "
-            "scans (far: uniform in the enlarged bounding box; near: 1-3 spacings along the normal), "
-            "F1 of the removed points. `sor-grid` is the best SOR over k x std_ratio chosen with "
-            "the labels; `rpca-oracle` is the `rpca` scores cut at the best threshold chosen with "
-            "the labels (how much the automatic threshold loses).\n\n"
-            + format_markdown(rows)
-            + "\n",
-            encoding="utf-8",
-        )
-    buf = _io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(_COLS), extrasaction="ignore")
-    w.writeheader()
-    for r in rows:
-        w.writerow({c: r.get(c, "") for c in _COLS})
-    with atomic_write(cs) as tmp:
-        Path(tmp).write_text(buf.getvalue(), encoding="utf-8")
-    return md, cs
+    return write_md_csv(
+        out,
+        "## Outlier removal\n\n"
+        "Produced by `spectrageo evaluate outliers`; injected, labelled outliers on the shared "
+        "scans (far: uniform in the enlarged bounding box; near: 1-3 spacings along the normal), "
+        "F1 of the removed points. `sor-grid` is the best SOR over k x std_ratio chosen with "
+        "the labels; `rpca-oracle` is the `rpca` scores cut at the best threshold chosen with "
+        "the labels (how much the automatic threshold loses).\n\n" + format_markdown(rows),
+        rows_to_csv(rows, _COLS),
+    )

@@ -17,8 +17,6 @@ Methods: ``combined``, ``fast`` (combined with the fast variant), ``spectral``, 
 
 from __future__ import annotations
 
-import csv
-import io as _io
 import time
 from pathlib import Path
 
@@ -26,6 +24,7 @@ import numpy as np
 from scipy.stats import pearsonr, spearmanr
 
 from .._errors import InvalidInputError
+from ._tables import rows_to_csv, write_md_csv
 
 MODELS = ("block", "cad", "casting", "fandisk")
 METHODS = ("combined", "fast", "spectral", "geometric")
@@ -197,28 +196,13 @@ def format_markdown(rows: list[dict]) -> str:
 
 
 def format_csv(rows: list[dict]) -> str:
-    buf = _io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(COLUMNS), lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({c: r.get(c) for c in COLUMNS})
-    return buf.getvalue()
+    """CSV text of the rows (full precision)."""
+    return rows_to_csv(rows, COLUMNS)
 
 
 def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
     """Write ``<out>.md`` and ``<out>.csv`` atomically; returns both paths."""
-    from ..io import atomic_write
-
-    out = Path(out)
-    if out.suffix in (".md", ".csv"):
-        out = out.with_suffix("")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    md, cs = out.with_name(out.name + ".md"), out.with_name(out.name + ".csv")
-    with atomic_write(md) as tmp:
-        Path(tmp).write_text(format_markdown(rows) + "\n", encoding="utf-8")
-    with atomic_write(cs) as tmp:
-        Path(tmp).write_text(format_csv(rows), encoding="utf-8")
-    return md, cs
+    return write_md_csv(out, format_markdown(rows) + "\n", format_csv(rows))
 
 
 __all__ = [
