@@ -5,13 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import grid
 from scipy.sparse.csgraph import connected_components, shortest_path
 
 from spectrageo._errors import InvalidInputError
 from spectrageo.datasets import fandisk
 from spectrageo.graph import adjacency_matrix, mesh_laplacian, weighted_adjacency
 from spectrageo.spectral import Submeshes, overlapped_submeshes, reassemble, submesh_laplacian
+
+from conftest import grid
 
 
 @pytest.fixture(scope="module")
@@ -24,7 +25,9 @@ def fandisk_graph():
 def _path_graph(n: int, offset: int = 0, total: int | None = None) -> sp.csr_matrix:
     total = n + offset if total is None else total
     i = np.arange(offset, offset + n - 1)
-    return sp.csr_matrix((np.ones(2 * i.size), (np.r_[i, i + 1], np.r_[i + 1, i])), shape=(total,) * 2)
+    return sp.csr_matrix(
+        (np.ones(2 * i.size), (np.r_[i, i + 1], np.r_[i + 1, i])), shape=(total,) * 2
+    )
 
 
 def _disjoint(*graphs: sp.spmatrix) -> sp.csr_matrix:

@@ -9,7 +9,13 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._validation import as_rng, check_positive
-from ._common import check_on_nonconvergence, check_tol_iter, report_nonconvergence, top_svd
+from ._common import (
+    blas_threads,
+    check_on_nonconvergence,
+    check_tol_iter,
+    report_nonconvergence,
+    top_svd,
+)
 
 __all__ = ["CompletionResult", "complete_matrix"]
 
@@ -112,7 +118,9 @@ def complete_matrix(
     try:
         D = np.array(M, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise InvalidInputError(f"`M` must be a numeric 2-D array; got {type(M).__name__}.") from exc
+        raise InvalidInputError(
+            f"`M` must be a numeric 2-D array; got {type(M).__name__}."
+        ) from exc
     if D.ndim != 2 or D.size == 0:
         raise InvalidInputError(f"`M` must be a non-empty 2-D array (m, n); got shape {D.shape}.")
     mask = np.asarray(observed)
@@ -154,6 +162,17 @@ def complete_matrix(
     if rho < 1:
         raise InvalidInputError(f"`rho` must be >= 1; got {rho!r}.")
 
+    with blas_threads(k_all):
+        E, it, converged, residual, rank, n_lam = _alm(
+            D, mask, mu, rho, sv_lo, sv_hi, tol, max_iter, normD, gen
+        )
+    completed = np.where(mask, D, E) if keep_observed else E
+    result = CompletionResult(completed, it, converged, residual, rank, n_lam)
+    return report_nonconvergence(result, on_nonconvergence, "Matrix completion (ALM)")
+
+
+def _alm(D, mask, mu, rho, sv_lo, sv_hi, tol, max_iter, normD, gen):
+    """The ALM iterations of :func:`complete_matrix` (Eq. 5.84-5.89)."""
     Y = np.zeros_like(D)
     S = np.zeros_like(D)
     E = np.zeros_like(D)
@@ -178,6 +197,4 @@ def complete_matrix(
         # Eq. 5.89: grow n_lambda unless the last two computed singular values are equal
         if n_lam < 2 or lam.size < n_lam or lam[n_lam - 1] <= 0.995 * lam[n_lam - 2]:
             n_lam = min(n_lam + 1, sv_hi)
-    completed = np.where(mask, D, E) if keep_observed else E
-    result = CompletionResult(completed, it, converged, residual, rank, n_lam)
-    return report_nonconvergence(result, on_nonconvergence, "Matrix completion (ALM)")
+    return E, it, converged, residual, rank, n_lam

@@ -72,15 +72,15 @@ def isvd_update(
     C = _as_float_2d(C, "C")
     m, r = U.shape
     if s.shape != (r,):
-        raise InvalidInputError(f"`s` must have shape ({r},) to match `U` {U.shape}; got {s.shape}.")
+        raise InvalidInputError(
+            f"`s` must have shape ({r},) to match `U` {U.shape}; got {s.shape}."
+        )
     if C.shape[0] != m:
         raise InvalidInputError(f"`C` must have {m} rows like `U`; got shape {C.shape}.")
     if Vt is not None:
         Vt = _as_float_2d(Vt, "Vt")
         if Vt.shape[0] != r:
-            raise InvalidInputError(
-                f"`Vt` must have {r} rows to match `s`; got shape {Vt.shape}."
-            )
+            raise InvalidInputError(f"`Vt` must have {r} rows to match `s`; got shape {Vt.shape}.")
     if rank is not None:
         check_positive(rank, "rank", integer=True)
     if tol is not None:
@@ -137,7 +137,9 @@ class IncrementalSVD:
     True
     """
 
-    def __init__(self, rank: int | None = None, *, compute_v: bool = True, tol: float | None = None):
+    def __init__(
+        self, rank: int | None = None, *, compute_v: bool = True, tol: float | None = None
+    ):
         if rank is not None:
             check_positive(rank, "rank", integer=True)
         self.rank = rank
@@ -170,5 +172,7 @@ class IncrementalSVD:
         if self.U is None:
             raise InvalidInputError("no column has been added yet.")
         if self.Vt is None:
-            raise InvalidInputError("`compute_v=False`: the right singular vectors are not tracked.")
+            raise InvalidInputError(
+                "`compute_v=False`: the right singular vectors are not tracked."
+            )
         return (self.U * self.s) @ self.Vt

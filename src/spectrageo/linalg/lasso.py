@@ -153,7 +153,9 @@ def lasso(
     return report_nonconvergence(result, on_nonconvergence, "LASSO (ADMM)")
 
 
-def _factorised_solver(A, N: int, rho: float, is_sparse: bool) -> Callable[[np.ndarray], np.ndarray]:
+def _factorised_solver(
+    A, N: int, rho: float, is_sparse: bool
+) -> Callable[[np.ndarray], np.ndarray]:
     """Return ``q -> (A^T A / N + rho I)^{-1} q`` with the factorisation computed once."""
     n_samples, p = A.shape
     if is_sparse:

@@ -112,7 +112,8 @@ def lowpass(
         out = lowpass_whole(X.reshape(n, -1), L, keep=keep)
         return out.reshape(X.shape)
 
-    subs = overlapped_submeshes(W, submesh_size=submesh_size, overlap=overlap, rng=rng)
+    # the partition only uses the sparsity pattern (cotangent weights may be negative)
+    subs = overlapped_submeshes(abs(W), submesh_size=submesh_size, overlap=overlap, rng=rng)
     Xm = X.reshape(n, -1)
     values = [None] * len(subs.parts)
     for i, _w, U in submesh_eigenbases(

@@ -17,6 +17,7 @@ the low-pass residual of a given signal stays between two thresholds.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -27,9 +28,10 @@ import scipy.sparse.linalg as spla
 from numba import njit
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-from .._errors import InvalidInputError
+from .._errors import ConvergenceWarning, InvalidInputError
 from .._progress import progress
 from .._validation import as_rng, check_choice, check_positive
+from ..linalg._common import check_on_nonconvergence, report_nonconvergence, single_thread_blas
 from .gft import fix_signs
 from .partition import Submeshes, as_adjacency
 
@@ -468,6 +470,7 @@ def orthogonal_iteration(
     factor=None,
     tol: float | None = None,
     full_output: bool = False,
+    on_nonconvergence: str = "warn",
 ):
     """Orthogonal iteration ``U <- Onorm(T^zeta U)``, ``T = (L + delta I)^-1`` (Eq. 4.7, Algorithm 6).
 
@@ -499,6 +502,11 @@ def orthogonal_iteration(
     full_output : bool
         Return an :class:`OIResult` (eigenvalues, eigenvectors, n_iter, converged, residual) instead
         of the basis alone.
+    on_nonconvergence : {"warn", "raise", "ignore"}
+        With ``tol``, when ``n_iter`` iterations do not reach it: ``"warn"`` emits a
+        :class:`~spectrageo.ConvergenceWarning`, ``"raise"`` raises
+        :class:`~spectrageo.ConvergenceError` (``partial`` is the :class:`OIResult`), ``"ignore"``
+        returns silently (``converged`` is still False).
 
     Returns
     -------
@@ -516,10 +524,13 @@ def orthogonal_iteration(
         factor = shifted_factor(L, delta=delta)
     elif not (hasattr(factor, "solve") or callable(factor)):
         raise InvalidInputError("`factor` must be a SuperLU object or a callable solve(B).")
-    theta, U, it, res = _oi(L, U, factor, zeta, int(n_iter), tol, full_output)
-    if not full_output:
-        return U
-    return OIResult(theta, U, it, bool(tol is not None and res <= tol), float(res))
+    check_on_nonconvergence(on_nonconvergence)
+    with single_thread_blas():
+        theta, U, it, res = _oi(L, U, factor, zeta, int(n_iter), tol, full_output)
+    result = OIResult(theta, U, it, bool(tol is not None and res <= tol), float(res))
+    if tol is not None:
+        report_nonconvergence(result, on_nonconvergence, f"Orthogonal iteration (tol={tol:g})")
+    return result if full_output else U
 
 
 def _oi(L, U, factor, zeta: int, n_iter: int, tol, want_residual: bool, ritz: bool = True):
@@ -564,6 +575,7 @@ def dynamic_orthogonal_iteration(
     min_size: int = 1,
     max_size: int | None = None,
     factor=None,
+    on_nonconvergence: str = "warn",
 ) -> DOIResult:
     """Dynamic orthogonal iteration (Algorithm 7, Eq. 5.43-5.44): OI whose subspace size adapts to a
     signal ``X`` so that its low-pass residual lies between ``eps_low`` and ``eps_high``.
@@ -600,6 +612,8 @@ def dynamic_orthogonal_iteration(
     delta, zeta, factor : see :func:`orthogonal_iteration`
     t_max : int, maximum number of OI steps
     min_size, max_size : bounds of ``n_l`` (``max_size`` defaults to ``n - 1``)
+    on_nonconvergence : {"warn", "raise", "ignore"}
+        Policy when ``converged`` is False (see :func:`orthogonal_iteration`).
 
     Returns
     -------
@@ -635,7 +649,10 @@ def dynamic_orthogonal_iteration(
         )
     if factor is None:
         factor = shifted_factor(L, delta=delta)
-    return _doi(L, U, X, eps_low, eps_high, zeta, int(t_max), int(min_size), max_size, factor)
+    check_on_nonconvergence(on_nonconvergence)
+    with single_thread_blas():
+        res = _doi(L, U, X, eps_low, eps_high, zeta, int(t_max), int(min_size), max_size, factor)
+    return report_nonconvergence(res, on_nonconvergence, "Dynamic orthogonal iteration")
 
 
 def _doi(L, U, X, eps_low, eps_high, zeta, t_max, min_size, max_size, factor) -> DOIResult:
@@ -770,8 +787,10 @@ def submesh_eigenbases(
     ``"doi"``
         Dynamic OI (Algorithm 7) on ``signal`` (required): the subspace size of every submesh is
         adapted so that the relative low-pass residual of the signal lies in ``[eps_low, eps_high]``
-        (see :func:`dynamic_orthogonal_iteration`); ``n_keep`` is the size of the first submesh, the
-        others start from their predecessor's size.
+        (see :func:`dynamic_orthogonal_iteration`). The first submesh starts from its ``n_keep``
+        exact lowest eigenvectors and may take up to ``max(t_max, n_i)`` steps (one column is
+        added per step, so a tight band can need hundreds); the others start from their
+        predecessor's subspace and take at most ``t_max`` steps.
 
     Parameters
     ----------
@@ -780,6 +799,9 @@ def submesh_eigenbases(
     n_keep : int (count) or float in (0, 1] (fraction of each submesh's size)
     laplacian : {"binary", "weighted"}
         Binary ``L = D - C`` on the sparsity pattern (Eq. 4.1) or weighted with the values of ``C``.
+        Negative weights (cotangent weights of obtuse triangles) are accepted; ``L + delta I`` is
+        then factorised by SuperLU when it is not positive definite, and OI converges to the
+        eigenvalues of smallest ``|lambda + delta|``.
     normalized : bool, use ``D^-1/2 L D^-1/2``
     warm_start : bool
         ``False`` starts every OI from a random orthonormal basis instead (an ablation of Eq. 4.7).
@@ -797,7 +819,9 @@ def submesh_eigenbases(
     check_choice(laplacian, "laplacian", ("binary", "weighted"))
     if not isinstance(subs, Submeshes):
         raise InvalidInputError(f"`subs` must be a Submeshes; got {type(subs).__name__}.")
-    C = as_adjacency(C)
+    # negative weights (cotangent) only matter with laplacian="weighted", where an indefinite
+    # L + delta I is factorised by SuperLU instead of Cholesky
+    C = as_adjacency(C, allow_negative=True)
     if C.shape[0] != subs.n_vertices:
         raise InvalidInputError(
             f"`C` has {C.shape[0]} vertices but `subs` was built for {subs.n_vertices}."
@@ -901,37 +925,40 @@ def _eigenbases(
 ):
     systems = _SubmeshSystems(C, laplacian == "binary", normalized, delta)
     U_prev = None
-    for i in progress(range(len(subs.parts)), desc=f"submeshes ({method})", total=len(subs.parts)):
+
+    # results are collected when the caller asks for them or convergence must be checked
+    track = info if info is not None else ([] if (method == "doi" or tol is not None) else None)
+
+    def step(i, U_prev):
         part = subs.parts[i]
         L, local = systems.laplacian(part)
         ni = part.size
         k = _n_keep(n_keep, ni)
         if method == "exact" or (U_prev is None and warm_start) or ni <= 2:
-            if method == "doi" and U_prev is not None:
-                k = min(U_prev.shape[1], ni)
+            if method == "doi":
+                w, U = _dense_lowest(L, k)
+                # one column per step from n_keep: allow enough steps to reach any band
+                res = _doi(
+                    L,
+                    fix_signs(U),
+                    X[part],
+                    eps_low,
+                    eps_high,
+                    zeta,
+                    max(t_max, ni),
+                    1,
+                    ni - 1,
+                    systems.factor(L, local),
+                )
+                w, U = res.eigenvalues, res.eigenvectors
+                if track is not None:
+                    track.append(res)
+                return w, U
             w, U = _dense_lowest(L, k)
             U = fix_signs(U)
-            if method == "doi":
-                if ni > 2:
-                    res = _doi(
-                        L,
-                        U,
-                        X[part],
-                        eps_low,
-                        eps_high,
-                        zeta,
-                        t_max,
-                        1,
-                        ni - 1,
-                        systems.factor(L, local),
-                    )
-                else:
-                    res = DOIResult(w, U, 0, True, 0.0)
-                w, U = res.eigenvalues, res.eigenvectors
-                if info is not None:
-                    info.append(res)
-            elif info is not None:
-                info.append(OIResult(w, U, 0, True, 0.0))
+            if track is not None:
+                track.append(OIResult(w, U, 0, True, 0.0))
+            return w, U
         else:
             if warm_start:
                 U0 = _carry_over(U_prev, ni, gen)
@@ -950,7 +977,30 @@ def _eigenbases(
             else:
                 res = _doi(L, U0, X[part], eps_low, eps_high, zeta, t_max, 1, ni - 1, factor)
             w, U = res.eigenvalues, res.eigenvectors
-            if info is not None:
-                info.append(res)
+            if track is not None:
+                track.append(res)
+        return w, U
+
+    failed = []
+    n_info = len(track) if track is not None else 0
+    for i in progress(range(len(subs.parts)), desc=f"submeshes ({method})", total=len(subs.parts)):
+        # many small dense products: multithreaded BLAS only adds synchronisation cost
+        with single_thread_blas():
+            w, U = step(i, U_prev)
+        if track is not None and len(track) > n_info:
+            r = track[-1]
+            n_info = len(track)
+            if (method == "doi" or tol is not None) and not r.converged:
+                failed.append(i)
+            if info is None:  # only the last result was needed
+                track.clear()
+                n_info = 0
         U_prev = U
         yield i, w, U
+    if failed:
+        warnings.warn(
+            f"{len(failed)} of {len(subs.parts)} submeshes did not converge ({method}; first: "
+            f"{failed[0]}); increase `t_max`/`n_iter` or widen the band.",
+            ConvergenceWarning,
+            stacklevel=2,
+        )
