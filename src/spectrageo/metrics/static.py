@@ -22,7 +22,7 @@ import numpy as np
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_choice
 from ..geometry.data import Mesh
-from ..geometry.primitives import face_normals, vertex_normals
+from ..geometry.primitives import edges, face_normals, vertex_normals
 from .surface import hausdorff
 
 METRIC_KEYS = ("theta_deg", "dmean", "dmax", "dist_n", "dmean_n", "nmsve", "hd_mean", "hd_max")
@@ -59,13 +59,8 @@ def _angles_deg(N1: np.ndarray, N2: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 
 def _unique_edges(F: np.ndarray, n: int) -> np.ndarray:
-    """Unique undirected edges (i < j) of ``F``, shape (e, 2) (1-D key unique: fast for big meshes)."""
-    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    E.sort(axis=1)
-    E = E[E[:, 0] != E[:, 1]]
-    key = np.sort(E[:, 0] * np.int64(n) + E[:, 1])
-    key = key[np.r_[True, key[1:] != key[:-1]]] if key.size else key
-    return np.stack([key // n, key % n], axis=1)
+    """Unique undirected edges (i < j) of ``F``, shape (e, 2)."""
+    return edges(F)
 
 
 def _valid_rows(N: np.ndarray) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_choice
-from ..geometry.primitives import vertex_normals
+from ..geometry.primitives import edges, vertex_normals
 
 DIRECTIONS = ("normal", "random")
 
@@ -63,12 +63,8 @@ def check_fraction(fraction, name: str = "fraction") -> float:
 
 
 def unique_edges(F: np.ndarray, n: int) -> np.ndarray:
-    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    E.sort(axis=1)
-    E = E[E[:, 0] != E[:, 1]]
-    key = np.sort(E[:, 0] * np.int64(n) + E[:, 1])
-    key = key[np.r_[True, key[1:] != key[:-1]]] if key.size else key
-    return np.stack([key // n, key % n], axis=1)
+    """Unique undirected edges (i < j) of ``F``, shape (e, 2)."""
+    return edges(F)
 
 
 def mean_spacing(V: np.ndarray, F: np.ndarray | None) -> float:
