@@ -54,7 +54,7 @@ def main() -> None:
         r = run_isolated(LAPLACIAN.format(path=dragon, kind=kind))
         rows.append(
             (
-                f"{kind} Laplacian of the dragon (incl. read)",
+                f"{kind} Laplacian of the dragon",
                 f"nnz {r['nnz']:,}",
                 r["time_s"],
                 r["peak_rss_mb"],
@@ -74,7 +74,7 @@ def main() -> None:
         "## Foundation: I/O, Laplacians, kNN graph",
         "",
         f"Machine: {machine_line()}. Regenerate with `python benchmarks/core.py`.",
-        "Time is the operation alone; peak memory is the whole process (reading included).",
+        "Time is the operation alone (not the read); peak memory is the whole process (read included).",
         "",
         "| operation | size | time (s) | peak RSS (MB) |",
         "|---|---|---|---|",
