@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 
@@ -146,21 +147,49 @@ def _sym3_eigvalsh(S: np.ndarray) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=True)
+def _assign(X, centers, labels, sums, counts):  # pragma: no cover - jitted
+    """One Lloyd assignment pass: nearest centre of every row (first on ties), per-cluster sums and
+    counts; returns whether any label changed."""
+    m, d = X.shape
+    kc = centers.shape[0]
+    sums[:] = 0.0
+    counts[:] = 0
+    changed = False
+    for i in range(m):
+        best = 0
+        bd = np.inf
+        for c in range(kc):
+            dist = 0.0
+            for a in range(d):
+                t = X[i, a] - centers[c, a]
+                dist += t * t
+            if dist < bd:
+                bd = dist
+                best = c
+        if labels[i] != best:
+            changed = True
+            labels[i] = best
+        counts[best] += 1
+        for a in range(d):
+            sums[best, a] += X[i, a]
+    return changed
+
+
 def _lloyd(X: np.ndarray, centers: np.ndarray, max_iter: int):
-    labels = np.full(X.shape[0], -1)
+    """Lloyd iterations (compiled assignment + centre update in one pass over the rows)."""
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    labels = np.full(X.shape[0], -1, dtype=np.int64)
+    sums = np.empty_like(centers)
+    counts = np.empty(centers.shape[0], dtype=np.int64)
     converged = False
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 - returned after the loop
-        d = ((X[:, None, :] - centers[None, :, :]) ** 2).sum(axis=2)
-        new = np.argmin(d, axis=1)
-        if np.array_equal(new, labels):
+        if not _assign(X, centers, labels, sums, counts):
             converged = True
             break
-        labels = new
-        for c in range(centers.shape[0]):
-            sel = labels == c
-            if sel.any():
-                centers[c] = X[sel].mean(axis=0)
+        nz = counts > 0
+        centers[nz] = sums[nz] / counts[nz, None]
     return labels, centers, it, converged
 
 
