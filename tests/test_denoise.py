@@ -206,6 +206,21 @@ def test_fine_returns_features(noisy_cube):
     assert np.isfinite(out).all() and N0.shape == F.shape
 
 
+def test_curved_gate_stops_on_a_sphere_not_on_a_cube(noisy_cube, noisy_sphere):
+    # sphere: the flat-face l1 keeps its curvature part after round 1 -> single round
+    _, Fs, Vs = noisy_sphere
+    Xc = tsgsp.coarse(Vs, Fs)
+    gated = tsgsp.fine(Xc, Fs, n_outer=3)
+    assert np.array_equal(gated, tsgsp.fine(Xc, Fs, n_outer=1, curved_gate=None))
+    assert not np.array_equal(gated, tsgsp.fine(Xc, Fs, n_outer=3, curved_gate=None))
+    # cube: planar faces, the noise part of l1 is removed -> all rounds run
+    _, Fc, Vc = noisy_cube
+    Xc = tsgsp.coarse(Vc, Fc)
+    gated = tsgsp.fine(Xc, Fc, n_outer=3)
+    assert np.array_equal(gated, tsgsp.fine(Xc, Fc, n_outer=3, curved_gate=None))
+    assert not np.array_equal(gated, tsgsp.fine(Xc, Fc, n_outer=1))
+
+
 def test_tsgsp_validation(noisy_cube):
     _, F, Vn = noisy_cube
     with pytest.raises(InvalidInputError, match="`pre` must be None"):
@@ -232,6 +247,8 @@ def test_tsgsp_validation(noisy_cube):
         tsgsp.fine(Vn, F, sigma_c=0.0)
     with pytest.raises(InvalidInputError, match="`min_feature`"):
         tsgsp.fine(Vn, F, min_feature=-1.0)
+    with pytest.raises(InvalidInputError, match="`curved_gate` must be > 0"):
+        tsgsp.fine(Vn, F, curved_gate=0.0)
     with pytest.raises(InvalidInputError, match="`patch` must be >= 4"):
         tsgsp.estimate_noise(Vn, patch=3)
     with pytest.raises(InvalidInputError, match="at least 4 vertices"):
