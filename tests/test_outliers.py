@@ -85,12 +85,53 @@ def test_rpca_scores_match_linalg_rpca():
 
     P, _ = noise.add_outliers(_sphere(400), fraction=0.05, kind="far", rng=1)
     k = 6
-    r = rpca_scores(P, k, rho=1.5, tol=1e-9, max_iter=500, block_size=10**6)
+    r = rpca_scores(P, k, rho=1.5, tol=1e-9, max_iter=500, block_size=10**6, refine=False)
     # explicit reference on the same normalised coordinates
     M = knn_patch_matrix((P - P.mean(axis=0)) / r.spacing, k)
     ref = rpca(M, method="ialm", rho=1.5, tol=1e-9, max_iter=500)
     s_ref = np.linalg.norm(ref.sparse[:, 0].reshape(-1, 3), axis=1)
     np.testing.assert_allclose(r.scores, s_ref, atol=1e-5 * max(1.0, s_ref.max()))
+
+
+def test_rpca_refinement_rebuilds_outlier_patches_and_subtracts_baseline():
+    """Steps 5-6 of rpca_scores, recomputed independently from the plain scores of the pieces."""
+    from spectrageo.graph import knn
+    from spectrageo.linalg import rpca
+    from spectrageo.outliers import rpca as rp
+
+    # a plane with a cloud of far outliers above it, many of whose patches are made of each other
+    rng = np.random.default_rng(7)
+    P = np.concatenate([_plane(25), rng.uniform([-0.5, -0.5, 0.3], [1.5, 1.5, 0.8], (100, 3))])
+    k = 6
+    plain = rpca_scores(P, k, refine=False, tol=1e-9, rho=1.5, max_iter=500)
+    r = rpca_scores(P, k, tol=1e-9, rho=1.5, max_iter=500)
+    assert r.n_refined > 0 and plain.n_refined == 0
+    # reference: flag, rebuild the patches made mostly of flagged points, rerun Algorithm 14
+    s1 = plain.scores
+    tau = max(auto_threshold(s1, minimum=0.5), rp.REFINE_MIN_TAU)
+    flag = s1 >= tau
+    idx = knn(P, k)[0]
+    kept = np.flatnonzero(~flag)
+    rebuild = np.flatnonzero(2 * flag[idx].sum(axis=1) > k)
+    assert rebuild.size == r.n_refined
+    for i in rebuild:
+        d = np.linalg.norm(P[kept] - P[i], axis=1)
+        d[kept == i] = np.inf
+        idx[i] = kept[np.argsort(d, kind="stable")[:k]]
+    M = knn_patch_matrix((P - P.mean(axis=0)) / plain.spacing, k, neighbors=idx)
+    ref = rpca(M, method="ialm", rho=1.5, tol=1e-9, max_iter=500)
+    s2 = np.linalg.norm(ref.sparse[:, 0].reshape(-1, 3), axis=1)
+    expect = np.maximum(s2 - np.median(s1[idx], axis=1), 0.0)
+    np.testing.assert_allclose(r.scores, expect, atol=1e-4 * max(1.0, expect.max()))
+    # the refinement separates the outlier cloud better than the plain first column
+    from spectrageo.evaluate.outliers import _oracle_threshold
+
+    lab = np.arange(P.shape[0]) >= 625
+
+    def best_f1(sc):
+        return _f1(sc < _oracle_threshold(sc, lab), lab)
+
+    assert best_f1(plain.scores) < 0.99 < best_f1(r.scores)
 
 
 def test_rpca_scores_invariances():
@@ -108,9 +149,10 @@ def test_rpca_blocks_bound_memory_and_agree():
     many = rpca_scores(P, 8, block_size=700)
     assert many.n_blocks == 5 and one.n_blocks == 1
     # block-wise RPCA is a different (independent) decomposition but flags the same outliers
-    tau = auto_threshold(one.scores, minimum=0.5)
+    tau = auto_threshold(one.scores, minimum=0.5, rule="density")
     assert _f1(one.scores < tau, lab) > 0.9
-    assert _f1(many.scores < auto_threshold(many.scores, minimum=0.5), lab) > 0.9
+    tau = auto_threshold(many.scores, minimum=0.5, rule="density")
+    assert _f1(many.scores < tau, lab) > 0.9
 
 
 def test_rpca_threaded_ranges_match_single_thread(monkeypatch):
@@ -313,6 +355,21 @@ def test_auto_threshold_splits_two_modes():
     assert auto_threshold(np.full(10, 2.0)) == pytest.approx(2.0)
     assert auto_threshold(s[:900], minimum=1.0) >= 1.0
     assert auto_threshold(np.array([np.inf])) == 0.0
+    # density rule: the split moves down to where the (flat) outlier density takes over
+    inl = np.abs(rng.standard_normal(9000)) * 0.3
+    out = rng.uniform(0.0, 40.0, 1000)
+    s = np.concatenate([inl, out])
+    t_otsu = auto_threshold(s, minimum=0.5)
+    t_dens = auto_threshold(s, minimum=0.5, rule="density")
+    assert 0.5 <= t_dens < t_otsu
+
+    def errors(t):
+        return np.count_nonzero(inl >= t) + np.count_nonzero(out < t)
+
+    assert errors(t_dens) < errors(t_otsu)
+    assert auto_threshold(s, minimum=5.0, rule="density") >= 5.0
+    with pytest.raises(InvalidInputError, match="rule"):
+        auto_threshold(s, rule="median")
 
 
 # ----------------------------------------------------------------------------- robot pipeline
