@@ -443,3 +443,25 @@ def test_validation_lowpass(fan):
         lowpass(V, F, keep=1.5, method="whole")
     with pytest.raises(InvalidInputError, match="`n_keep` must be"):
         lowpass(V, F, keep=-3)
+
+
+@pytest.mark.parametrize("cond_exp", [2, 12])
+def test_onorm_cholesky_qr_and_householder_fallback(cond_exp, monkeypatch):
+    """Well-conditioned tall blocks take Cholesky QR; ill-conditioned ones fall back to Householder.
+
+    Either way the result is orthonormal and spans the columns of ``Y``.
+    """
+    from spectrageo.spectral import orthogonal
+
+    rng = np.random.default_rng(cond_exp)
+    U, _ = np.linalg.qr(rng.normal(size=(400, 30)))
+    V, _ = np.linalg.qr(rng.normal(size=(30, 30)))
+    Y = U @ np.diag(np.logspace(0, -cond_exp, 30)) @ V.T
+    calls = []
+    real_qr = orthogonal.sla.qr
+    monkeypatch.setattr(orthogonal.sla, "qr", lambda *a, **k: calls.append(1) or real_qr(*a, **k))
+    Q = orthogonal._onorm(Y.copy())
+    assert bool(calls) == (cond_exp > 7)  # Householder only for the ill-conditioned block
+    np.testing.assert_allclose(Q.T @ Q, np.eye(30), atol=1e-10)
+    # same span: projecting Y onto span(Q) leaves it unchanged
+    np.testing.assert_allclose(Q @ (Q.T @ Y), Y, atol=1e-9 * np.abs(Y).max())
