@@ -315,3 +315,81 @@ def test_taubin_preserves_a_plane_and_laplacian_shrinks_sphere():
     r_lap = np.linalg.norm(smoothing.laplacian(S, Fs, n_iter=20), axis=1).mean()
     r_tau = np.linalg.norm(smoothing.taubin(S, Fs, n_iter=20), axis=1).mean()
     assert r_lap < 0.95 < 0.98 < r_tau < 1.05  # Taubin does not shrink (slight inflation allowed)
+
+
+def test_fast_update_vertices_matches_geometry_update(noisy_cube):
+    from spectrageo.geometry import update_vertices
+
+    V, F, Vn = noisy_cube
+    target = face_normals(V, F) * 2.0  # not unit: both re-normalise
+    target[::7] = 0.0  # inactive faces
+    ref = update_vertices(Vn, F, target, n_iter=6)
+    out = _normals.fast_update_vertices(Vn, F, target, 6)
+    np.testing.assert_allclose(out, ref, rtol=0, atol=1e-12)
+    assert not np.shares_memory(out, Vn)
+    np.testing.assert_array_equal(_normals.fast_update_vertices(Vn, F, target, 0), Vn)
+
+
+def test_sym3_eigenvalues_match_lapack():
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(500, 3, 3))
+    R = np.concatenate(
+        [
+            A @ A.transpose(0, 2, 1),  # generic SPD
+            np.repeat(np.diag([1.0, 1.0, 1.0])[None], 2, axis=0),  # triple eigenvalue
+            np.repeat(np.diag([0.0, 0.5, 0.5])[None], 2, axis=0),  # double eigenvalue
+            np.repeat(np.diag([0.0, 0.0, 1.0])[None], 2, axis=0),  # flat patch
+        ]
+    )
+    S = np.stack([R[:, 0, 0], R[:, 1, 1], R[:, 2, 2], R[:, 0, 1], R[:, 0, 2], R[:, 1, 2]], 1)
+    got = tsgsp._sym3_eigenvalues(S)
+    ref = np.linalg.eigvalsh(R)
+    scale = np.abs(ref).max(axis=1, keepdims=True)
+    assert np.all(np.abs(got - ref) <= 1e-12 * scale)
+    assert np.all(np.diff(got, axis=1) >= 0)
+
+
+def test_fine_round_kernels_match_sparse_formulation(noisy_cube):
+    # Eq. (5.16)-(5.23) written with sparse matrices (the direct reading) vs the compiled kernels
+    import scipy.sparse as sp
+
+    from spectrageo.geometry.features import patch_eigenvalues
+    from spectrageo.geometry.primitives import _normalize_rows
+    from spectrageo.graph.adjacency import knn
+
+    _, F, Vn = noisy_cube
+    m, k = F.shape[0], 12
+    N = face_normals(Vn, F)
+    N[3] = 0.0  # a degenerate face: no weight, keeps its (zero) normal
+    Cc = Vn[F].mean(axis=1)
+    nb, _ = knn(Cc, k, include_self=True)
+    ev = patch_eigenvalues(N, nb)
+    S = tsgsp._patch_moments(N, np.sort(nb, axis=1))
+    np.testing.assert_allclose(tsgsp._sym3_eigenvalues(S), ev, atol=1e-12)
+    indptr, cand = tsgsp._inverse_patches(nb)
+    order = np.argsort(nb.ravel(), kind="stable")
+    np.testing.assert_array_equal(cand, order // k)
+    np.testing.assert_array_equal(np.diff(indptr), np.bincount(nb.ravel(), minlength=m))
+    feature = np.random.default_rng(1).random(m) < 0.4
+    best = tsgsp._select(N, nb, feature, ev, indptr, cand)
+    np.testing.assert_array_equal(best, tsgsp.select_neighborhoods(N, nb, feature))
+    den_c, den_s, zeta = 0.05, 0.08, 4
+    active = np.linalg.norm(N, axis=1) > 0
+    for patch_guide in (True, False):
+        hood = nb[best]
+        rows, cols = np.repeat(np.arange(m), k), hood.ravel()
+        G = _normalize_rows(N[hood].sum(axis=1)) if patch_guide else N
+        dc = np.sum((Cc[rows] - Cc[cols]) ** 2, axis=1)
+        dn = np.sum((G[rows] - G[cols]) ** 2, axis=1)
+        w = np.exp(-dc / den_c - dn / den_s) * active[cols]
+        Cw = sp.csr_matrix((w, (rows, cols)), shape=(m, m))
+        d = np.asarray(Cw.sum(axis=1)).ravel()
+        P = sp.diags(np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)) @ Cw
+        ref = N.copy()
+        for _ in range(zeta):
+            ref = P @ ref
+        ref = _normalize_rows(ref)
+        empty = ~ref.any(axis=1)
+        ref[empty] = N[empty]
+        got = tsgsp._filter_kernel(N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide)
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)

@@ -28,18 +28,17 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, as_rng, check_choice, check_positive
-from ..geometry import face_areas, face_centroids, face_normals, update_vertices
+from ..geometry import face_centroids, face_normals
 from ..geometry.features import FLAT, cluster_eigenvalues, patch_eigenvalues
 from ..geometry.primitives import _normalize_rows
 from ..graph import adjacency_matrix
 from ..graph.adjacency import knn
 from ..spectral import overlapped_submeshes, reassemble, submesh_eigenbases
-from ._normals import mean_centroid_distance
+from ._normals import fast_update_vertices, mean_centroid_distance
 from ._registry import register
 from ._tsgsp_mbl import _mbl_search
 
@@ -413,21 +412,230 @@ def select_neighborhoods(
     N = np.ascontiguousarray(N, dtype=np.float64)
     nb = np.ascontiguousarray(nb, dtype=np.int64)
     feature = np.ascontiguousarray(feature, dtype=np.bool_)
-    m, k = nb.shape
+    m = nb.shape[0]
     if not feature.any():
         return np.arange(m, dtype=np.int64)
     lam = patch_eigenvalues(N, nb) if eigenvalues is None else np.asarray(eigenvalues)
-    psi = np.abs(lam[:, 0] - lam[:, 2]) / np.maximum(lam[:, 2], _EPS)
-    mean = np.ascontiguousarray(N[nb].sum(axis=1) / k)
-    # invert the kNN lists: candidates of face i = centres j with i in P_j (stable -> ascending j)
-    members = nb.ravel()
-    order = np.argsort(members, kind="stable")
-    cand = (order // k).astype(np.int64)
+    return _select(N, nb, feature, lam, *_inverse_patches(nb))
+
+
+def _inverse_patches(nb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Invert the kNN lists: the candidates of face ``i`` are ``cand[indptr[i]:indptr[i + 1]]``,
+    the centres ``j`` with ``i`` in ``P_j`` (ascending ``j``). Depends on the patches only."""
+    return _inverse_kernel(np.ascontiguousarray(nb, dtype=np.int64))
+
+
+@numba.njit(cache=True)
+def _inverse_kernel(nb):  # pragma: no cover - jitted
+    """Counting sort of the (centre, member) pairs by member, centres ascending."""
+    m, k = nb.shape
     indptr = np.zeros(m + 1, dtype=np.int64)
-    np.cumsum(np.bincount(members, minlength=m), out=indptr[1:])
+    for j in range(m):
+        for q in range(k):
+            indptr[nb[j, q] + 1] += 1
+    for i in range(m):
+        indptr[i + 1] += indptr[i]
+    fill = indptr[:-1].copy()
+    cand = np.empty(m * k, dtype=np.int64)
+    for j in range(m):
+        for q in range(k):
+            g = nb[j, q]
+            cand[fill[g]] = j
+            fill[g] += 1
+    return indptr, cand
+
+
+@numba.njit(cache=True)
+def _patch_means(N, nb):  # pragma: no cover - jitted
+    """Mean normal of every kNN patch, summed in member order."""
+    m, k = nb.shape
+    out = np.zeros((m, 3))
+    for j in range(m):
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        for q in range(k):
+            g = nb[j, q]
+            s0 += N[g, 0]
+            s1 += N[g, 1]
+            s2 += N[g, 2]
+        out[j, 0] = s0 / k
+        out[j, 1] = s1 / k
+        out[j, 2] = s2 / k
+    return out
+
+
+def _select(N, nb, feature, lam, indptr, cand) -> np.ndarray:
+    """:func:`select_neighborhoods` with the inverted patch lists precomputed."""
+    if not feature.any():
+        return np.arange(nb.shape[0], dtype=np.int64)
+    lam = np.asarray(lam)
+    psi = np.abs(lam[:, 0] - lam[:, 2]) / np.maximum(lam[:, 2], _EPS)
+    mean = _patch_means(N, nb)
     return _select_kernel(N, nb, feature, np.ascontiguousarray(psi), mean, indptr, cand).astype(
         np.int64
     )
+
+
+@numba.njit(cache=True)
+def _patch_moments(N, nb_sorted):  # pragma: no cover - jitted
+    """Entries [xx, yy, zz, xy, xz, yz] of ``R_i = N_i^T N_i / k`` for every patch (members in
+    ascending order, the summation order of the sparse product of ``patch_eigenvalues``)."""
+    m, k = nb_sorted.shape
+    out = np.zeros((m, 6))
+    for i in range(m):
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        a4 = 0.0
+        a5 = 0.0
+        for q in range(k):
+            g = nb_sorted[i, q]
+            x = N[g, 0]
+            y = N[g, 1]
+            z = N[g, 2]
+            a0 += x * x
+            a1 += y * y
+            a2 += z * z
+            a3 += x * y
+            a4 += x * z
+            a5 += y * z
+        out[i, 0] = a0 / k
+        out[i, 1] = a1 / k
+        out[i, 2] = a2 / k
+        out[i, 3] = a3 / k
+        out[i, 4] = a4 / k
+        out[i, 5] = a5 / k
+    return out
+
+
+@numba.njit(cache=True)
+def _jacobi_rotate(app, aqq, apq, arp, arq):  # pragma: no cover - jitted
+    """One Jacobi rotation zeroing ``a_pq`` of a symmetric 3x3 matrix (``r`` the third index)."""
+    tau = (aqq - app) / (2.0 * apq)
+    if abs(tau) > 1e150:
+        t = 0.5 / tau
+    else:
+        t = 1.0 / (abs(tau) + np.sqrt(1.0 + tau * tau))
+        if tau < 0:
+            t = -t
+    c = 1.0 / np.sqrt(1.0 + t * t)
+    s = t * c
+    return app - t * apq, aqq + t * apq, c * arp - s * arq, s * arp + c * arq
+
+
+@numba.njit(cache=True)
+def _sym3_eigenvalues(S):  # pragma: no cover - jitted
+    """Ascending eigenvalues of symmetric 3x3 matrices given as (m, 6) [xx, yy, zz, xy, xz, yz].
+
+    Cyclic Jacobi rotations (backward stable like LAPACK: absolute error of the order of the
+    rounding error times the largest eigenvalue, also for the repeated eigenvalues of flat
+    patches, where the closed-form cubic solution loses half of the digits)."""
+    m = S.shape[0]
+    out = np.empty((m, 3))
+    for i in range(m):
+        a00 = S[i, 0]
+        a11 = S[i, 1]
+        a22 = S[i, 2]
+        a01 = S[i, 3]
+        a02 = S[i, 4]
+        a12 = S[i, 5]
+        for _ in range(30):
+            off = a01 * a01 + a02 * a02 + a12 * a12
+            diag = a00 * a00 + a11 * a11 + a22 * a22
+            if off == 0.0 or off <= 1e-36 * diag:
+                break
+            if a01 != 0.0:  # (p, q, r) = (0, 1, 2)
+                a00, a11, a02, a12 = _jacobi_rotate(a00, a11, a01, a02, a12)
+                a01 = 0.0
+            if a02 != 0.0:  # (0, 2, 1)
+                a00, a22, a01, a12 = _jacobi_rotate(a00, a22, a02, a01, a12)
+                a02 = 0.0
+            if a12 != 0.0:  # (1, 2, 0)
+                a11, a22, a01, a02 = _jacobi_rotate(a11, a22, a12, a01, a02)
+                a12 = 0.0
+        lo = min(a00, min(a11, a22))
+        hi = max(a00, max(a11, a22))
+        out[i, 0] = lo
+        out[i, 1] = max(min(a00, a11), min(max(a00, a11), a22))
+        out[i, 2] = hi
+    return out
+
+
+@numba.njit(cache=True)
+def _filter_kernel(N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide):  # pragma: no cover
+    """Eq. (5.20)-(5.23): bilateral weights on the selected neighbourhoods ``nb[best[i]]``, then
+    ``zeta`` steps of ``n <- D^-1 C_w n`` and row normalisation (rows that vanish keep ``N``)."""
+    m, k = nb.shape
+    G = np.zeros((m, 3))
+    if patch_guide:
+        for i in range(m):
+            j = best[i]
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            for q in range(k):
+                g = nb[j, q]
+                s0 += N[g, 0]
+                s1 += N[g, 1]
+                s2 += N[g, 2]
+            nrm = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+            if nrm > 0:
+                G[i, 0] = s0 / nrm
+                G[i, 1] = s1 / nrm
+                G[i, 2] = s2 / nrm
+    else:
+        G[:, :] = N
+    P = np.empty((m, k))
+    for i in range(m):
+        j = best[i]
+        d = 0.0
+        for q in range(k):
+            g = nb[j, q]
+            e0 = Cc[i, 0] - Cc[g, 0]
+            e1 = Cc[i, 1] - Cc[g, 1]
+            e2 = Cc[i, 2] - Cc[g, 2]
+            dc = e0 * e0 + e1 * e1 + e2 * e2
+            e0 = G[i, 0] - G[g, 0]
+            e1 = G[i, 1] - G[g, 1]
+            e2 = G[i, 2] - G[g, 2]
+            dn = e0 * e0 + e1 * e1 + e2 * e2
+            w = np.exp(-dc / den_c - dn / den_s) if active[g] else 0.0
+            P[i, q] = w
+            d += w
+        inv = 1.0 / d if d > 0 else 0.0
+        for q in range(k):
+            P[i, q] *= inv
+    A = N.copy()
+    B = np.empty((m, 3))
+    for _ in range(zeta):
+        for i in range(m):
+            j = best[i]
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            for q in range(k):
+                g = nb[j, q]
+                p = P[i, q]
+                s0 += p * A[g, 0]
+                s1 += p * A[g, 1]
+                s2 += p * A[g, 2]
+            B[i, 0] = s0
+            B[i, 1] = s1
+            B[i, 2] = s2
+        A, B = B, A
+    for i in range(m):
+        nrm = np.sqrt(A[i, 0] * A[i, 0] + A[i, 1] * A[i, 1] + A[i, 2] * A[i, 2])
+        if nrm > 0:
+            A[i, 0] /= nrm
+            A[i, 1] /= nrm
+            A[i, 2] /= nrm
+        else:
+            A[i, 0] = N[i, 0]
+            A[i, 1] = N[i, 1]
+            A[i, 2] = N[i, 2]
+    return A
 
 
 def fine(
@@ -559,13 +767,20 @@ def fine(
             )
         sigma_c = lc * float(np.sqrt(patch / 6.0))
     X = V.copy()
-    nb, _ = knn(face_centroids(X, F), patch, include_self=True)
-    rows = np.repeat(np.arange(m), patch)
+    Cc = face_centroids(X, F)
+    nb, _ = knn(Cc, patch, include_self=True)
+    # topology of the patches is fixed over the rounds: sort / invert the lists once
+    nb_sorted = np.sort(nb, axis=1)
+    indptr, cand = _inverse_patches(nb)
+    den_c = 2 * sigma_c**2
+    den_s = 2 * sigma_s**2
     feature = np.zeros(m, dtype=bool)
     l1_first = 0.0
     for r in range(n_outer):
-        N = face_normals(X, F)
-        ev = patch_eigenvalues(N, nb)
+        cr = face_normals(X, F, unit=False)
+        N = _normalize_rows(cr)
+        active = np.linalg.norm(cr, axis=1) > 0  # zero-area faces carry no weight
+        ev = _sym3_eigenvalues(_patch_moments(N, nb_sorted))  # Eq. (4.14)-(4.15)
         labels = cluster_eigenvalues(ev, min_feature=min_feature)[0]
         new_feature = labels != FLAT
         if curved_gate is not None:
@@ -576,26 +791,13 @@ def fine(
             elif r == 1 and l1 > curved_gate * l1_first:
                 break  # curved surface: further rounds would facet it (reading choice (c))
         feature = new_feature
-        best = select_neighborhoods(N, nb, feature, eigenvalues=ev)
-        hood = nb[best]  # (m, k): neighbourhood A_i of every face
-        cols = hood.ravel()
-        Cc = face_centroids(X, F)
-        dc = np.sum((Cc[rows] - Cc[cols]) ** 2, axis=1)
-        G = N if range_guide == "normal" else _normalize_rows(N[hood].sum(axis=1))
-        dn = np.sum((G[rows] - G[cols]) ** 2, axis=1)
-        w = np.exp(-dc / (2 * sigma_c**2) - dn / (2 * sigma_s**2))
-        # zero-area faces carry no weight
-        w = w * (face_areas(X, F)[cols] > 0)
-        Cw = sp.csr_matrix((w, cols, np.arange(0, m * patch + 1, patch)), shape=(m, m))
-        d = np.asarray(Cw.sum(axis=1)).ravel()
-        Pm = (sp.diags(np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)) @ Cw).tocsr()
-        Nf = N
-        for _z in range(zeta):
-            Nf = Pm @ Nf
-        Nf = _normalize_rows(Nf)
-        empty = ~Nf.any(axis=1)
-        Nf[empty] = N[empty]
-        X = update_vertices(X, F, Nf, n_iter=vertex_iter)
+        best = _select(N, nb, feature, ev, indptr, cand)  # Eq. (5.16)-(5.19)
+        if r > 0:
+            Cc = face_centroids(X, F)
+        Nf = _filter_kernel(
+            N, Cc, nb, best, active, den_c, den_s, int(zeta), range_guide == "patch"
+        )  # Eq. (5.20)-(5.23)
+        X = fast_update_vertices(X, F, Nf, vertex_iter)  # Eq. (4.28)-(4.29)
     return (X, feature) if return_features else X
 
 
