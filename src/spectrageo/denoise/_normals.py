@@ -32,6 +32,7 @@ from scipy.spatial import cKDTree
 
 from .._errors import InvalidInputError
 from .._validation import check_choice, check_positive
+from ..geometry._numba_kernels import vertex_update_kernel
 from ..geometry.primitives import _normalize_rows
 from ..graph import face_adjacency
 
@@ -474,37 +475,6 @@ def joint_bilateral_normals(
 
 
 # --------------------------------------------------------------------------- vertex update
-@numba.njit(cache=True)
-def _vertex_update_kernel(V, F, N, inv_deg, n_iter):  # pragma: no cover - jitted
-    n = V.shape[0]
-    m = F.shape[0]
-    delta = np.empty((n, 3))
-    for _ in range(n_iter):
-        delta[:, :] = 0.0
-        for j in range(m):
-            a = F[j, 0]
-            b = F[j, 1]
-            c = F[j, 2]
-            c0 = (V[a, 0] + V[b, 0] + V[c, 0]) / 3.0
-            c1 = (V[a, 1] + V[b, 1] + V[c, 1]) / 3.0
-            c2 = (V[a, 2] + V[b, 2] + V[c, 2]) / 3.0
-            n0 = N[j, 0]
-            n1 = N[j, 1]
-            n2 = N[j, 2]
-            for t in range(3):
-                v = F[j, t]
-                p = n0 * (c0 - V[v, 0]) + n1 * (c1 - V[v, 1]) + n2 * (c2 - V[v, 2])
-                delta[v, 0] += p * n0
-                delta[v, 1] += p * n1
-                delta[v, 2] += p * n2
-        for i in range(n):
-            s = inv_deg[i]
-            V[i, 0] += delta[i, 0] * s
-            V[i, 1] += delta[i, 1] * s
-            V[i, 2] += delta[i, 2] * s
-    return V
-
-
 def fast_update_vertices(V: np.ndarray, F: np.ndarray, N: np.ndarray, n_iter: int) -> np.ndarray:
     """Compiled equivalent of :func:`spectrageo.geometry.update_vertices` (Eq. 4.28-4.29).
 
@@ -523,7 +493,7 @@ def fast_update_vertices(V: np.ndarray, F: np.ndarray, N: np.ndarray, n_iter: in
     active = N.any(axis=1)
     deg = np.bincount(F[active].ravel(), minlength=V.shape[0]).astype(np.float64)
     inv_deg = np.divide(1.0, deg, out=np.zeros_like(deg), where=deg > 0)
-    return _vertex_update_kernel(V, F, N, inv_deg, int(n_iter))
+    return vertex_update_kernel(V, F, N, inv_deg, int(n_iter))
 
 
 __all__ = [
