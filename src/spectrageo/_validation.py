@@ -115,3 +115,24 @@ def as_rng(rng: Any) -> np.random.Generator:
     raise InvalidInputError(
         f"`rng` must be an int seed, a numpy Generator or None; got {type(rng).__name__}."
     )
+
+
+def as_frames(frames: Any, name: str = "frames") -> np.ndarray:
+    """Validate animation frames: a (T, n, 3) float64 array (or an object with ``.frames``),
+    T, n >= 1, all finite; the first non-finite vertex is named in the error."""
+    try:
+        A = np.asarray(getattr(frames, "frames", frames), dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(
+            f"`{name}` must be a numeric array of shape (T, n, 3); got {type(frames).__name__}."
+        ) from exc
+    if A.ndim != 3 or A.shape[2] != 3:
+        raise InvalidInputError(f"`{name}` must have shape (T, n, 3); got {A.shape}.")
+    if A.shape[0] == 0 or A.shape[1] == 0:
+        raise InvalidInputError(f"`{name}` is empty; got shape {A.shape}.")
+    if not np.isfinite(A).all():
+        bad = np.argwhere(~np.isfinite(A).all(axis=2))[0]
+        raise InvalidInputError(
+            f"`{name}` contains NaN or inf coordinates (first at frame {bad[0]}, vertex {bad[1]})."
+        )
+    return A

@@ -35,7 +35,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._progress import progress
-from .._validation import as_faces, as_rng, check_choice, check_positive
+from .._validation import as_faces, as_frames, as_rng, check_choice, check_positive
 
 __all__ = [
     "DYNAMIC_METHODS",
@@ -57,25 +57,6 @@ EXACT_LIMIT = 6000
 
 
 # --------------------------------------------------------------------------- helpers
-def _as_frames(frames, name: str = "frames") -> np.ndarray:
-    try:
-        A = np.asarray(getattr(frames, "frames", frames), dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(
-            f"`{name}` must be a numeric array of shape (T, n, 3); got {type(frames).__name__}."
-        ) from exc
-    if A.ndim != 3 or A.shape[2] != 3:
-        raise InvalidInputError(f"`{name}` must have shape (T, n, 3); got {A.shape}.")
-    if A.shape[0] == 0 or A.shape[1] == 0:
-        raise InvalidInputError(f"`{name}` is empty; got shape {A.shape}.")
-    if not np.isfinite(A).all():
-        bad = np.argwhere(~np.isfinite(A).all(axis=2))[0]
-        raise InvalidInputError(
-            f"`{name}` contains NaN or inf coordinates (first at frame {bad[0]}, vertex {bad[1]})."
-        )
-    return A
-
-
 def _faces_of(frames, F):
     if F is None:
         F = getattr(frames, "faces", None)
@@ -350,7 +331,7 @@ def gft_rpca(
     """
     t_start = time.perf_counter()
     F = _faces_of(frames, F)
-    A = _as_frames(frames)
+    A = as_frames(frames)
     T, n, _ = A.shape
     F = as_faces(F, n, "F")
     energy = _check_energy(energy)
@@ -491,7 +472,7 @@ def normals_rpca(
 
     t_start = time.perf_counter()
     F = _faces_of(frames, F)
-    A = _as_frames(frames)
+    A = as_frames(frames)
     T, n, _ = A.shape
     F = as_faces(F, n, "F")
     rank = _check_rank(rank)
@@ -530,7 +511,7 @@ def denoise_frames(frames, F=None, *, method: str = "bnf", **options) -> np.ndar
     from ._registry import denoise, get
 
     F = _faces_of(frames, F)
-    A = _as_frames(frames)
+    A = as_frames(frames)
     F = as_faces(F, A.shape[1], "F")
     get(method)  # validate the name before the loop
     return np.stack(

@@ -13,33 +13,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._errors import InvalidInputError
-from .._validation import as_faces, check_positive
+from .._validation import as_faces, as_frames, check_positive
 from .static import METRIC_KEYS, _unique_edges, compare, theta_deg
 from .surface import HausdorffResult, hausdorff
 
 
-def _frames(x, name: str) -> np.ndarray:
-    try:
-        a = np.asarray(getattr(x, "frames", x), dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(
-            f"`{name}` must be a numeric array of shape (T, n, 3); got {type(x).__name__}."
-        ) from exc
-    if a.ndim != 3 or a.shape[2] != 3:
-        raise InvalidInputError(f"`{name}` must have shape (T, n, 3); got {a.shape}.")
-    if a.shape[0] == 0 or a.shape[1] == 0:
-        raise InvalidInputError(f"`{name}` is empty; got shape {a.shape}.")
-    if not np.isfinite(a).all():
-        bad = np.argwhere(~np.isfinite(a).all(axis=2))[0]
-        raise InvalidInputError(
-            f"`{name}` contains NaN or inf coordinates (first at frame {bad[0]}, vertex {bad[1]})."
-        )
-    return a
-
-
 def _frame_pair(frames, frames_ref) -> tuple[np.ndarray, np.ndarray]:
-    A = _frames(frames, "frames")
-    B = _frames(frames_ref, "frames_ref")
+    A = as_frames(frames, "frames")
+    B = as_frames(frames_ref, "frames_ref")
     if A.shape != B.shape:
         what = "frame counts" if A.shape[0] != B.shape[0] else "vertex counts"
         raise InvalidInputError(

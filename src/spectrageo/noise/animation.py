@@ -5,26 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import as_faces, as_rng, check_choice
+from .._validation import as_faces, as_frames, as_rng, check_choice
 from ..geometry.primitives import vertex_normals
 from . import static
 from ._core import NoiseResult, check_fraction, check_level, mean_spacing
-
-
-def _frames(frames) -> np.ndarray:
-    try:
-        A = np.asarray(getattr(frames, "frames", frames), dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(
-            f"`frames` must be a numeric array of shape (T, n, 3); got {type(frames).__name__}."
-        ) from exc
-    if A.ndim != 3 or A.shape[2] != 3 or A.shape[0] == 0 or A.shape[1] == 0:
-        raise InvalidInputError(
-            f"`frames` must have shape (T, n, 3) with T, n >= 1; got {A.shape}."
-        )
-    if not np.isfinite(A).all():
-        raise InvalidInputError("`frames` contains NaN or inf coordinates.")
-    return A
 
 
 def spatial_mask(
@@ -53,7 +37,7 @@ def spatial_mask(
     NoiseResult
         ``vertices``/``displacement`` (T, n, 3), ``mask`` (n,), ``scale`` (n,).
     """
-    A = _frames(frames)
+    A = as_frames(frames)
     T, n, _ = A.shape
     F = as_faces(F, n, "F")
     fraction = check_fraction(fraction)
@@ -122,7 +106,7 @@ def animation_noise(
         raise InvalidInputError(
             f"`fraction` applies to kinds 'impulsive' and 'spatial-mask' only; got kind={kind!r}."
         )
-    A = _frames(frames)
+    A = as_frames(frames)
     F = as_faces(F, A.shape[1], "F")
     if kind in ("spatial-mask", "spatial_mask"):
         res = spatial_mask(
