@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import importlib
 import io
 import os
 import re
@@ -33,71 +35,27 @@ NAN_POLICIES = ("raise", "drop")
 
 
 # ------------------------------------------------------------------------------ format registry
-def _read_ply(raw, name):
-    from ._ply import read_ply
-
-    return read_ply(raw, name)
-
-
-def _read_obj(raw, name):
-    from ._obj import read_obj
-
-    return read_obj(raw, name)
-
-
-def _read_off(raw, name):
-    from ._off import read_off
-
-    return read_off(raw, name)
-
-
-def _read_stl(raw, name):
-    from ._simple import read_stl
-
-    return read_stl(raw, name)
-
-
-def _read_pcd(raw, name):
-    from ._pcd import read_pcd
-
-    return read_pcd(raw, name)
-
-
-def _read_xyz(raw, name):
-    from ._simple import read_xyz
-
-    return read_xyz(raw, name)
-
-
-def _read_npy(raw, name):
-    from ._simple import read_npy
-
-    return read_npy(raw, name)
-
-
-def _read_las(raw, name):
-    from ._las import read_las
-
-    return read_las(raw, name, compressed=False)
-
-
-def _read_laz(raw, name):
-    from ._las import read_las
-
-    return read_las(raw, name, compressed=True)
-
-
-_SINGLE_READERS: dict[str, Callable[[bytes, str], RawGeometry]] = {
-    ".ply": _read_ply,
-    ".obj": _read_obj,
-    ".off": _read_off,
-    ".stl": _read_stl,
-    ".pcd": _read_pcd,
-    ".xyz": _read_xyz,
-    ".npy": _read_npy,
-    ".las": _read_las,
-    ".laz": _read_laz,
+# extension -> (module of this package, reader function, extra keyword arguments); the modules are
+# imported on first use so that reading a PLY never imports laspy
+_READER_SPECS: dict[str, tuple[str, str, dict[str, Any]]] = {
+    ".ply": ("_ply", "read_ply", {}),
+    ".obj": ("_obj", "read_obj", {}),
+    ".off": ("_off", "read_off", {}),
+    ".stl": ("_simple", "read_stl", {}),
+    ".pcd": ("_pcd", "read_pcd", {}),
+    ".xyz": ("_simple", "read_xyz", {}),
+    ".npy": ("_simple", "read_npy", {}),
+    ".las": ("_las", "read_las", {"compressed": False}),
+    ".laz": ("_las", "read_las", {"compressed": True}),
 }
+
+
+def _reader(suffix: str) -> Callable[[bytes, str], RawGeometry]:
+    module, func, kwargs = _READER_SPECS[suffix]
+    fn = getattr(importlib.import_module(f"{__package__}.{module}"), func)
+    return functools.partial(fn, **kwargs) if kwargs else fn
+
+
 _MESH_WRITE = (".ply", ".obj", ".off", ".stl")
 _POINTS_WRITE = (".ply", ".pcd", ".xyz", ".npy", ".las", ".laz", ".obj", ".off")
 _WRITE_OPTIONS = ("pcd_format", "dtype", "las_scale", "frame_format", "prefix", "compress")
@@ -116,7 +74,7 @@ def supported_formats() -> dict[str, Any]:
         ``"sequence"``); ``"compression"``: ``[".gz"]``, appendable to every single-file format.
     """
     return {
-        "read": [*_SINGLE_READERS, ".npz", "<folder>/"],
+        "read": [*_READER_SPECS, ".npz", "<folder>/"],
         "write": {
             "mesh": list(_MESH_WRITE),
             "points": list(_POINTS_WRITE),
@@ -216,8 +174,8 @@ def read(
     suffix, gz = _format_suffix(p, format)
     if suffix == ".npz":
         return _read_npz(p, gz, kind=kind)
-    if suffix not in _SINGLE_READERS:
-        raise _unsupported(p, suffix, [*_SINGLE_READERS, ".npz"])
+    if suffix not in _READER_SPECS:
+        raise _unsupported(p, suffix, [*_READER_SPECS, ".npz"])
     if kind in ("animation", "sequence"):
         raise InvalidInputError(
             f"{p.name}: a single {suffix} file cannot be read as {kind!r}; "
@@ -231,7 +189,7 @@ def _read_raw(p: Path, suffix: str, gz: bool) -> RawGeometry:
     data = read_bytes(p, gz)
     if not data.strip():
         raise InvalidInputError(f"{p.name}: empty file.")
-    return _SINGLE_READERS[suffix](data, p.name)
+    return _reader(suffix)(data, p.name)
 
 
 def _nonfinite_rows(a: np.ndarray) -> np.ndarray:
@@ -421,11 +379,11 @@ def _frame_files(folder: Path, format: str | None) -> list[Path]:
     for f in folder.iterdir():
         if not f.is_file() or f.name.startswith("."):
             continue
-        if _format_suffix(f, format)[0] in _SINGLE_READERS:
+        if _format_suffix(f, format)[0] in _READER_SPECS:
             files.append(f)
     if not files:
         raise InvalidInputError(
-            f"{folder}: folder holds no frame files (expected numbered {', '.join(_SINGLE_READERS)} files)."
+            f"{folder}: folder holds no frame files (expected numbered {', '.join(_READER_SPECS)} files)."
         )
     kinds = sorted({_format_suffix(f, format)[0] for f in files})
     if len(kinds) > 1:
@@ -727,7 +685,7 @@ def _write_folder(
     for f in folder.iterdir():
         if f.name in keep or not f.is_file() or not pattern.match(f.name):
             continue
-        if split_suffix(f)[0] in _SINGLE_READERS:
+        if split_suffix(f)[0] in _READER_SPECS:
             f.unlink()
 
 
