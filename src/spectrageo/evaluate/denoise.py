@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
+from .._progress import progress
 from ._tables import rows_to_csv, write_md_csv
 
 #: columns of the table, in order
@@ -139,7 +140,7 @@ def evaluate_denoise(
         else:
             denoise.get(base)
     rows: list[dict] = []
-    for name, noisy_path, orig_path in found:
+    for name, noisy_path, orig_path in progress(found, desc="denoise pairs", total=len(found)):
         noisy = io.read_mesh(noisy_path)
         orig = io.read_mesh(orig_path)
         V, F, V0 = noisy.vertices, noisy.faces, orig.vertices

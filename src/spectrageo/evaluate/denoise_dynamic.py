@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+from .._progress import progress
 from ._tables import rows_to_csv, write_md_csv
 
 ANIMATIONS = ("crane", "horse-gallop", "horse-collapse", "chickenCrossing")
@@ -131,7 +132,7 @@ def evaluate(
     dynamic = set(dn.dynamic_methods())
     static = set(dn.available())
     rows: list[dict] = []
-    for name in names:
+    for name in progress(names, desc="animations", total=len(names)):
         loaded = _load(data_dir, name, max_frames)
         if loaded is None:
             continue

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+from .._progress import progress
 from ._tables import rows_to_csv, write_md_csv
 
 __all__ = ["DEFAULT_METHODS", "SCANS", "evaluate_outliers", "format_markdown"]
@@ -106,7 +107,7 @@ def evaluate_outliers(
         warm = np.random.default_rng(0).random((200, 3))
         for m in ("rpca", "sor", "radius"):
             remove_outliers(warm, method=m, k=10, return_points=False)
-    for label, rel in scans:
+    for label, rel in progress(scans, desc="outlier scans", total=len(scans)):
         path = data / rel
         if not path.exists():
             continue

@@ -24,6 +24,7 @@ import numpy as np
 from scipy.stats import pearsonr, spearmanr
 
 from .._errors import InvalidInputError
+from .._progress import progress
 from ._tables import rows_to_csv, write_md_csv
 
 MODELS = ("block", "cad", "casting", "fandisk")
@@ -107,7 +108,7 @@ def evaluate(
         if m not in METHODS:
             raise InvalidInputError(f"`methods` must be among {', '.join(METHODS)}; got {m!r}.")
     rows: list[dict] = []
-    for name in models:
+    for name in progress(models, desc="saliency models", total=len(models)):
         mesh_path = folder / f"{name}.obj"
         gt_path = folder / f"{name}_saliencyValues_of_centroids.csv"
         if not mesh_path.is_file() or not gt_path.is_file():
