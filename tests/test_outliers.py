@@ -85,7 +85,9 @@ def test_rpca_scores_match_linalg_rpca():
 
     P, _ = noise.add_outliers(_sphere(400), fraction=0.05, kind="far", rng=1)
     k = 6
-    r = rpca_scores(P, k, rho=1.5, tol=1e-9, max_iter=500, block_size=10**6, refine=False)
+    r = rpca_scores(
+        P, k, rho=1.5, tol=1e-9, max_iter=500, block_size=10**6, refine=False, tangent_weight=1
+    )
     # explicit reference on the same normalised coordinates
     M = knn_patch_matrix((P - P.mean(axis=0)) / r.spacing, k)
     ref = rpca(M, method="ialm", rho=1.5, tol=1e-9, max_iter=500)
@@ -103,8 +105,8 @@ def test_rpca_refinement_rebuilds_outlier_patches_and_subtracts_baseline():
     rng = np.random.default_rng(7)
     P = np.concatenate([_plane(25), rng.uniform([-0.5, -0.5, 0.3], [1.5, 1.5, 0.8], (100, 3))])
     k = 6
-    plain = rpca_scores(P, k, refine=False, tol=1e-9, rho=1.5, max_iter=500)
-    r = rpca_scores(P, k, tol=1e-9, rho=1.5, max_iter=500)
+    plain = rpca_scores(P, k, refine=False, tangent_weight=1, tol=1e-9, rho=1.5, max_iter=500)
+    r = rpca_scores(P, k, tangent_weight=1, tol=1e-9, rho=1.5, max_iter=500)
     assert r.n_refined > 0 and plain.n_refined == 0
     # reference: flag, rebuild the patches made mostly of flagged points, rerun Algorithm 14
     s1 = plain.scores
@@ -132,6 +134,57 @@ def test_rpca_refinement_rebuilds_outlier_patches_and_subtracts_baseline():
         return _f1(sc < _oracle_threshold(sc, lab), lab)
 
     assert best_f1(plain.scores) < 0.99 < best_f1(r.scores)
+
+
+def _neighbour_normals(P, idx):
+    """Smallest principal axis of each point's neighbours (the point itself left out)."""
+    Q = P[idx]
+    C = Q - Q.mean(axis=1, keepdims=True)
+    return np.linalg.eigh(np.einsum("nki,nkj->nij", C, C))[1][:, :, 0]
+
+
+@pytest.mark.parametrize("w", [0.0, 0.5])
+def test_tangent_weighted_scores_match_reference(w):
+    """Step 7 of rpca_scores against numpy: residual split along / across the neighbours' normal."""
+    from spectrageo.graph import knn
+    from spectrageo.linalg import rpca
+
+    P, _ = noise.add_outliers(_sphere(400), fraction=0.05, kind="far", rng=3)
+    k = 6
+    kw = dict(rho=1.5, tol=1e-9, max_iter=500)
+    r = rpca_scores(P, k, refine=False, tangent_weight=w, **kw)
+    M = knn_patch_matrix((P - P.mean(axis=0)) / r.spacing, k)
+    S = rpca(M, method="ialm", **kw).sparse[:, 0].reshape(-1, 3)
+    nrm = _neighbour_normals(P, knn(P, k)[0])
+    sn = np.einsum("ij,ij->i", S, nrm)
+    st = np.linalg.norm(S - sn[:, None] * nrm, axis=1)
+    expect = np.hypot(sn, w * st)
+    np.testing.assert_allclose(r.scores, expect, atol=1e-5 * max(1.0, expect.max()))
+    if w == 0.0:  # weighting can only shrink the plain norm
+        plain = rpca_scores(P, k, refine=False, tangent_weight=1, **kw).scores
+        assert np.all(r.scores <= plain + 1e-9) and np.any(r.scores < 0.5 * plain)
+
+
+def test_tangent_weight_separates_normal_from_tangential_offsets():
+    """A point pushed along the normal outscores one pushed the same distance across the plane."""
+    P = _plane(30)
+    i_n, i_t = 200, 600
+    h = 1.0 / 30
+    Q = P.copy()
+    Q[i_n, 2] += 1.5 * h
+    Q[i_t, 0] += 0.45 * h  # stays inside the sampling, only irregularity
+    plain = rpca_scores(Q, 8, tangent_weight=1).scores
+    weighted = rpca_scores(Q, 8).scores
+    assert weighted[i_n] > 0.5
+    # relative to the clean points' level, the weighted score singles out the normal offset more
+    others = np.delete(np.arange(len(Q)), [i_n, i_t])
+    assert weighted[i_n] / np.percentile(weighted[others], 99) > plain[i_n] / np.percentile(
+        plain[others], 99
+    )
+    with pytest.raises(InvalidInputError, match="tangent_weight"):
+        rpca_scores(Q, 8, tangent_weight=1.5)
+    with pytest.raises(InvalidInputError, match="tangent_weight"):
+        rpca_scores(Q, 8, tangent_weight=-0.1)
 
 
 def test_rpca_scores_invariances():

@@ -15,7 +15,9 @@ Implementation notes (deviations and choices, all documented in :func:`rpca_scor
   time, and each score is taken relative to the median first-pass score of its patch. Far
   outliers that only see other outliers then score by their distance to the surface, and points
   in sparse or noisy parts of a scan no longer stand out merely because their whole
-  neighbourhood has large residuals. ``refine=False`` gives the thesis' score unchanged.
+  neighbourhood has large residuals. The residual is also weighted towards its component along
+  the local normal (``tangent_weight=0.5``). ``refine=False, tangent_weight=1`` gives the
+  thesis' score unchanged.
 
 * ``M`` is never formed: a fused kernel gathers its rows from the points and runs the inexact ALM
   iteration of Eq. 4.22 (the same iterates as :func:`spectrageo.linalg.rpca` with ``method="ialm"``,
@@ -148,6 +150,7 @@ def rpca_scores(
     on_nonconvergence: str = "warn",
     workers: int = -1,
     refine: bool = True,
+    tangent_weight: float = 0.5,
 ) -> PatchRPCAResult:
     r"""Per-point outlier scores ``||s_i||_2`` of Eq. (5.99) from RPCA of the patch matrix.
 
@@ -172,7 +175,7 @@ def rpca_scores(
     4. ``score_i = sqrt(S[3i, 0]^2 + S[3i+1, 0]^2 + S[3i+2, 0]^2)`` (the first column only; the
        other ``k`` columns, the neighbours' entries, are ignored as in the thesis).
 
-    With ``refine=True`` (default; ``refine=False`` returns the plain scores of step 4) two
+    With ``refine=True`` (default; ``refine=False`` skips steps 5-6) two
     documented additions make the score robust where the thesis' assumption that outliers are
     sparse in every patch fails:
 
@@ -197,6 +200,22 @@ def rpca_scores(
     Measured on the shared scans with 10 % injected outliers (``spectrageo evaluate outliers``),
     these raise the far-outlier F1 at the best threshold from 0.934-0.985 to 0.943-0.997 and the
     near-surface F1 from 0.59-0.85 to 0.70-0.91, for twice the solver time.
+
+    7. *Residual measured along the surface normal* (``tangent_weight < 1``, default 0.5). The
+       residual vector ``s_i`` (the first-column entries of the three rows of ``v_i``) is split
+       into its component along the normal ``n_i`` of the patch (the smallest principal axis of
+       the ``k`` neighbours, ``v_i`` itself left out) and the tangential rest, and the score is
+       ``sqrt(<s_i, n_i>^2 + w^2 |s_i - <s_i, n_i> n_i|^2)`` with ``w = tangent_weight``, for
+       both passes (so also in the baseline of step 6). An off-surface point is displaced along
+       the normal, while the tangential part of the residual mostly reflects the irregular
+       sampling inside the patch (a point is rarely at its neighbours' centroid). Measured on the
+       shared scans with 10 % injected outliers, ``w = 0.5`` raises the near-surface F1 at the
+       best threshold on six of the seven scans (e.g. LiDAR 0.70 -> 0.74, Kinect milk 0.85 ->
+       0.87, bunny 0.91 -> 0.95) and keeps or raises the far-outlier F1 (0.943-0.998), and on the
+       clean scans fewer points exceed a given threshold (at 0.5 spacings 0.3-6 % instead of
+       1-7 %). ``w = 0`` (the normal component alone) loses far outliers lying beside a scan's
+       border (far F1 down to 0.85-0.98); ``w = 0.25`` and ``0.75`` were in between.
+       ``tangent_weight = 1`` is the plain norm of Eq. (5.99).
 
     Parameters
     ----------
@@ -227,8 +246,10 @@ def rpca_scores(
         Threads of the kd-tree queries and of the solver (-1: all cores; blocks of fewer than
         ``2 * 50000`` points run on one thread).
     refine : bool
-        Second pass over rebuilt patches and local baseline (steps 5-6); ``False`` gives the
-        plain first-column scores of Eq. (5.99).
+        Second pass over rebuilt patches and local baseline (steps 5-6).
+    tangent_weight : float
+        Weight ``w`` in ``[0, 1]`` of the tangential part of the residual (step 7);
+        ``refine=False, tangent_weight=1`` gives the plain first-column scores of Eq. (5.99).
 
     Returns
     -------
@@ -248,6 +269,10 @@ def rpca_scores(
     if block_size < k + 1:
         raise InvalidInputError(f"`block_size` must be >= k + 1 = {k + 1}; got {block_size}.")
     check_choice(on_nonconvergence, "on_nonconvergence", ("warn", "raise", "ignore"))
+    check_positive(tangent_weight, "tangent_weight", allow_zero=True)
+    if tangent_weight > 1:
+        raise InvalidInputError(f"`tangent_weight` must be in [0, 1]; got {tangent_weight!r}.")
+    weighted = tangent_weight < 1
 
     order = morton_order(X)
     Xs = X[order]
@@ -266,6 +291,7 @@ def rpca_scores(
             on_nonconvergence=on_nonconvergence,
             workers=workers,
             refine=refine,
+            tangent_weight=tangent_weight,
         )
     h = spacing_from(nb.dmean)
     del tree
@@ -273,22 +299,28 @@ def rpca_scores(
     solve_kw = dict(
         lam=lam, rho=rho, tol=tol, max_iter=max_iter, block_size=block_size, workers=workers
     )
-    scores_s, E0_s, n_iter, converged, residual, n_blocks = _solve_blocks(
-        Xs, h, nb.idx, smoothed=smoothed, **solve_kw
+    idx = nb.idx
+    scores_s, E0_s, S1, n_iter, converged, residual, n_blocks = _solve_blocks(
+        Xs, h, idx, smoothed=smoothed, vectors=weighted, **solve_kw
     )
     n_refined = 0
+    S2 = S1
     if refine:
-        idx = nb.idx
         s1 = scores_s
         n_refined = _rebuild_outlier_patches(Xs, idx, s1, k, workers)
         if n_refined:  # otherwise the second pass would repeat the first
-            scores_s, E0_s, it2, conv2, res2, _ = _solve_blocks(
-                Xs, h, idx, smoothed=smoothed, **solve_kw
+            scores_s, E0_s, S2, it2, conv2, res2, _ = _solve_blocks(
+                Xs, h, idx, smoothed=smoothed, vectors=weighted, **solve_kw
             )
             n_iter, converged = max(n_iter, it2), converged and conv2
             residual = max(residual, res2)
         else:
             scores_s = s1.copy()
+    if weighted:  # step 7: the residuals measured along the local normal (patches final)
+        s1 = np.empty(n)
+        _k.tangent_weighted_norms(Xs, idx, S1, S2, float(tangent_weight) ** 2, s1, scores_s)
+        del S1, S2
+    if refine:
         _subtract_local_baseline(scores_s, s1, idx)
 
     scores = np.empty(n)
@@ -327,11 +359,14 @@ def _solve_blocks(
     max_iter: int,
     block_size: int,
     workers: int,
-) -> tuple[np.ndarray, np.ndarray | None, int, bool, float, int]:
-    """First-column scores (and ``E`` first column) of every block's patch matrix (sorted order)."""
+    vectors: bool = False,
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int, bool, float, int]:
+    """First-column scores (and ``E`` first column, and the residual vectors ``S[3i:3i+3, 0]``
+    when ``vectors``) of every block's patch matrix (sorted order)."""
     n = Xs.shape[0]
     scores_s = np.empty(n)
     E0_s = np.empty((n, 3)) if smoothed else None
+    S_s = np.empty((n, 3)) if vectors else np.empty((0, 3))
     n_blocks = max(1, -(-n // int(block_size)))
     bounds = np.linspace(0, n, n_blocks + 1).astype(np.int64)
     n_iter, converged, residual = 0, True, 0.0
@@ -352,7 +387,17 @@ def _solve_blocks(
             shift = centre * inv_h
             centers = np.arange(lo, hi, dtype=idx.dtype)
             out = _patch_ialm(
-                Pn, centers, idx[lo:hi], lam, rho, tol, max_iter, smoothed, pool, n_threads
+                Pn,
+                centers,
+                idx[lo:hi],
+                lam,
+                rho,
+                tol,
+                max_iter,
+                smoothed,
+                pool,
+                n_threads,
+                S_s[lo:hi] if vectors else S_s,
             )
             scores_s[lo:hi] = out[0]
             if smoothed:
@@ -360,7 +405,7 @@ def _solve_blocks(
             n_iter = max(n_iter, out[2])
             converged = converged and out[3]
             residual = max(residual, out[4])
-    return scores_s, E0_s, n_iter, converged, residual, n_blocks
+    return scores_s, E0_s, (S_s if vectors else None), n_iter, converged, residual, n_blocks
 
 
 def _rebuild_outlier_patches(
@@ -498,10 +543,12 @@ def _patch_ialm(
     want_e0: bool,
     pool: ThreadPoolExecutor | None,
     n_threads: int,
+    vec: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray | None, int, bool, float]:
     """Inexact ALM (Eq. 4.22) on the implicit patch matrix of the rows ``centers``.
 
     Returns ``(scores, E0, n_iter, converged, residual)``; see :mod:`._kernels` for the state.
+    ``vec`` ((m, 3), or no rows) receives the first-column residual vectors of ``S``.
     """
     m = centers.shape[0]
     K = nbrs.shape[1] + 1
@@ -512,6 +559,7 @@ def _patch_ialm(
     E0 = np.empty((m, 3))
     if fro == 0.0:
         E0[:] = 0.0
+        vec[:] = 0.0
         return scores, (E0 if want_e0 else None), 0, True, 0.0
     lam = 1.0 / np.sqrt(3.0 * m) if lam is None else float(lam)
     s_max = float(np.sqrt(max(np.linalg.eigvalsh(G)[-1], 0.0)))
@@ -541,5 +589,5 @@ def _patch_ialm(
         if residual <= tol:
             converged = True
             break
-    _k.first_column_scores(R, lam / mu_prev, scores)
+    _k.first_column_scores(R, lam / mu_prev, scores, vec)
     return scores, (E0 if want_e0 else None), it, converged, residual
