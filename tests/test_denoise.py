@@ -249,6 +249,8 @@ def test_tsgsp_validation(noisy_cube):
         tsgsp.fine(Vn, F, min_feature=-1.0)
     with pytest.raises(InvalidInputError, match="`curved_gate` must be > 0"):
         tsgsp.fine(Vn, F, curved_gate=0.0)
+    with pytest.raises(InvalidInputError, match="`area_weights` must be True or False"):
+        tsgsp.fine(Vn, F, area_weights="yes")
     with pytest.raises(InvalidInputError, match="`patch` must be >= 4"):
         tsgsp.estimate_noise(Vn, patch=3)
     with pytest.raises(InvalidInputError, match="at least 4 vertices"):
@@ -402,13 +404,14 @@ def test_fine_round_kernels_match_sparse_formulation(noisy_cube):
     np.testing.assert_array_equal(best, tsgsp.select_neighborhoods(N, nb, feature))
     den_c, den_s, zeta = 0.05, 0.08, 4
     active = np.linalg.norm(N, axis=1) > 0
-    for patch_guide in (True, False):
+    wa_rand = np.random.default_rng(2).uniform(0.2, 3.0, m)
+    for patch_guide, wa in [(True, np.ones(m)), (False, np.ones(m)), (True, wa_rand)]:
         hood = nb[best]
         rows, cols = np.repeat(np.arange(m), k), hood.ravel()
-        G = _normalize_rows(N[hood].sum(axis=1)) if patch_guide else N
+        G = _normalize_rows((wa[hood, None] * N[hood]).sum(axis=1)) if patch_guide else N
         dc = np.sum((Cc[rows] - Cc[cols]) ** 2, axis=1)
         dn = np.sum((G[rows] - G[cols]) ** 2, axis=1)
-        w = np.exp(-dc / den_c - dn / den_s) * active[cols]
+        w = wa[cols] * np.exp(-dc / den_c - dn / den_s) * active[cols]
         Cw = sp.csr_matrix((w, (rows, cols)), shape=(m, m))
         d = np.asarray(Cw.sum(axis=1)).ravel()
         P = sp.diags(np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)) @ Cw
@@ -418,5 +421,30 @@ def test_fine_round_kernels_match_sparse_formulation(noisy_cube):
         ref = _normalize_rows(ref)
         empty = ~ref.any(axis=1)
         ref[empty] = N[empty]
-        got = tsgsp._filter_kernel(N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide)
+        got = tsgsp._filter_kernel(N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide, wa)
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+
+
+def test_area_weights_matter_only_when_face_areas_differ(noisy_cube):
+    # folded regular grid with a little normal noise: the face areas differ by about 1 %, so
+    # the weights are all about one and the result barely moves, while the filter itself does
+    V, F = grid(21, 21)
+    V[:, 2] = 0.6 * np.abs(V[:, 0] - 0.5) + np.random.default_rng(4).normal(0, 1e-3, 441)
+    A = 0.5 * np.linalg.norm(face_normals(V, F, unit=False), axis=1)
+    assert A.std() / A.mean() < 0.02
+    plain = tsgsp.fine(V, F, area_weights=False, curved_gate=None)
+    moved = np.abs(plain - V).max()
+    assert moved > 2e-4
+    diff = np.abs(tsgsp.fine(V, F, curved_gate=None) - plain).max()
+    assert diff < 0.05 * moved
+    # uneven areas (noisy coarse cube): the weights change the result
+    V, F, Vn = noisy_cube
+    Xc = tsgsp.coarse(Vn, F)
+    plain = tsgsp.fine(Xc, F, area_weights=False)
+    weighted = tsgsp.fine(Xc, F)  # area weights are the default
+    assert not np.array_equal(plain, weighted)
+    # both denoise well and stay close to each other
+    t_plain = metrics.theta_deg(plain, V, F)
+    t_weighted = metrics.theta_deg(weighted, V, F)
+    assert t_weighted < 0.5 * metrics.theta_deg(Vn, V, F)
+    assert abs(t_weighted - t_plain) < 0.25 * t_plain
