@@ -154,7 +154,7 @@ def coarse(
     V,
     F,
     *,
-    submesh_size: int = 700,
+    submesh_size: int = 500,
     overlap: float = 0.15,
     max_keep: float = 0.3,
     method: str = "oi",
@@ -185,7 +185,12 @@ def coarse(
     V : (n, 3) float
     F : (m, 3) int
     submesh_size : int
-        Vertices per submesh (the thesis recommends 500-800).
+        Vertices per submesh (the thesis recommends 500-800). The per-submesh algebra costs
+        ``O(n_i^3)`` (``max_keep * n_i`` tracked vectors), so the whole step is ``O(n n_i^2)``:
+        500 makes TSGSP about 25 % faster than 700 (e.g. Fandisk0.3 0.33 -> 0.25 s) at the same
+        quality on average (mean theta of the 8 shared pairs 5.245 / 5.236 degrees with 700 /
+        500, of seven other meshes with Gaussian noise 8.03 / 8.11; single models move by up to
+        +-0.3 degrees either way with the partition).
     overlap : float
         Overlap fraction of neighbouring submeshes.
     max_keep : float in (0, 1]
