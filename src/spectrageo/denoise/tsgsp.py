@@ -28,7 +28,6 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, as_rng, check_choice, check_positive
@@ -37,6 +36,7 @@ from ..geometry.features import FLAT, cluster_eigenvalues, patch_eigenvalues
 from ..geometry.primitives import _normalize_rows
 from ..graph import adjacency_matrix
 from ..graph.adjacency import knn
+from ..linalg._common import single_thread_blas
 from ..spectral import overlapped_submeshes, reassemble, submesh_eigenbases
 from ._normals import fast_update_vertices, mean_centroid_distance
 from ._registry import register
@@ -271,7 +271,7 @@ def coarse(
     frac0 = _initial_fractions(E)
     # the per-submesh algebra is on small dense matrices: one BLAS thread is fastest and avoids
     # oversubscription on busy machines
-    with threadpool_limits(limits=1, user_api="blas"):
+    with single_thread_blas():
         _coarse_loop(
             V,
             C,

@@ -46,10 +46,10 @@ from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
-from threadpoolctl import threadpool_limits
 
 from .._errors import ConvergenceError, ConvergenceWarning, InvalidInputError
 from .._validation import check_choice, check_positive
+from ..linalg._common import single_thread_blas
 from . import _kernels as _k
 from ._common import KNN_CHUNK, as_cloud, check_k, knn_chunked, morton_order, spacing_from
 
@@ -58,9 +58,7 @@ __all__ = ["PatchRPCAResult", "knn_patch_matrix", "rpca_scores"]
 #: Default number of points per independent RPCA block.
 BLOCK_SIZE = 1_000_000
 #: Fewest points per thread of the fused kernels (smaller blocks run on the calling thread).
-_MIN_PER_THREAD = 50_000
-#: Clouds from this size on run the solver under ``threadpool_limits(1)``.
-_BLAS_LIMIT_FROM = 100_000
+_MIN_PER_THREAD = 10_000
 
 
 @dataclass(frozen=True)
@@ -244,7 +242,7 @@ def rpca_scores(
         Policy when a block reaches ``max_iter`` first.
     workers : int
         Threads of the kd-tree queries and of the solver (-1: all cores; blocks of fewer than
-        ``2 * 50000`` points run on one thread).
+        ``2 * 10000`` points run on one thread).
     refine : bool
         Second pass over rebuilt patches and local baseline (steps 5-6).
     tangent_weight : float
@@ -375,11 +373,9 @@ def _solve_blocks(
     Pn = Xs * inv_h  # shifted in place to each block's centroid below
     shift = np.zeros(3)
     pool_cm = ThreadPoolExecutor(n_threads) if n_threads > 1 else contextlib.nullcontext()
-    # BLAS only sees (k+1)-square and 384 x (k+1) operands: keep it on the calling thread. (OpenBLAS
-    # does not thread such sizes anyway; the limit guards other builds, and is skipped on small
-    # clouds, where looking up the loaded BLAS libraries (~8 ms) would cost more than the solve.)
-    blas_cm = threadpool_limits(1) if n >= _BLAS_LIMIT_FROM else contextlib.nullcontext()
-    with pool_cm as pool, blas_cm:
+    # BLAS only sees (k+1)-square and 384 x (k+1) operands: keep it on the calling thread (OpenBLAS
+    # does not thread such sizes anyway; the limit guards other builds).
+    with pool_cm as pool, single_thread_blas():
         for b in range(n_blocks):
             lo, hi = int(bounds[b]), int(bounds[b + 1])
             centre = Xs[lo:hi].mean(axis=0)

@@ -33,10 +33,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from .._errors import InvalidInputError
 from .._validation import check_choice, check_positive
+from ..linalg._common import single_thread_blas
 from ._common import PER, check_int, check_k, check_mesh, face_patches, face_to_vertex, minmax
 from ._common import mesh_normals as _mesh_normals
 
@@ -186,7 +186,7 @@ def geometric_face_values(
     if solver == "internal":
         # The products of the tall (q, 3(k+1)) matrix are too thin to gain from BLAS threads, and
         # OpenBLAS threads spinning on a loaded machine made them up to 10x slower; one thread.
-        with threadpool_limits(1, user_api="blas"):
+        with single_thread_blas():
             S, n_iter, conv, resid, rank = _ialm_tall(
                 M, lam=lam, tol=float(tol), max_iter=max_iter, group=shrinkage == "group"
             )
