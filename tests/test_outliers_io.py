@@ -92,7 +92,13 @@ def test_evaluate_outliers_on_real_scan(shared_data, tmp_path):
     assert "kinect milk" in md and "| rpca |" in md
     csv = (tmp_path / "o.csv").read_text().splitlines()
     assert csv[0].startswith("dataset,kind,fraction,method") and len(csv) == 5
-    assert "F1" in format_markdown(rows)
+    text = format_markdown(rows)
+    assert "F1" in text
+    # the summary line of the case repeats the table's F1 values
+    summary = next(ln for ln in text.splitlines() if ln.startswith("| kinect milk | far |"))
+    cells = [c.strip() for c in summary.strip("|").split("|")]
+    assert cells[2] == f"{by['rpca']['f1']:.3f}" and cells[3] == f"{by['rpca-oracle']['f1']:.3f}"
+    assert cells[4] == f"{by['sor-grid']['f1']:.3f}" and cells[5] == "-" and cells[6] == "-"
     with pytest.raises(InvalidInputError, match="unknown method"):
         evaluate_outliers(shared_data, methods=("lof",))
     with pytest.raises(InvalidInputError, match="folder"):

@@ -277,6 +277,7 @@ def format_markdown(rows: list[dict]) -> str:
     seq = [r for r in rows if r.get("kind") == "sequence"]
     out = []
     if static:
+        out.extend(_summary(static))
         out.append(
             "| dataset | outliers | method | params | precision | recall | F1 | time (s) "
             "| points/s |"
@@ -314,6 +315,39 @@ def format_markdown(rows: list[dict]) -> str:
                 f"{r['theta_deg']:.3f} | {r['p2s_mean']:.4g} | {r['time_s']:.2f} |"
             )
     return "\n".join(out)
+
+
+def _summary(static: list[dict]) -> list[str]:
+    """One line per (scan, kind) at the 10 % fraction (or the middle one run): F1 of ``rpca``,
+    ``rpca-oracle``, ``sor-grid``, ``open3d-sor`` and the time of ``rpca`` over Open3D's."""
+    fracs = sorted({r["fraction"] for r in static})
+    frac = 0.1 if 0.1 in fracs else fracs[len(fracs) // 2]
+    cases: dict[tuple, dict] = {}
+    for r in static:
+        if r["fraction"] == frac:
+            cases.setdefault((r["dataset"], r["kind"]), {})[r["method"]] = r
+    if not any("rpca" in m for m in cases.values()):
+        return []
+
+    def f1(m: dict, name: str) -> str:
+        return f"{m[name]['f1']:.3f}" if name in m else "-"
+
+    lines = [
+        f"Summary at {int(round(100 * frac))} % outliers (F1; the full table follows):",
+        "",
+        "| dataset | outliers | rpca | rpca-oracle | sor-grid | open3d-sor | rpca time / open3d |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for (dataset, kind), m in cases.items():
+        ratio = "-"
+        if "rpca" in m and "open3d-sor" in m and m["open3d-sor"]["time_s"] > 0:
+            ratio = f"{m['rpca']['time_s'] / m['open3d-sor']['time_s']:.1f}x"
+        lines.append(
+            f"| {dataset} | {kind} | {f1(m, 'rpca')} | {f1(m, 'rpca-oracle')} | "
+            f"{f1(m, 'sor-grid')} | {f1(m, 'open3d-sor')} | {ratio} |"
+        )
+    lines.append("")
+    return lines
 
 
 def _fmt(v: Any) -> str:
