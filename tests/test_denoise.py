@@ -221,6 +221,27 @@ def test_curved_gate_stops_on_a_sphere_not_on_a_cube(noisy_cube, noisy_sphere):
     assert not np.array_equal(gated, tsgsp.fine(Xc, Fc, n_outer=1))
 
 
+def test_tsgsp_input_weight_recovers_acute_ridges():
+    # bicone |z| + 0.4 r = 1: the normals turn by 136 degrees across its rim, which the coarse
+    # low-pass rounds off; filtering the (partly) noisy normals with coarse-mesh weights
+    # recovers part of it
+    U, F = icosphere(3)
+    V = U / (np.abs(U[:, 2]) + 0.4 * np.linalg.norm(U[:, :2], axis=1))[:, None]
+    Vn = noise.apply(V, F, kind="gaussian", level=0.3, rng=0)
+    Vc = tsgsp.coarse(Vn, F)
+    literal = tsgsp.tsgsp(Vn, F, input_weight=0)
+    np.testing.assert_array_equal(literal, tsgsp.fine(Vc, F))
+    # the source equal to the guidance mesh is the plain fine step
+    np.testing.assert_array_equal(tsgsp.fine(Vc, F, source=Vc), literal)
+    blended = tsgsp.tsgsp(Vn, F)  # input_weight=0.7 is the default
+    np.testing.assert_array_equal(blended, tsgsp.fine(Vc, F, source=Vc + 0.7 * (Vn - Vc)))
+    t_lit = metrics.theta_deg(literal, V, F)
+    t_new = metrics.theta_deg(blended, V, F)
+    assert t_lit < 0.5 * metrics.theta_deg(Vn, V, F)
+    assert t_new < 0.96 * t_lit
+    np.testing.assert_array_equal(Vn, noise.apply(V, F, kind="gaussian", level=0.3, rng=0))
+
+
 def test_tsgsp_validation(noisy_cube):
     _, F, Vn = noisy_cube
     with pytest.raises(InvalidInputError, match="`pre` must be None"):
@@ -251,6 +272,14 @@ def test_tsgsp_validation(noisy_cube):
         tsgsp.fine(Vn, F, curved_gate=0.0)
     with pytest.raises(InvalidInputError, match="`area_weights` must be True or False"):
         tsgsp.fine(Vn, F, area_weights="yes")
+    with pytest.raises(InvalidInputError, match="`source` must have the shape of `V`"):
+        tsgsp.fine(Vn, F, source=Vn[:-1])
+    with pytest.raises(InvalidInputError, match=r"`input_weight` must be in \[0, 1\]"):
+        tsgsp.tsgsp(Vn, F, input_weight=1.5)
+    with pytest.raises(InvalidInputError, match=r"`input_weight` must be in \[0, 1\]"):
+        tsgsp.tsgsp(Vn, F, input_weight=True)
+    with pytest.raises(InvalidInputError, match="`source` is set by `input_weight`"):
+        tsgsp.tsgsp(Vn, F, source=Vn)
     with pytest.raises(InvalidInputError, match="`patch` must be >= 4"):
         tsgsp.estimate_noise(Vn, patch=3)
     with pytest.raises(InvalidInputError, match="at least 4 vertices"):
@@ -421,7 +450,7 @@ def test_fine_round_kernels_match_sparse_formulation(noisy_cube):
         ref = _normalize_rows(ref)
         empty = ~ref.any(axis=1)
         ref[empty] = N[empty]
-        got = tsgsp._filter_kernel(N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide, wa)
+        got = tsgsp._filter_kernel(N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide, wa, N)
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
 
 
