@@ -39,3 +39,50 @@ def test_evaluate_validation(shared_data, tmp_path):
         evaluate_denoise(shared_data, pairs=["Nope"])
     with pytest.raises(InvalidInputError, match="unknown denoising method"):
         evaluate_denoise(shared_data, methods=["nope"], pairs=["Twelve0.5Impulsive"])
+
+
+def test_summary_pairs_tsgsp_with_gnf_and_thesis_values():
+    from spectrageo.evaluate.denoise import THESIS_THETA, format_summary
+
+    def row(pair, method, theta, t):
+        return {"pair": pair, "method": method, "theta_deg": theta, "time_s": t}
+
+    rows = [
+        row("Block0.4", "noisy", 33.7, 0.0),
+        row("Block0.4", "gnf", 4.0, 1.0),
+        row("Block0.4", "tsgsp", 3.5, 0.25),
+        row("Bunny0.2", "gnf", 6.6, 2.0),
+        row("Bunny0.2", "tsgsp", 5.8, 1.0),
+        row("Fandisk0.3", "taubin", 9.9, 0.1),  # no tsgsp/gnf: not summarised
+    ]
+    lines = format_summary(rows).splitlines()
+    assert len(lines) == 4
+    assert lines[2] == (
+        f"| Block0.4 | 3.50 | 4.00 | 0.25 | {THESIS_THETA['Block0.4'][1]:.2f} | "
+        f"{THESIS_THETA['Block0.4'][0]:.2f} |"
+    )
+    assert lines[3] == "| Bunny0.2 | 5.80 | 6.60 | 0.50 | - | - |"
+    assert format_summary(rows[-1:]) == ""
+
+
+def test_warm_up_runs_each_method_on_a_reindexed_piece(monkeypatch):
+    import numpy as np
+
+    from spectrageo.datasets import fandisk
+    from spectrageo.denoise import _registry
+
+    m = fandisk()
+    calls = []
+
+    def spy(V, F, *, method):
+        calls.append((method, V.shape[0], F.shape[0], int(F.max())))
+        if method == "bad":
+            raise RuntimeError("fails")
+        return V
+
+    monkeypatch.setattr(_registry, "denoise", spy)
+    _registry.warm_up(["bad", "taubin"], m.vertices, m.faces, n_faces=300)
+    assert [c[0] for c in calls] == ["bad", "taubin"]  # a failing method does not stop the rest
+    for _, nv, nf, fmax in calls:
+        assert nf == 300 and fmax == nv - 1  # every kept vertex is used, indices re-numbered
+        assert nv == np.unique(m.faces[:300]).size

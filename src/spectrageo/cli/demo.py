@@ -25,6 +25,7 @@ def run_demo(
 ) -> list[dict]:
     from .. import denoise, io, metrics, noise
     from ..datasets import fandisk
+    from ..denoise._registry import warm_up
     from ..geometry import Mesh
 
     stream = stream or sys.stdout
@@ -44,10 +45,9 @@ def run_demo(
     )
     rows = [{"method": "noisy", **metrics.compare(noisy_V, V0, F), "time_s": 0.0}]
     best = None
-    warm_V, warm_F = _warmup_mesh(noisy_V, F)
     for name in names:
         print(f"  running {name} ...", file=sys.stderr, flush=True)
-        _warm_up(denoise, name, warm_V, warm_F)
+        warm_up([name], noisy_V, F)
         t0 = time.perf_counter()
         try:
             Vd = denoise.denoise(noisy_V, F, method=name)
@@ -96,19 +96,3 @@ def format_table(rows: list[dict]) -> str:
         vals = " | ".join(f"{r[c]:.4g}" for c in COLUMNS)
         lines.append(f"| {r['method']} | {vals} | {r['time_s']:.2f} |")
     return "\n".join(lines)
-
-
-def _warmup_mesh(V: np.ndarray, F: np.ndarray, n_faces: int = 2000):
-    """A small connected piece of the mesh (the first ``n_faces`` faces, re-indexed)."""
-    sub = F[:n_faces]
-    used, inv = np.unique(sub, return_inverse=True)
-    return V[used], inv.reshape(sub.shape)
-
-
-def _warm_up(denoise, name: str, V: np.ndarray, F: np.ndarray) -> None:
-    """Run a method once on a small mesh so that one-time compilation (numba caches) is not
-    counted in the timed run; any failure here is ignored (the timed run reports it)."""
-    try:
-        denoise.denoise(V, F, method=name)
-    except Exception:  # noqa: BLE001, S110 - warm-up only
-        pass
