@@ -33,6 +33,7 @@ SECTIONS = [
     ("lowpass", _script("lowpass")),
     ("rpca_large", _script("rpca_large")),
     ("denoise", _evaluate("denoise", "denoise")),
+    ("denoise_generality", _script("denoise_generality")),
     ("denoise_large", _script("denoise_large")),
     ("denoise_dynamic", [*_script("denoise_dynamic"), "--max-frames", "40"]),
     ("outliers", _evaluate("outliers", "outliers")),
