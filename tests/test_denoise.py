@@ -111,6 +111,24 @@ def test_estimate_noise_on_noisy_plane():
     assert np.median(np.abs(dirs[:, 2])) > 0.95  # minimum-variance direction = plane normal
 
 
+def test_patch_min_variance_matches_numpy_eigh():
+    from spectrageo.geometry._numba_kernels import patch_min_variance
+    from spectrageo.graph import knn
+
+    rng = np.random.default_rng(5)
+    P = rng.standard_normal((500, 3)) * [1.0, 0.5, 0.02]  # flat-ish, and some degenerate patches
+    P[:40] = P[0]  # a patch of identical points (all eigenvalues zero)
+    idx, _ = knn(P, 12, include_self=True)
+    lam, dirs = np.empty(500), np.empty((500, 3))
+    patch_min_variance(P, idx, lam, dirs)
+    Q = P[idx] - P[idx].mean(axis=1, keepdims=True)
+    w, U = np.linalg.eigh(np.einsum("nki,nkj->nij", Q, Q) / 12)
+    np.testing.assert_allclose(lam, w[:, 0], rtol=0, atol=1e-12 * max(1.0, w.max()))
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-12)
+    gap = (w[:, 1] - w[:, 0]) > 1e-6 * w[:, 2]  # direction defined up to sign
+    np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", dirs, U[:, :, 0]))[gap], 1.0, atol=1e-6)
+
+
 def test_coarse_result_fields(noisy_cube):
     V, F, Vn = noisy_cube
     r = tsgsp.coarse(Vn, F, full_output=True, submesh_size=500)

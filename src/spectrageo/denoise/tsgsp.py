@@ -35,6 +35,7 @@ import numpy as np
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, as_rng, check_choice, check_positive
 from ..geometry import face_centroids, face_normals
+from ..geometry._numba_kernels import patch_min_variance
 from ..geometry.features import FLAT, cluster_eigenvalues, patch_eigenvalues
 from ..geometry.primitives import _normalize_rows
 from ..graph import adjacency_matrix
@@ -130,16 +131,8 @@ def estimate_noise(V, *, patch: int = 24, F=None, return_directions: bool = Fals
         )
     idx, _ = knn(V, k, include_self=True)
     lam = np.empty(V.shape[0])
-    dirs = np.empty((V.shape[0], 3)) if return_directions else None
-    chunk = 200_000
-    for s in range(0, V.shape[0], chunk):
-        P = V[idx[s : s + chunk]]
-        P = P - P.mean(axis=1, keepdims=True)
-        R = np.einsum("nki,nkj->nij", P, P) / k
-        w, U = np.linalg.eigh(R)
-        lam[s : s + chunk] = w[:, 0]
-        if dirs is not None:
-            dirs[s : s + chunk] = U[:, :, 0]
+    dirs = np.empty((V.shape[0], 3))
+    patch_min_variance(V, idx, lam, dirs)  # compiled, no (n, k, 3) temporaries
     var = float(np.median(np.maximum(lam, 0.0))) * k / (k - 3)
     return (var, dirs) if return_directions else var
 

@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..geometry._numba_kernels import min_eigvec3
+
 #: Points per tile of the patch kernels (``3 * TILE`` rows of ``M`` in the tile buffers).
 TILE = 128
 
@@ -133,49 +135,6 @@ def first_column_scores(R, t, out, vec):  # pragma: no cover - compiled
         out[r] = np.sqrt(acc)
 
 
-@njit(cache=True, nogil=True)
-def _min_eigvec3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
-    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (cyclic Jacobi)."""
-    A = np.empty((3, 3))
-    A[0, 0], A[1, 1], A[2, 2] = a00, a11, a22
-    A[0, 1] = A[1, 0] = a01
-    A[0, 2] = A[2, 0] = a02
-    A[1, 2] = A[2, 1] = a12
-    V = np.eye(3)
-    for _ in range(30):
-        off = A[0, 1] ** 2 + A[0, 2] ** 2 + A[1, 2] ** 2
-        diag = A[0, 0] ** 2 + A[1, 1] ** 2 + A[2, 2] ** 2
-        if off == 0.0 or off <= 1e-30 * diag:
-            break
-        for p, q in ((0, 1), (0, 2), (1, 2)):
-            apq = A[p, q]
-            if apq == 0.0:
-                continue
-            theta = (A[q, q] - A[p, p]) / (2.0 * apq)
-            t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
-            if theta < 0.0:
-                t = -t
-            c = 1.0 / np.sqrt(t * t + 1.0)
-            s = t * c
-            A[p, p] -= t * apq
-            A[q, q] += t * apq
-            A[p, q] = A[q, p] = 0.0
-            r = 3 - p - q
-            arp, arq = A[r, p], A[r, q]
-            A[r, p] = A[p, r] = c * arp - s * arq
-            A[r, q] = A[q, r] = s * arp + c * arq
-            for i in range(3):
-                vip, viq = V[i, p], V[i, q]
-                V[i, p] = c * vip - s * viq
-                V[i, q] = s * vip + c * viq
-    j = 0
-    if A[1, 1] < A[j, j]:
-        j = 1
-    if A[2, 2] < A[j, j]:
-        j = 2
-    return V[0, j], V[1, j], V[2, j]
-
-
 @njit(cache=True, parallel=True)
 def tangent_weighted_norms(P, nbrs, S1, S2, w2, out1, out2):  # pragma: no cover - compiled
     """``out = sqrt(|<s, n>|^2 + w2 |s - <s, n> n|^2)`` for the residuals ``S1`` and ``S2``.
@@ -214,7 +173,7 @@ def tangent_weighted_norms(P, nbrs, S1, S2, w2, out1, out2):  # pragma: no cover
             cxy += dx * dy
             cxz += dx * dz
             cyz += dy * dz
-        nx, ny, nz = _min_eigvec3(cxx, cyy, czz, cxy, cxz, cyz)
+        _, nx, ny, nz = min_eigvec3(cxx, cyy, czz, cxy, cxz, cyz)
         out1[i] = _weighted_norm(S1[i, 0], S1[i, 1], S1[i, 2], nx, ny, nz, w2)
         out2[i] = _weighted_norm(S2[i, 0], S2[i, 1], S2[i, 2], nx, ny, nz, w2)
 
