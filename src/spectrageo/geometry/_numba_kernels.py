@@ -97,41 +97,49 @@ def min_eigvec3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
     return A[j, j], V[0, j], V[1, j], V[2, j]
 
 
+@numba.njit(cache=True, nogil=True)
+def patch_covariance(P, row):  # pragma: no cover - jitted
+    """``(cxx, cyy, czz, cxy, cxz, cyz)`` of ``(1/k) sum (p - mean)(p - mean)^T`` over the points
+    ``P[row]`` (``k = row.size``)."""
+    k = row.shape[0]
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    for q in range(k):
+        j = row[q]
+        mx += P[j, 0]
+        my += P[j, 1]
+        mz += P[j, 2]
+    mx /= k
+    my /= k
+    mz /= k
+    cxx = 0.0
+    cyy = 0.0
+    czz = 0.0
+    cxy = 0.0
+    cxz = 0.0
+    cyz = 0.0
+    for q in range(k):
+        j = row[q]
+        dx = P[j, 0] - mx
+        dy = P[j, 1] - my
+        dz = P[j, 2] - mz
+        cxx += dx * dx
+        cyy += dy * dy
+        czz += dz * dz
+        cxy += dx * dy
+        cxz += dx * dz
+        cyz += dy * dz
+    return cxx / k, cyy / k, czz / k, cxy / k, cxz / k, cyz / k
+
+
 @numba.njit(cache=True, parallel=True)
 def patch_min_variance(P, idx, lam, dirs):  # pragma: no cover - jitted
     """Smallest eigenvalue ``lam[i]`` and its unit eigenvector ``dirs[i]`` of the covariance
     ``(1/k) sum (p - mean)(p - mean)^T`` of the points ``P[idx[i]]`` (``k`` = row length)."""
-    n, k = idx.shape
-    for i in numba.prange(n):
-        mx = 0.0
-        my = 0.0
-        mz = 0.0
-        for q in range(k):
-            j = idx[i, q]
-            mx += P[j, 0]
-            my += P[j, 1]
-            mz += P[j, 2]
-        mx /= k
-        my /= k
-        mz /= k
-        cxx = 0.0
-        cyy = 0.0
-        czz = 0.0
-        cxy = 0.0
-        cxz = 0.0
-        cyz = 0.0
-        for q in range(k):
-            j = idx[i, q]
-            dx = P[j, 0] - mx
-            dy = P[j, 1] - my
-            dz = P[j, 2] - mz
-            cxx += dx * dx
-            cyy += dy * dy
-            czz += dz * dz
-            cxy += dx * dy
-            cxz += dx * dz
-            cyz += dy * dz
-        w, x, y, z = min_eigvec3(cxx / k, cyy / k, czz / k, cxy / k, cxz / k, cyz / k)
+    for i in numba.prange(idx.shape[0]):
+        cxx, cyy, czz, cxy, cxz, cyz = patch_covariance(P, idx[i])
+        w, x, y, z = min_eigvec3(cxx, cyy, czz, cxy, cxz, cyz)
         lam[i] = w
         dirs[i, 0] = x
         dirs[i, 1] = y

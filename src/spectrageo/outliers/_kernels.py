@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ..geometry._numba_kernels import min_eigvec3
+from ..geometry._numba_kernels import min_eigvec3, patch_covariance
 
 #: Points per tile of the patch kernels (``3 * TILE`` rows of ``M`` in the tile buffers).
 TILE = 128
@@ -143,36 +143,8 @@ def tangent_weighted_norms(P, nbrs, S1, S2, w2, out1, out2):  # pragma: no cover
     smallest eigenvalue of their covariance about their mean; the point itself is left out, so an
     outlying point does not tilt its own normal).
     """
-    n, k = nbrs.shape
-    for i in prange(n):
-        mx = 0.0
-        my = 0.0
-        mz = 0.0
-        for q in range(k):
-            j = nbrs[i, q]
-            mx += P[j, 0]
-            my += P[j, 1]
-            mz += P[j, 2]
-        mx /= k
-        my /= k
-        mz /= k
-        cxx = 0.0
-        cyy = 0.0
-        czz = 0.0
-        cxy = 0.0
-        cxz = 0.0
-        cyz = 0.0
-        for q in range(k):
-            j = nbrs[i, q]
-            dx = P[j, 0] - mx
-            dy = P[j, 1] - my
-            dz = P[j, 2] - mz
-            cxx += dx * dx
-            cyy += dy * dy
-            czz += dz * dz
-            cxy += dx * dy
-            cxz += dx * dz
-            cyz += dy * dz
+    for i in prange(nbrs.shape[0]):
+        cxx, cyy, czz, cxy, cxz, cyz = patch_covariance(P, nbrs[i])
         _, nx, ny, nz = min_eigvec3(cxx, cyy, czz, cxy, cxz, cyz)
         out1[i] = _weighted_norm(S1[i, 0], S1[i, 1], S1[i, 2], nx, ny, nz, w2)
         out2[i] = _weighted_norm(S2[i, 0], S2[i, 1], S2[i, 2], nx, ny, nz, w2)
