@@ -248,13 +248,10 @@ def coarse(
     C = adjacency_matrix(F, n)
     subs = overlapped_submeshes(C, submesh_size=submesh_size, overlap=overlap, rng=gen)
     n_sub = len(subs.parts)
-    sizes = np.zeros((n_sub, 3), dtype=np.int64)
-    noise = np.zeros((n_sub, 3))
-    values: list[np.ndarray] = [None] * n_sub  # type: ignore[list-item]
-    stats: list = [0, True]
     if not sig2 > 0:
         out = V.copy()
-        res = CoarseResult(out, 0.0, sizes, noise, n_sub, 0, True, 0.0)
+        zeros = np.zeros((n_sub, 3))
+        res = CoarseResult(out, 0.0, zeros.astype(np.int64), zeros, n_sub, 0, True, 0.0)
         return res if full_output else out
     Cb = C.copy()
     Cb.data[:] = 1.0
@@ -268,26 +265,9 @@ def coarse(
     # the per-submesh algebra is on small dense matrices: one BLAS thread is fastest and avoids
     # oversubscription on busy machines
     with single_thread_blas():
-        _coarse_loop(
-            V,
-            C,
-            subs,
-            frac0,
-            sig2,
-            dirs,
-            max_keep,
-            method,
-            zeta,
-            oi_iter,
-            n_em,
-            tol,
-            gen,
-            values,
-            sizes,
-            noise,
-            stats,
+        values, sizes, noise, visits, all_conv = _coarse_loop(
+            V, C, subs, frac0, sig2, dirs, max_keep, method, zeta, oi_iter, n_em, tol, gen
         )
-    visits, all_conv = stats
     out = reassemble(values, subs)
     if not full_output:
         return out
@@ -295,25 +275,12 @@ def coarse(
     return CoarseResult(out, sig2, sizes, noise, n_sub, visits, all_conv, resid)
 
 
-def _coarse_loop(
-    V,
-    C,
-    subs,
-    frac0,
-    sig2,
-    dirs,
-    max_keep,
-    method,
-    zeta,
-    oi_iter,
-    n_em,
-    tol,
-    gen,
-    values,
-    sizes,
-    noise,
-    stats,
-):
+def _coarse_loop(V, C, subs, frac0, sig2, dirs, max_keep, method, zeta, oi_iter, n_em, tol, gen):
+    """Algorithm 1 on every submesh basis; returns ``(values, sizes, noise, visits, all_conv)``."""
+    n_sub = len(subs.parts)
+    sizes = np.zeros((n_sub, 3), dtype=np.int64)
+    noise = np.zeros((n_sub, 3))
+    values: list[np.ndarray] = [None] * n_sub  # type: ignore[list-item]
     visits = 0
     all_conv = True
     for i, _w, U in submesh_eigenbases(
@@ -351,7 +318,7 @@ def _coarse_loop(
             all_conv &= bool(conv)
             Y[:, j] = U[:, :nl] @ H
         values[i] = Y
-    stats[:] = [visits, all_conv]
+    return values, sizes, noise, visits, all_conv
 
 
 # =========================================================================== fine step

@@ -131,6 +131,7 @@ def evaluate_denoise(
     if methods is None:
         methods = denoise.available() + ([p for p in PEERS if _peer_available(p)] if peers else [])
     methods = list(methods)
+    own = []  # registered denoisers among the methods (warmed up before timing)
     for m in methods:
         base = m[: -len("+coarse")] if m.endswith("+coarse") else m
         if base in PEERS:
@@ -140,18 +141,8 @@ def evaluate_denoise(
                 )
         else:
             denoise.get(base)
+            own.append(base)
     rows: list[dict] = []
-    # one-time compilation (numba caches) is kept out of the first pair's timings
-    first = io.read_mesh(found[0][1])
-    warm_up(
-        [
-            m[: -len("+coarse")] if m.endswith("+coarse") else m
-            for m in methods
-            if m.split("+")[0] not in PEERS
-        ],
-        first.vertices,
-        first.faces,
-    )
     for name, noisy_path, orig_path in progress(found, desc="denoise pairs", total=len(found)):
         noisy = io.read_mesh(noisy_path)
         orig = io.read_mesh(orig_path)
@@ -159,6 +150,9 @@ def evaluate_denoise(
         if V.shape != V0.shape:
             raise InvalidInputError(f"pair {name}: noisy and original vertex counts differ.")
         rows.append(_row(name, "noisy", V, V0, F, 0.0, hausdorff_distance))
+        if own:  # one-time compilation (numba caches) kept out of the first pair's timings
+            warm_up(own, V, F)
+            own = []
         for m in methods:
             pre = m.endswith("+coarse")
             base = m[: -len("+coarse")] if pre else m
@@ -231,11 +225,9 @@ def format_summary(rows: list[dict]) -> str:
         "| pair | tsgsp theta | gnf theta | tsgsp time / gnf time | thesis tsgsp | thesis gnf |",
         "|---|---|---|---|---|---|",
     ]
-    n = 0
     for pair, m in by.items():
         if "tsgsp" not in m or "gnf" not in m:
             continue
-        n += 1
         t, g = m["tsgsp"], m["gnf"]
         ratio = f"{t['time_s'] / g['time_s']:.2f}" if g["time_s"] > 0 else "-"
         th_g, th_t = THESIS_THETA.get(pair, (None, None))
@@ -243,7 +235,7 @@ def format_summary(rows: list[dict]) -> str:
             f"| {pair} | {t['theta_deg']:.2f} | {g['theta_deg']:.2f} | {ratio} | "
             f"{'-' if th_t is None else f'{th_t:.2f}'} | {'-' if th_g is None else f'{th_g:.2f}'} |"
         )
-    return "\n".join(lines) if n else ""
+    return "\n".join(lines) if len(lines) > 2 else ""
 
 
 def format_csv(rows: list[dict]) -> str:
