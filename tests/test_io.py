@@ -273,10 +273,12 @@ def test_obj_integer_colours_and_points_only(tmp_path):
     assert isinstance(pc, PointCloud) and pc.n_points == 2
 
 
-def test_obj_normals_only_when_per_vertex(tmp_path):
+def test_obj_one_normal_per_vertex_becomes_vertex_normals(tmp_path):
+    # every vertex uses one normal (here the same one): per-vertex normals, not corner normals
     (tmp_path / "a.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n")
     m = io.read_mesh(tmp_path / "a.obj")
-    assert m.vertex_normals is None and m.n_vertices == 3
+    assert m.n_vertices == 3 and "corner_normals" not in m.face_attributes
+    np.testing.assert_array_equal(m.vertex_normals, [[0, 0, 1]] * 3)
 
 
 # ------------------------------------------------------------------------------------------ OFF
@@ -322,13 +324,13 @@ def test_stl_roundtrip_unwelded_and_welded(tmp_path, binary):
     V, F = icosphere(2)
     path = tmp_path / "m.stl"
     io.write(path, Mesh(V, F), binary=binary)
-    raw = io.read_mesh(path)
-    # default: each triangle keeps its own 3 corners, in file order
+    raw = io.read_mesh(path, weld=False)
+    # weld=False: each triangle keeps its own 3 corners, in file order
     assert raw.n_vertices == 3 * len(F) and raw.n_faces == len(F)
     np.testing.assert_array_equal(raw.faces, np.arange(3 * len(F)).reshape(-1, 3))
     tol = 1e-6 if binary else 0.0
     np.testing.assert_allclose(raw.vertices.reshape(-1, 3, 3), V[F], atol=tol)
-    welded = io.read_mesh(path, weld=True)
+    welded = io.read_mesh(path)  # default: STL is welded
     assert welded.n_vertices == len(V) and welded.n_faces == len(F)
     np.testing.assert_allclose(welded.vertices[welded.faces], V[F], atol=tol)
     # weld keeps first occurrences in corner order, as merge_duplicate_vertices does
@@ -371,8 +373,8 @@ def test_pcd_roundtrip(tmp_path, rich_cloud, pcd_format, suffix):
     assert f"DATA {pcd_format}\n".encode() in raw[:600]
     pc = io.read(path)
     assert pc.n_points == rich_cloud.n_points
-    # float32 coordinates by default (PCL's type)
-    np.testing.assert_array_equal(pc.points, rich_cloud.points.astype(np.float32))
+    # float64 coordinates kept by default (they do not round-trip through float32, PCL's type)
+    np.testing.assert_array_equal(pc.points, rich_cloud.points)
     np.testing.assert_array_equal(pc.normals, rich_cloud.normals.astype(np.float32))
     np.testing.assert_array_equal(pc.colors, rich_cloud.colors)
     np.testing.assert_array_equal(pc.attributes["intensity"], rich_cloud.attributes["intensity"])

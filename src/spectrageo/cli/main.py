@@ -8,13 +8,29 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import traceback
 
 from .._errors import SpectrageoError
 
 
+class _Formatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Keeps the line breaks of descriptions and examples and shows every option's default."""
+
+    def _get_help_string(self, action):  # no "(default: None)" / "(default: False)" noise
+        if action.default in (None, False) or action.default is argparse.SUPPRESS:
+            return action.help
+        if action.help and "default" in action.help:
+            return action.help
+        return super()._get_help_string(action)
+
+
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", _Formatter)
+        super().__init__(*args, **kwargs)
+
     def error(self, message: str):  # one line, exit 2, like every other user mistake
         self.exit(2, f"{self.prog}: error: {message}\n")
 
@@ -23,12 +39,49 @@ def build_parser() -> argparse.ArgumentParser:
     from . import commands
 
     p = _Parser(
-        prog="spectrageo", description="Spectral processing of static and dynamic 3D geometry."
+        prog="spectrageo",
+        description="Spectral processing of static and dynamic 3D geometry.",
+        epilog="Run 'spectrageo COMMAND --help' for a command's options and an example.",
     )
     p.add_argument("--version", action="version", version=_version())
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     commands.register_all(sub)
+    for name, sp in sub.choices.items():
+        doc = commands.HELP_TEXTS.get(name)
+        if doc is not None:
+            desc, example = doc
+            sp.description = desc
+            sp.epilog = "example:\n  " + "\n  ".join(example.strip().splitlines())
+        if not any("--quiet" in a.option_strings for a in sp._actions):
+            sp.add_argument(
+                "-q",
+                "--quiet",
+                action="store_true",
+                help="no progress display and no status lines on stderr (errors still print)",
+            )
     return p
+
+
+def _option_names(parser: argparse.ArgumentParser, command: str) -> dict[str, str]:
+    """``dest -> --option`` of a sub-command, to word library messages in CLI terms."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction) and command in action.choices:
+            sp = action.choices[command]
+            return {a.dest: max(a.option_strings, key=len) for a in sp._actions if a.option_strings}
+    return {}
+
+
+_BACKTICKED = re.compile(r"`([A-Za-z_][A-Za-z0-9_]*)`")
+
+
+def cli_message(message: str, options: dict[str, str]) -> str:
+    """Replace a Python argument name in backticks with the command's option (`patch` -> --patch).
+
+    Names the command has no option for are left as they are.
+    """
+    return _BACKTICKED.sub(
+        lambda m: options[m.group(1)] if m.group(1) in options else m.group(0), message
+    )
 
 
 def _version() -> str:
@@ -43,11 +96,25 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "command", None):
         parser.print_help(sys.stderr)
         return 2
+    from .. import _progress
+    from . import commands
+
+    quiet = bool(getattr(args, "quiet", False))
+    _progress.QUIET = quiet
+    commands.QUIET = quiet
     try:
         return int(args.func(args) or 0)
     except SpectrageoError as exc:
-        print(f"spectrageo {args.command}: error: {exc}", file=sys.stderr)
+        msg = cli_message(str(exc), _option_names(parser, args.command))
+        print(f"spectrageo {args.command}: error: {msg}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `spectrageo info --json | head`: the reader went away, not an error
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except OSError:
+            pass
+        return 0
     except FileNotFoundError as exc:
         print(
             f"spectrageo {args.command}: error: file not found: {exc.filename or exc}",

@@ -70,7 +70,14 @@ def get(name: str) -> DenoiserInfo:
 
 
 def denoise(
-    V, F, *, method: str = "tsgsp", preset: str | None = None, pre: str | None = None, **options
+    V,
+    F,
+    *,
+    method: str = "tsgsp",
+    preset: str | None = None,
+    pre: str | None = None,
+    weld: bool = True,
+    **options,
 ) -> np.ndarray:
     """Denoise the vertex positions of mesh ``(V, F)`` with the registered ``method``.
 
@@ -86,6 +93,12 @@ def denoise(
     pre : None or "coarse"
         ``"coarse"`` first runs the TSGSP coarse step (:func:`spectrageo.denoise.tsgsp.coarse`,
         Fig. 5.7) and hands its result to ``method``. TSGSP always includes that step.
+    weld : bool
+        Denoise the welded surface: vertices that coincide within
+        :data:`spectrageo.geometry.WELD_TOL` of the bounding-box diagonal (UV/normal seam copies,
+        unwelded STL corners) are merged first, and every copy receives its merged vertex's result,
+        so seams stay closed. Input order and count are kept. False: process ``(V, F)`` as given
+        (each seam copy is then a boundary vertex and the seam can open).
     **options
         Keyword options of the method.
 
@@ -94,6 +107,15 @@ def denoise(
     (n, 3) float64 denoised positions, same vertex order.
     """
     info = get(method)
+    if weld:
+        from ..geometry.repair import weld as weld_mesh
+
+        w = weld_mesh(V, F)
+        if w.n_merged:
+            out = denoise(
+                w.vertices, w.faces, method=method, preset=preset, pre=pre, weld=False, **options
+            )
+            return w.expand(out)
     if pre is not None and pre != "coarse":
         raise InvalidInputError(f"`pre` must be None or 'coarse'; got {pre!r}.")
     if preset is not None:

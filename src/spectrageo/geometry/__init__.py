@@ -18,14 +18,20 @@ from .primitives import (
     vertex_normals,
 )
 from .repair import (
+    WELD_TOL,
     RepairReport,
+    Weld,
     clean_mesh,
     degenerate_faces,
     duplicate_faces,
+    has_coincident_vertices,
+    is_soup,
     merge_duplicate_vertices,
     remove_unreferenced,
     unreferenced_vertices,
+    weld,
 )
+from .topology import mesh_topology
 from .update import update_vertices
 
 __all__ = [
@@ -34,6 +40,8 @@ __all__ = [
     "PointCloud",
     "PointCloudSequence",
     "RepairReport",
+    "WELD_TOL",
+    "Weld",
     "boundary_edges",
     "boundary_loops",
     "clean_mesh",
@@ -47,6 +55,9 @@ __all__ = [
     "face_normals",
     "mean_curvature",
     "mean_edge_length",
+    "mesh_topology",
+    "has_coincident_vertices",
+    "is_soup",
     "merge_duplicate_vertices",
     "pca_normals",
     "remove_unreferenced",
@@ -55,4 +66,5 @@ __all__ = [
     "vertex_areas",
     "vertex_face_matrix",
     "vertex_normals",
+    "weld",
 ]

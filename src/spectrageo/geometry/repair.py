@@ -141,3 +141,115 @@ def clean_mesh(
     if not report.changed:
         return mesh, report
     return Mesh(V, F), report
+
+
+#: Default weld tolerance, relative to the bounding-box diagonal. Coordinates written in float32
+#: (STL) or recomputed per triangle by CAD exporters differ by about 1e-7 of the part's size where
+#: they mean the same point; the shortest edges of the shared CAD tessellations are >= 1e-5 of it.
+WELD_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Weld:
+    """Result of :func:`weld`: the welded surface and the map back to the input vertices.
+
+    Attributes
+    ----------
+    vertices : (k, 3) float64
+        One vertex per group of coincident input vertices (the group's first vertex, in input order).
+    faces : (m', 3) int64
+        Input faces re-indexed; faces whose corners collapsed onto each other are dropped.
+    index_map : (n,) int64
+        ``index_map[i]`` is the welded vertex of input vertex ``i``.
+    face_kept : (m,) bool
+        Input faces that survive in ``faces`` (in order).
+    tol : float
+        Absolute distance used (relative tolerance times the bounding-box diagonal).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    index_map: np.ndarray
+    face_kept: np.ndarray
+    tol: float
+
+    @property
+    def n_merged(self) -> int:
+        """Number of input vertices merged into an earlier one."""
+        return int(self.index_map.size - self.vertices.shape[0])
+
+    @property
+    def n_dropped_faces(self) -> int:
+        """Number of input faces that collapsed (two corners welded together)."""
+        return int(self.face_kept.size - np.count_nonzero(self.face_kept))
+
+    def expand(self, V_welded) -> np.ndarray:
+        """Positions ``(k, 3)`` of the welded vertices back in the input's order and count ``(n, 3)``.
+
+        Every copy of a welded vertex (a seam, an STL corner) receives the same position.
+        """
+        V_welded = np.asarray(V_welded)
+        if V_welded.shape[0] != self.vertices.shape[0]:
+            from .._errors import InvalidInputError
+
+            raise InvalidInputError(
+                f"`V_welded` must have {self.vertices.shape[0]} rows (the welded vertices); "
+                f"got {V_welded.shape[0]}."
+            )
+        return V_welded[self.index_map]
+
+
+def weld(V, F, *, tol: float = WELD_TOL) -> Weld:
+    """Merge vertices that coincide within ``tol`` times the bounding-box diagonal.
+
+    Used for triangle soups (STL: three corners per face), meshes with duplicated seam vertices
+    (UV or normal seams of OBJ/glTF exports) and CAD exports whose shared corners differ in the last
+    bits. Groups are the connected components of the "closer than ``tol * diag``" relation; each
+    group is represented by its first vertex (input order kept among representatives). Faces with two
+    corners in one group are dropped (``face_kept``). ``tol=0`` merges exact duplicates only.
+
+    Parameters
+    ----------
+    V : (n, 3) float
+    F : (m, 3) int
+    tol : float
+        Relative tolerance (>= 0), default :data:`WELD_TOL` = 1e-6.
+
+    Returns
+    -------
+    Weld
+    """
+    from .._errors import InvalidInputError
+
+    V = as_points(V, "V")
+    F = as_faces(F, V.shape[0], "F", allow_empty=True)
+    if not np.isfinite(tol) or tol < 0:
+        raise InvalidInputError(f"`tol` must be a finite number >= 0; got {tol!r}.")
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) if V.shape[0] else 0.0
+    abs_tol = tol * diag
+    Vw, Fw, index_map = merge_duplicate_vertices(V, F, tol=abs_tol)
+    kept = ~((Fw[:, 0] == Fw[:, 1]) | (Fw[:, 1] == Fw[:, 2]) | (Fw[:, 0] == Fw[:, 2]))
+    return Weld(Vw, Fw[kept], index_map, kept, abs_tol)
+
+
+def has_coincident_vertices(V, *, tol: float = WELD_TOL) -> bool:
+    """True when two vertices of ``V`` lie within ``tol`` times the bounding-box diagonal."""
+    from scipy.spatial import cKDTree
+
+    V = as_points(V, "V")
+    if V.shape[0] < 2:
+        return False
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    if tol == 0 or diag == 0:
+        return np.unique(V, axis=0).shape[0] < V.shape[0]
+    d, _ = cKDTree(V).query(V, k=2)
+    return bool((d[:, 1] <= tol * diag).any())
+
+
+def is_soup(F, n_vertices: int) -> bool:
+    """True when no vertex is shared by two faces (and there are at least two faces)."""
+    F = np.asarray(F, dtype=np.int64)
+    if F.shape[0] < 2:
+        return False
+    counts = np.bincount(F.ravel(), minlength=n_vertices)
+    return bool(counts.max() <= 1)

@@ -9,8 +9,8 @@ extension   read                                       write
             normals, colours, extra properties
 ``.obj``    mesh or points (meshio), polygons fanned   Mesh, PointCloud (meshio)
 ``.off``    mesh or points, COFF/NOFF, polygons fanned Mesh, PointCloud (meshio)
-``.stl``    mesh (trimesh), corners unmerged unless    Mesh (binary or ascii, trimesh)
-            ``weld=True``
+``.stl``    mesh (trimesh), corners welded unless      Mesh (binary or ascii, trimesh)
+            ``weld=False``
 ``.pcd``    points, ascii/binary/binary_compressed     PointCloud (``pcd_format=``)
 ``.xyz``    points, 3 or 6 columns (normals)           PointCloud
 ``.npy``    points, (n, 3) array                       PointCloud
@@ -26,8 +26,11 @@ folder/     numbered frames (``frame_000.obj`` ...,    MeshAnimation, PointCloud
 
 Policies
     * Order and counts are preserved exactly: no reader merges, drops or reorders vertices or faces
-      (ground-truth pairs and animations rely on it). Degenerate faces, duplicate and unreferenced
-      vertices are kept; repairs are explicit with :func:`spectrageo.geometry.clean_mesh`.
+      (ground-truth pairs and animations rely on it), with one exception: triangle soups (STL, and
+      any mesh whose faces share no vertex) are welded by default, merging vertices within 1e-6 of
+      the bounding-box diagonal (``weld=False`` keeps the raw soup; :func:`read_with_report` says how
+      many were merged). Degenerate faces, duplicate (seam) and unreferenced vertices are otherwise
+      kept; repairs are explicit with :func:`spectrageo.geometry.clean_mesh`.
     * Quads and polygons are triangulated as fans ``(v0, vi, vi+1)``, each polygon's triangles in
       place, so face order follows the file; PLY face properties are repeated on a polygon's triangles.
     * Bad input raises :class:`~spectrageo.InvalidInputError` naming the file (missing file, malformed
@@ -36,28 +39,33 @@ Policies
       Library exceptions are caught and re-raised as these errors.
     * NaN points: an error, except in PCD files whose organized clouds use NaN for "no measurement";
       those points are dropped by default (``nan_points=``), their original indices kept in the
-      ``source_index`` attribute.
+      ``source_index`` attribute (and in :class:`ReadReport`), so per-point outputs can be mapped
+      back to every input row.
     * Every write is atomic (:func:`atomic_write`): a failure leaves no partial file and no temporary.
 """
 
 from ._api import (
+    ReadReport,
     read,
     read_animation,
     read_mesh,
     read_point_cloud,
     read_sequence,
+    read_with_report,
     supported_formats,
     write,
 )
 from ._common import atomic_write
 
 __all__ = [
+    "ReadReport",
     "atomic_write",
     "read",
     "read_animation",
     "read_mesh",
     "read_point_cloud",
     "read_sequence",
+    "read_with_report",
     "supported_formats",
     "write",
 ]

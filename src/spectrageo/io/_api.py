@@ -10,6 +10,7 @@ import re
 import zipfile
 import zlib
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,8 @@ import numpy as np
 
 from .._errors import InvalidInputError, UnsupportedFormatError
 from ..geometry.data import Mesh, MeshAnimation, PointCloud, PointCloudSequence
+from ..geometry.repair import WELD_TOL, Weld, is_soup
+from ..geometry.repair import weld as weld_mesh
 from ._common import (
     atomic_dir,
     atomic_write,
@@ -47,6 +50,9 @@ _READER_SPECS: dict[str, tuple[str, str, dict[str, Any]]] = {
     ".npy": ("_simple", "read_npy", {}),
     ".las": ("_las", "read_las", {"compressed": False}),
     ".laz": ("_las", "read_las", {"compressed": True}),
+    ".glb": ("_trimesh_formats", "read_glb", {}),
+    ".gltf": ("_trimesh_formats", "read_gltf", {}),
+    ".3mf": ("_trimesh_formats", "read_3mf", {}),
 }
 
 
@@ -111,11 +117,40 @@ def _format_suffix(p: Path, format: str | None) -> tuple[str, bool]:
     return suffix, gz
 
 
+@dataclass(frozen=True)
+class ReadReport:
+    """What :func:`read_with_report` did to the file's data on the way in.
+
+    Attributes
+    ----------
+    n_input_vertices : int
+        Vertex/point rows in the file (frame 0 for animations and sequences).
+    n_merged_vertices : int
+        Vertices merged into an earlier one by welding (0 when not welded).
+    n_dropped_faces : int
+        Faces dropped because welding collapsed two of their corners.
+    welded : bool
+        Whether the mesh was welded.
+    n_nonfinite_rows : int
+        Rows with NaN/inf coordinates that were dropped (point clouds; see ``nan_points``).
+    source_index : (k,) int64 or None
+        Input row of every point kept, when rows were dropped; None otherwise.
+    """
+
+    n_input_vertices: int = 0
+    n_merged_vertices: int = 0
+    n_dropped_faces: int = 0
+    welded: bool = False
+    n_nonfinite_rows: int = 0
+    source_index: np.ndarray | None = None
+
+
 def read(
     path: str | os.PathLike,
     *,
     kind: str | None = None,
-    weld: bool = False,
+    weld: bool | None = None,
+    weld_tol: float | None = None,
     format: str | None = None,
     nan_points: str | None = None,
 ) -> Geometry:
@@ -124,7 +159,8 @@ def read(
     Parameters
     ----------
     path : str or path-like
-        A file (``.ply .obj .off .stl .pcd .xyz .npy .las .laz``, each optionally ``.gz``), a ``.npz``
+        A file (``.ply .obj .off .stl .pcd .xyz .npy .las .laz .glb .gltf .3mf``, each optionally
+        ``.gz``), a ``.npz``
         animation/sequence, or a folder of numbered frame files.
     kind : {"mesh", "points", "animation", "sequence"} or None
         Force the interpretation. None: a file with faces gives a :class:`Mesh`, without faces a
@@ -132,10 +168,16 @@ def read(
         :class:`PointCloudSequence`; a folder gives an animation when every frame has faces, else a
         sequence. ``"points"`` reads a mesh file's vertices (with normals, colours, attributes) as a
         point cloud; ``"sequence"`` reads an animation's frames as point clouds.
-    weld : bool
-        Merge exactly coincident vertices of a mesh (first occurrence kept, in order; per-vertex data
-        of the first occurrence kept). Off by default, so STL triangles keep their own 3 corners and
-        every other format keeps its vertex order and count exactly.
+    weld : bool or None
+        Merge coincident vertices of a mesh (within ``weld_tol`` times the bounding-box diagonal; the
+        first vertex of each group is kept, in input order, with its per-vertex data; faces whose
+        corners collapse are dropped). None (default): weld triangle soups only, i.e. STL files and
+        any mesh whose faces share no vertex; every other mesh keeps its vertex order and count
+        exactly (seam copies included: the processing functions weld internally and write results
+        back in the input's order, see :func:`spectrageo.geometry.weld`). False: never weld (the
+        raw soup); True: always weld.
+    weld_tol : float, optional
+        Relative weld tolerance; default :data:`spectrageo.geometry.WELD_TOL` (1e-6).
     format : str, optional
         Format to use instead of the one the extension implies (``"xyz"``, ``"ply.gz"``...).
     nan_points : {"raise", "drop"} or None
@@ -157,10 +199,26 @@ def read(
 
     Notes
     -----
-    Readers never repair: degenerate faces, duplicate and unreferenced vertices are kept as in the
-    file (order and count preserved). Repairs are explicit, see
-    :func:`spectrageo.geometry.clean_mesh`. Polygons are fan-triangulated in file order.
+    Apart from welding soups (above), readers never repair: degenerate faces, duplicate and
+    unreferenced vertices are kept as in the file (order and count preserved). Repairs are explicit,
+    see :func:`spectrageo.geometry.clean_mesh`. Polygons are fan-triangulated in file order.
+    :func:`read_with_report` also says how many vertices were merged and rows dropped.
     """
+    return read_with_report(
+        path, kind=kind, weld=weld, weld_tol=weld_tol, format=format, nan_points=nan_points
+    )[0]
+
+
+def read_with_report(
+    path: str | os.PathLike,
+    *,
+    kind: str | None = None,
+    weld: bool | None = None,
+    weld_tol: float | None = None,
+    format: str | None = None,
+    nan_points: str | None = None,
+) -> tuple[Geometry, ReadReport]:
+    """:func:`read`, also returning a :class:`ReadReport` (vertices merged, rows dropped)."""
     _check_kind(kind)
     if nan_points is not None and nan_points not in NAN_POLICIES:
         raise InvalidInputError(
@@ -169,11 +227,15 @@ def read(
     p = Path(path)
     if not p.exists():
         raise InvalidInputError(f"file not found: {p}")
+    if weld_tol is not None and (not np.isfinite(weld_tol) or weld_tol < 0):
+        raise InvalidInputError(f"`weld_tol` must be a finite number >= 0; got {weld_tol!r}.")
     if p.is_dir():
-        return _read_folder(p, kind=kind, weld=weld, nan_points=nan_points, format=format)
+        geom = _read_folder(p, kind=kind, weld=weld, nan_points=nan_points, format=format)
+        return geom, ReadReport(n_input_vertices=_n_rows(geom))
     suffix, gz = _format_suffix(p, format)
     if suffix == ".npz":
-        return _read_npz(p, gz, kind=kind)
+        geom = _read_npz(p, gz, kind=kind)
+        return geom, ReadReport(n_input_vertices=_n_rows(geom))
     if suffix not in _READER_SPECS:
         raise _unsupported(p, suffix, [*_READER_SPECS, ".npz"])
     if kind in ("animation", "sequence"):
@@ -182,7 +244,19 @@ def read(
             "use a .npz file or a folder of numbered frames."
         )
     raw = _read_raw(p, suffix, gz)
-    return _build(raw, p.name, kind=kind, weld=weld, nan_points=nan_points)
+    if weld is None:
+        weld = suffix == ".stl" or (raw.has_faces and is_soup(raw.faces, raw.vertices.shape[0]))
+    return _build_with_report(
+        raw, p.name, kind=kind, weld=weld, weld_tol=weld_tol, nan_points=nan_points
+    )
+
+
+def _n_rows(geom: Geometry) -> int:
+    if isinstance(geom, Mesh | MeshAnimation):
+        return geom.n_vertices
+    if isinstance(geom, PointCloud):
+        return geom.n_points
+    return int(geom.n_points[0])
 
 
 def _read_raw(p: Path, suffix: str, gz: bool) -> RawGeometry:
@@ -196,29 +270,44 @@ def _nonfinite_rows(a: np.ndarray) -> np.ndarray:
     return np.flatnonzero(~np.isfinite(a).all(axis=1))
 
 
-def _weld(rg: RawGeometry) -> RawGeometry:
-    from ..geometry.repair import merge_duplicate_vertices
-
-    V, F, index_map = merge_duplicate_vertices(rg.vertices, rg.faces)
-    first = np.empty(V.shape[0], dtype=np.int64)
-    first[index_map[::-1]] = np.arange(index_map.size - 1, -1, -1)
+def _weld(rg: RawGeometry, tol: float | None) -> tuple[RawGeometry, Weld]:
+    w = weld_mesh(rg.vertices, rg.faces, tol=WELD_TOL if tol is None else tol)
+    first = np.empty(w.vertices.shape[0], dtype=np.int64)
+    first[w.index_map[::-1]] = np.arange(w.index_map.size - 1, -1, -1)
 
     def pick(a):
         return None if a is None else np.asarray(a)[first]
 
     return RawGeometry(
-        V,
-        F,
+        w.vertices,
+        w.faces,
         pick(rg.normals),
         pick(rg.colors),
         {k: np.asarray(v)[first] for k, v in rg.vertex_attributes.items()},
-        dict(rg.face_attributes),
-    )
+        {k: np.asarray(v)[w.face_kept] for k, v in rg.face_attributes.items()},
+    ), w
 
 
 def _build(
-    rg: RawGeometry, name: str, *, kind: str | None, weld: bool, nan_points: str | None
+    rg: RawGeometry, name: str, *, kind: str | None, weld: bool | None, nan_points: str | None
 ) -> Mesh | PointCloud:
+    if weld is None:
+        weld = rg.has_faces and is_soup(rg.faces, rg.vertices.shape[0])
+    geom, _report = _build_with_report(
+        rg, name, kind=kind, weld=weld, weld_tol=None, nan_points=nan_points
+    )
+    return geom
+
+
+def _build_with_report(
+    rg: RawGeometry,
+    name: str,
+    *,
+    kind: str | None,
+    weld: bool,
+    weld_tol: float | None,
+    nan_points: str | None,
+) -> tuple[Mesh | PointCloud, ReadReport]:
     n = rg.vertices.shape[0]
     if n == 0:
         raise InvalidInputError(f"{name}: the file contains no vertices/points.")
@@ -234,8 +323,25 @@ def _build(
                 f"{name}: {bad.size} vertices have NaN or inf coordinates (first at index "
                 f"{int(bad[0])}); mesh vertices cannot be dropped without renumbering faces."
             )
+        report = ReadReport(n_input_vertices=n)
         if weld:
-            rg = _weld(rg)
+            if rg.faces is None or not len(rg.faces):
+                raise InvalidInputError(f"{name}: has no faces to weld.")
+            try:
+                rg, w = _weld(rg, weld_tol)
+            except InvalidInputError as exc:
+                raise InvalidInputError(f"{name}: {exc}") from exc
+            if not len(rg.faces):
+                raise InvalidInputError(
+                    f"{name}: every face collapsed when welding coincident vertices (all "
+                    f"{w.face_kept.size} faces are degenerate); read it with weld=False."
+                )
+            report = ReadReport(
+                n_input_vertices=n,
+                n_merged_vertices=w.n_merged,
+                n_dropped_faces=w.n_dropped_faces,
+                welded=True,
+            )
         try:
             return Mesh(
                 rg.vertices,
@@ -244,7 +350,7 @@ def _build(
                 vertex_colors=rg.colors,
                 vertex_attributes=rg.vertex_attributes,
                 face_attributes=rg.face_attributes,
-            )
+            ), report
         except InvalidInputError as exc:
             raise InvalidInputError(f"{name}: {exc}") from exc
     policy = nan_points or rg.nan_policy_default
@@ -268,8 +374,13 @@ def _build(
     if normals is not None and not np.isfinite(normals).all():
         cnt = _nonfinite_rows(normals).size
         raise InvalidInputError(f"{name}: {cnt} point normals are NaN or inf.")
+    report = ReadReport(
+        n_input_vertices=n,
+        n_nonfinite_rows=int(bad.size),
+        source_index=np.flatnonzero(np.isfinite(rg.vertices).all(axis=1)) if bad.size else None,
+    )
     try:
-        return PointCloud(P, normals, colors, attrs)
+        return PointCloud(P, normals, colors, attrs), report
     except InvalidInputError as exc:
         raise InvalidInputError(f"{name}: {exc}") from exc
 
@@ -382,8 +493,21 @@ def _frame_files(folder: Path, format: str | None) -> list[Path]:
         if _format_suffix(f, format)[0] in _READER_SPECS:
             files.append(f)
     if not files:
+        others = sorted(
+            f.name for f in folder.iterdir() if not f.name.startswith(".") and f.is_file()
+        )
+        npz = [n for n in others if n.lower().endswith((".npz", ".npz.gz"))]
+        hint = (
+            f"; it holds {len(npz)} .npz file(s) ({', '.join(npz[:3])}{', ...' if len(npz) > 3 else ''}): "
+            "pass one of them"
+            if npz
+            else f"; it holds {len(others)} other file(s)"
+            if others
+            else "; it is empty"
+        )
         raise InvalidInputError(
-            f"{folder}: folder holds no frame files (expected numbered {', '.join(_READER_SPECS)} files)."
+            f"{folder}: a folder is read as an animation or sequence of numbered frame files "
+            f"({', '.join(_READER_SPECS)}), and this one has none{hint}."
         )
     kinds = sorted({_format_suffix(f, format)[0] for f in files})
     if len(kinds) > 1:
@@ -493,7 +617,12 @@ def write(path: str | os.PathLike, obj: Any, *, binary: bool = True, **kw: Any) 
     pcd_format : {"ascii", "binary", "binary_compressed"}, optional
         PCD encoding; default ``"binary"`` (``"ascii"`` when ``binary=False``).
     dtype : numpy float dtype, optional
-        Coordinate type for PLY (default float64, lossless) and PCD (default float32, PCL's).
+        Coordinate type for PLY (default float64, lossless) and PCD. PCD default (None): float32,
+        PCL's usual type, when every coordinate survives the float32 round trip exactly
+        (``np.array_equal(P.astype(np.float32).astype(np.float64), P)``), else float64, so that
+        georeferenced clouds are not altered (float32 moves UTM coordinates such as
+        x=512345.678 by up to 3 cm, northings near 5.4e6 by up to 0.25 m); PCD normals are float32
+        unless ``dtype`` is given. An explicit ``dtype`` is always obeyed.
     las_scale : float, optional
         LAS/LAZ coordinate resolution (default: chosen from the extent, see :mod:`._las`).
     frame_format : str, optional
@@ -507,8 +636,11 @@ def write(path: str | os.PathLike, obj: Any, *, binary: bool = True, **kw: Any) 
     Notes
     -----
     PLY keeps vertex normals, colours and vertex/face attributes ((n,) scalars or (n, k) fixed-length
-    lists); PCD keeps normals, colours and attributes; OBJ keeps normals; OFF, STL, XYZ (normals
-    kept), NPY and LAS (colours, normals and attributes kept) store what the format can hold.
+    lists; a (m, 6) face attribute ``texcoord`` is written as MeshLab's ``property list uchar float
+    texcoord``); PCD keeps normals, colours and attributes; OBJ keeps vertex normals and the per-corner
+    face attributes ``texcoord`` (m, 6) and ``corner_normals`` (m, 9) as deduplicated ``vt``/``vn``
+    lines with ``f v/vt/vn`` corners; OFF, STL, XYZ (normals kept), NPY and LAS (colours, normals and
+    attributes kept) store what the format can hold.
     Writing a folder stages the frames in a temporary folder; frames named ``<prefix><number>.*``
     left in an existing target folder from an earlier, longer sequence are removed.
     """
@@ -573,7 +705,13 @@ def _serialise(p: Path, geom: Mesh | PointCloud, suffix: str, *, binary: bool, *
         if suffix == ".obj":
             from ._obj import write_obj
 
-            return write_obj(V, F, normals=geom.vertex_normals)
+            return write_obj(
+                V,
+                F,
+                normals=geom.vertex_normals,
+                texcoord=geom.face_attributes.get("texcoord"),
+                corner_normals=geom.face_attributes.get("corner_normals"),
+            )
         if suffix == ".off":
             from ._off import write_off
 
@@ -606,7 +744,7 @@ def _serialise(p: Path, geom: Mesh | PointCloud, suffix: str, *, binary: bool, *
             colors=geom.colors,
             attributes=geom.attributes,
             pcd_format=fmt,
-            dtype=dtype if dtype is not None else np.float32,
+            dtype=dtype,
         )
     if suffix == ".xyz":
         from ._simple import write_xyz
@@ -696,6 +834,8 @@ __all__ = [
     "read_mesh",
     "read_point_cloud",
     "read_sequence",
+    "read_with_report",
+    "ReadReport",
     "supported_formats",
     "write",
 ]

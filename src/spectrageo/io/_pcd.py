@@ -298,18 +298,38 @@ def write_pcd(
     colors=None,
     attributes=None,
     pcd_format: str = "binary",
-    dtype: Any = np.float32,
+    dtype: Any = None,
 ) -> bytes:
-    """Serialise a point cloud to PCD v0.7 bytes (``pcd_format`` in ascii/binary/binary_compressed)."""
-    dtype = np.dtype(dtype)
+    """Serialise a point cloud to PCD v0.7 bytes (``pcd_format`` in ascii/binary/binary_compressed).
+
+    Parameters
+    ----------
+    P : (n, 3) float
+    normals : (n, 3) float, optional
+    colors : (n, 3) or (n, 4) uint8 or float in [0, 1], optional
+    attributes : dict of name -> (n,) or (n, k) array, optional
+    pcd_format : {"ascii", "binary", "binary_compressed"}
+    dtype : numpy float dtype or None
+        Type of the coordinates (and of the normals). None: float32 (PCL's usual type) when every
+        coordinate round-trips through float32 exactly, else float64 (georeferenced clouds with
+        UTM-sized coordinates would move by up to 0.25 m in float32); normals are then float32.
+    """
+    P = np.asarray(P)
+    if dtype is None:
+        p64 = P.astype(np.float64)
+        exact = np.array_equal(p64.astype(np.float32).astype(np.float64), p64)
+        coord_dtype = np.dtype(np.float32 if exact else np.float64)
+        normal_dtype = np.dtype(np.float32)
+    else:
+        coord_dtype = normal_dtype = np.dtype(dtype)
     n = P.shape[0]
     columns: list[tuple[str, np.ndarray]] = []  # (name, (n, c) array)
     for i, k in enumerate("xyz"):
-        columns.append((k, P[:, i : i + 1].astype(dtype)))
+        columns.append((k, P[:, i : i + 1].astype(coord_dtype)))
     if normals is not None:
         nrm = np.asarray(normals)
         for i, k in enumerate(("normal_x", "normal_y", "normal_z")):
-            columns.append((k, nrm[:, i : i + 1].astype(dtype)))
+            columns.append((k, nrm[:, i : i + 1].astype(normal_dtype)))
     if colors is not None:
         c = np.asarray(colors)
         if c.dtype.kind == "f":

@@ -20,6 +20,21 @@ Element ``vertex`` gives the positions (``x y z``), normals (``nx ny nz``), colo
 property as a face attribute. Other elements (camera, range_grid, edge, ...) are ignored. A list
 property of fixed length ``k`` becomes an (n, k) attribute; variable-length lists other than the
 face indices are skipped.
+
+Triangle strips
+    Element ``tristrips`` (``property list int vertex_indices``, written by Stanford/Cyberware range
+    scans and by vcglib) is turned into triangles: in each strip ``s``, triangle ``j`` is
+    ``(s[j], s[j+1], s[j+2])`` for even ``j`` and ``(s[j+1], s[j], s[j+2])`` for odd ``j`` (alternate
+    winding, so that all triangles of a strip keep one orientation, as vcglib/MeshLab read them); a
+    negative index (``-1``) ends the strip and starts a new one at the next index; each row is its own
+    strip; triangles with a repeated index (the degenerate ones strips use to swap parity) are
+    skipped. Strip triangles come after the triangles of a ``face`` element; when a file has both, the
+    ``face`` element's other properties are not kept (they would not cover the strip triangles).
+Texture coordinates
+    MeshLab's per-corner face property ``texcoord`` (``property list uchar float texcoord``, 6 values
+    ``u0 v0 u1 v1 u2 v2`` per triangle) is read as the face attribute ``texcoord`` (m, 6) float64, the
+    layout the OBJ reader gives (polygons: the values follow the fan, ``(c0, ck, ck+1)``); a (m, 6)
+    face attribute ``texcoord`` is written back as ``property list uchar float texcoord``.
 """
 
 from __future__ import annotations
@@ -41,7 +56,7 @@ _COLOR_NAMES = (
     ("diffuse_red", "diffuse_green", "diffuse_blue", "diffuse_alpha"),
 )
 _FACE_INDEX_NAMES = ("vertex_indices", "vertex_index")
-_WANTED = frozenset({"vertex", "face"})
+_WANTED = frozenset({"vertex", "face", "tristrips"})
 _PLY_SCALAR = {
     "i1": "i1",
     "u1": "u1",
@@ -292,11 +307,95 @@ def read_ply(raw: bytes, name: str) -> RawGeometry:
             source = None
         else:
             faces, source = fan_triangulate(polys, name)
+        tex = fcols.pop("texcoord", None)
+        if tex is not None:
+            tc = _fan_texcoords(polys, tex, name)
+            if tc is not None:
+                fattrs["texcoord"] = tc
         for k, v in fcols.items():
             if v.dtype == object:
                 continue
             fattrs[k] = v if source is None else v[source]
+    if "tristrips" in elements:
+        scols = elements["tristrips"]
+        key = next((k for k in _FACE_INDEX_NAMES if k in scols), None)
+        if key is None:
+            raise InvalidInputError(
+                f"{name}: PLY 'tristrips' element has no 'vertex_indices' list "
+                f"(has {', '.join(scols)})."
+            )
+        strips = strips_to_triangles(scols[key], name)
+        if faces is None or len(faces) == 0:
+            faces = strips
+        else:
+            faces = np.concatenate([faces, strips])
+            fattrs = {}  # per-face properties of the 'face' element do not cover the strips
     return RawGeometry(V, faces, normals, colors, vattrs, fattrs)
+
+
+def strips_to_triangles(strips: Any, name: str) -> np.ndarray:
+    """Triangles (t, 3) int64 of PLY triangle strips (see the module docstring for the rules).
+
+    Parameters
+    ----------
+    strips : (r, L) int array or sequence of r int sequences (ragged)
+        One strip list per ``tristrips`` row; a negative index restarts the strip.
+    name : str
+        File name for error messages.
+    """
+    if isinstance(strips, np.ndarray) and strips.dtype != object:
+        rows = [np.asarray(r) for r in strips.reshape(strips.shape[0], -1)]
+    else:
+        rows = [np.asarray(r) for r in strips]
+    for r in rows:
+        if r.size and r.dtype.kind not in "iu":
+            raise InvalidInputError(f"{name}: PLY 'tristrips' indices must be integers.")
+    if not rows:
+        return np.zeros((0, 3), dtype=np.int64)
+    # one flat sequence, each row closed by a restart marker
+    sep = np.array([-1], dtype=np.int64)
+    s = np.concatenate([np.concatenate([r.astype(np.int64).ravel(), sep]) for r in rows])
+    if s.size < 3:
+        return np.zeros((0, 3), dtype=np.int64)
+    pos = np.arange(s.size, dtype=np.int64)
+    start = np.maximum.accumulate(np.where(s < 0, pos + 1, 0))  # first index of the current strip
+    a, b, c = s[:-2], s[1:-1], s[2:]
+    odd = ((pos[:-2] - start[:-2]) % 2).astype(bool)
+    ok = (a >= 0) & (b >= 0) & (c >= 0) & (a != b) & (b != c) & (a != c)
+    tris = np.stack([np.where(odd, b, a), np.where(odd, a, b), c], axis=1)
+    return tris[ok]
+
+
+def _fan_texcoords(polys: np.ndarray, tex: np.ndarray, name: str) -> np.ndarray | None:
+    """MeshLab's per-corner ``texcoord`` list (2 values per corner) following the polygon fans.
+
+    Returns (t, 6) float64 aligned with the triangles of :func:`fan_triangulate`, or None when the
+    list lengths do not match the polygons' corner counts (then the property is not kept).
+    """
+    if polys.dtype != object and tex.dtype != object and polys.ndim == 2 and tex.ndim == 2:
+        m, k = polys.shape
+        if tex.shape != (m, 2 * k):
+            return None
+        corner_ids = np.arange(m * k, dtype=np.int64).reshape(m, k)
+        flat_uv = tex.reshape(m * k, 2)
+    else:
+        plist = list(polys)
+        tlist = list(tex) if tex.dtype == object else list(tex.reshape(len(tex), -1))
+        lens = np.fromiter((len(p) for p in plist), dtype=np.int64, count=len(plist))
+        tlens = np.fromiter((len(t) for t in tlist), dtype=np.int64, count=len(tlist))
+        if lens.shape != tlens.shape or (tlens != 2 * lens).any():
+            return None
+        ends = np.cumsum(lens)
+        corner_ids = [np.arange(e - n, e, dtype=np.int64) for e, n in zip(ends, lens)]
+        flat_uv = (
+            np.concatenate([np.asarray(t, dtype=np.float64) for t in tlist]).reshape(-1, 2)
+            if tlist
+            else np.zeros((0, 2))
+        )
+    tri_corners, _ = fan_triangulate(corner_ids, name)
+    if tri_corners.size == 0:
+        return np.zeros((0, 6), dtype=np.float64)
+    return flat_uv.astype(np.float64)[tri_corners].reshape(-1, 6)
 
 
 # --------------------------------------------------------------------------------------- writing
@@ -401,6 +500,8 @@ def write_ply(
                 raise InvalidInputError(
                     f"face attribute `{k}` has shape {a.shape}; PLY stores (m,) or (m, k)."
                 )
+            if k == "texcoord" and a.ndim == 2 and a.shape[1] == 6 and a.dtype.kind == "f":
+                a = a.astype(np.float32)  # MeshLab's `property list uchar float texcoord`
             fcols.append((k, a))
         farr = _element_table(fcols, F.shape[0], {})
         elements.append(plyfile.PlyElement.describe(farr, "face"))

@@ -8,27 +8,236 @@ import warnings
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._common import exc_text
+from ._common import exc_text, text_colors
 from ._raw import RawGeometry
 
-
 # ------------------------------------------------------------------------------------------ XYZ
+_COMMENTS = ("#", "//")
+_NORMAL_KEYS = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"), ("n_x", "n_y", "n_z"))
+_COLOR_KEYS = (("r", "g", "b", "a"), ("red", "green", "blue", "alpha"))
+
+
+def _is_comment(line: str) -> bool:
+    return line.startswith(_COMMENTS)
+
+
+def _split(line: str, sep: str | None) -> list[str]:
+    return [t.strip() for t in line.split(sep)] if sep else line.split()
+
+
+def _is_number(tok: str) -> bool:
+    try:
+        float(tok)
+    except ValueError:
+        return False
+    return True
+
+
+def _xyz_names(tokens: list[str]) -> list[str]:
+    """Header column names, lower case, spaces replaced by ``_``, leading ``//`` or ``#`` dropped."""
+    out = []
+    for t in tokens:
+        t = t.strip().lstrip("/#").strip()
+        out.append("_".join(t.split()))
+    return out
+
+
+def _find_group(names: list[str], groups, width: int) -> list[int] | None:
+    low = [n.lower() for n in names]
+    for g in groups:
+        if all(k in low for k in g[:width]):
+            return [low.index(k) for k in g[:width]]
+    return None
+
+
 def read_xyz(raw: bytes, name: str) -> RawGeometry:
-    """Whitespace-separated text, ``#`` comments; 3 columns (x y z) or 6 (x y z nx ny nz)."""
+    """Delimited text of points, one per line: ``x y z`` and optional normals, colours, scalars.
+
+    Separators: spaces/tabs, ``,`` or ``;`` (chosen from the first data line; with ``;`` a decimal
+    comma is accepted). Lines starting with ``#`` or ``//`` are comments; blank lines are skipped.
+
+    Column layout
+        With a header naming the columns (a first line of names such as ``X Y Z R G B``, or a comment
+        line right before the data whose first three names are x, y, z, e.g. CloudCompare's
+        ``//X,Y,Z,R,G,B,A``), the names decide: ``x y z``; ``nx ny nz`` (or ``normal_x``...) are
+        normals; ``r g b [a]`` (or ``red``...) colours (uint8 when they are integers above 1, else
+        floats in [0, 1]); every other column a float64 attribute of that name. Without a header the
+        columns after ``x y z`` are guessed, left to right: 3 columns whose finite rows all have unit
+        norm (within 1e-3) are normals; 3 columns of integers in 0..255 are colours (uint8), and a
+        4th such column right after them is alpha; this is repeated once for a normal block after
+        the colours (``x y z r g b nx ny nz``); all remaining columns become attributes ``scalar_0``,
+        ``scalar_1``, ... (float64). This covers ``x y z``, ``x y z nx ny nz``, ``x y z r g b``,
+        ``x y z r g b a`` (CloudCompare), ``x y z nx ny nz r g b``, ``x y z i`` and
+        ``x y z r g b i``.
+
+    Ambiguities of the guess (write a header line to settle them)
+        * An integer scalar in 0..255 right after ``r g b`` (``x y z r g b i`` with an 8-bit
+          intensity) is read as alpha.
+        * Three integer columns in 0..255 that are not colours (labels, counts) are read as colours.
+        * Normals that are not unit length (unnormalised or zero normals) are not recognised: they
+          become ``scalar_*`` attributes; axis-aligned unit rows such as ``0 0 1`` are normals even
+          if meant as colours.
+        * Columns ``x y z`` are always the first three.
+
+    Raises
+    ------
+    InvalidInputError
+        Rows with a different number of values or non-numeric values (naming the line), fewer than
+        3 columns, no data rows.
+    """
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    lines = text.splitlines()
+    # first data line; the comment line right before it may name the columns
+    first, last_comment = None, None
+    for i, ln in enumerate(lines):
+        s = ln.strip()
+        if not s:
+            continue
+        if _is_comment(s):
+            last_comment = s
+            continue
+        first = i
+        break
+    if first is None:
+        raise InvalidInputError(f"{name}: XYZ file holds no points.")
+    head = lines[first].strip()
+    sep = ";" if ";" in head else "," if "," in head else None
+    names: list[str] | None = None
+    tokens = _split(head, sep)
+    body_start = first
+    if not all(_is_number(t.replace(",", ".") if sep == ";" else t) for t in tokens):
+        # a line of column names
+        names = _xyz_names(tokens)
+        body_start = first + 1
+        nxt = next((ln.strip() for ln in lines[body_start:] if ln.strip()), "")
+        nxt = "" if _is_comment(nxt) else nxt
+        if nxt:
+            sep = ";" if ";" in nxt else "," if "," in nxt else None
+    body = "\n".join(lines[body_start:])
+    decimal_comma = sep == ";" and "," in body  # European CSV: "1,5;2,25;3"
+    if decimal_comma:
+        body = body.replace(",", ".")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
-            table = np.loadtxt(io.BytesIO(raw), dtype=np.float64, ndmin=2, comments="#")
+            table = np.loadtxt(
+                io.StringIO(body),
+                dtype=np.float64,
+                ndmin=2,
+                comments=list(_COMMENTS),
+                delimiter=sep,
+            )
     except ValueError as exc:
-        raise InvalidInputError(f"{name}: malformed XYZ text ({exc_text(exc)}).") from exc
+        raise InvalidInputError(
+            f"{name}: malformed XYZ text: {_bad_line(lines, body_start, sep, decimal_comma, exc)}."
+        ) from exc
     if table.size == 0:
         raise InvalidInputError(f"{name}: XYZ file holds no points.")
-    if table.shape[1] not in (3, 6):
+    k = table.shape[1]
+    if k < 3:
         raise InvalidInputError(
-            f"{name}: XYZ rows must have 3 (x y z) or 6 (x y z nx ny nz) values; got {table.shape[1]}."
+            f"{name}: XYZ rows must have at least 3 values (x y z); got {k} (line {first + 1})."
         )
-    normals = table[:, 3:6] if table.shape[1] == 6 else None
-    return RawGeometry(table[:, :3].copy(), None, normals)
+    if names is None and last_comment is not None:
+        cand = _xyz_names(_split(last_comment.lstrip("/#").strip(), sep))
+        if len(cand) == k and [c.lower() for c in cand[:3]] == ["x", "y", "z"]:
+            names = cand
+    if names is not None and len(names) != k:
+        raise InvalidInputError(
+            f"{name}: the XYZ header names {len(names)} columns ({' '.join(names)}), the data rows "
+            f"have {k} values."
+        )
+    if names is not None:
+        return _xyz_by_names(table, names, name)
+    return _xyz_guess(table)
+
+
+def _bad_line(lines: list[str], start: int, sep, decimal_comma: bool, exc: Exception) -> str:
+    """Describe the first malformed data line (1-based line number) for the error message."""
+    width = None
+    for i in range(start, len(lines)):
+        s = lines[i].strip()
+        for c in _COMMENTS:
+            s = s.split(c, 1)[0].strip() if c in s else s
+        if not s:
+            continue
+        if decimal_comma:
+            s = s.replace(",", ".")
+        toks = _split(s, sep)
+        bad = next((t for t in toks if not _is_number(t)), None)
+        if bad is not None:
+            return f"line {i + 1} has a non-numeric value {bad!r}"
+        if width is None:
+            width, first = len(toks), i
+        elif len(toks) != width:
+            return f"line {i + 1} has {len(toks)} values, line {first + 1} has {width}"
+    return exc_text(exc)
+
+
+def _unit_rows(block: np.ndarray) -> bool:
+    finite = np.isfinite(block).all(axis=1)
+    if not finite.any():
+        return False
+    return bool((np.abs(np.linalg.norm(block[finite], axis=1) - 1.0) <= 1e-3).all())
+
+
+def _byte_column(col: np.ndarray) -> bool:
+    return bool(
+        np.isfinite(col).all()
+        and (col == np.round(col)).all()
+        and col.min() >= 0
+        and col.max() <= 255
+    )
+
+
+def _xyz_guess(table: np.ndarray) -> RawGeometry:
+    k = table.shape[1]
+    normals = colors = None
+    c = 3
+    for _ in range(2):
+        if normals is None and k - c >= 3 and _unit_rows(table[:, c : c + 3]):
+            normals = table[:, c : c + 3].copy()
+            c += 3
+        if (
+            colors is None
+            and k - c >= 3
+            and all(_byte_column(table[:, j]) for j in range(c, c + 3))
+        ):
+            w = 4 if k - c >= 4 and _byte_column(table[:, c + 3]) else 3
+            colors = table[:, c : c + w].astype(np.uint8)
+            c += w
+    attrs = {f"scalar_{i}": table[:, j].copy() for i, j in enumerate(range(c, k))}
+    return RawGeometry(table[:, :3].copy(), None, normals, colors, attrs)
+
+
+def _xyz_by_names(table: np.ndarray, names: list[str], name: str) -> RawGeometry:
+    used: set[int] = set()
+    xyz = _find_group(names, (("x", "y", "z"),), 3) or [0, 1, 2]
+    used.update(xyz)
+    normals = colors = None
+    nidx = _find_group(names, _NORMAL_KEYS, 3)
+    if nidx is not None and not used & set(nidx):
+        normals = table[:, nidx].copy()
+        used.update(nidx)
+    cidx = _find_group(names, _COLOR_KEYS, 3)
+    if cidx is not None and not used & set(cidx):
+        aidx = _find_group(names, _COLOR_KEYS, 4)
+        if aidx is not None and aidx[3] not in used:
+            cidx = aidx
+        colors = text_colors(table[:, cidx])
+        used.update(cidx)
+    attrs: dict[str, np.ndarray] = {}
+    for j, key in enumerate(names):
+        if j in used:
+            continue
+        key = key or f"scalar_{j}"
+        if key in attrs:
+            raise InvalidInputError(f"{name}: the XYZ header repeats the column name {key!r}.")
+        attrs[key] = table[:, j].copy()
+    return RawGeometry(table[:, xyz].copy(), None, normals, colors, attrs)
 
 
 def write_xyz(P: np.ndarray, normals=None) -> bytes:
