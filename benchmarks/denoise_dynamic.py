@@ -90,7 +90,7 @@ def main(argv=None) -> int:
         "",
         f"`spectrageo evaluate denoise-dynamic` on the first {args.max_frames} frames of every shared "
         "animation (the same noisy animation for every method; static methods run frame by frame "
-        "with their defaults; theta averaged over all frames, HD over 10 evenly spaced frames).",
+        "with their defaults; theta averaged over all frames, HD (one-sided: result vertices to the clean surface) over 10 evenly spaced frames).",
         "",
         ev.format_markdown(rows),
         "",

@@ -31,7 +31,8 @@ def main() -> None:
         "",
         "`python benchmarks/noisy_inputs.py` (equivalently `spectrageo metrics Noisy.obj Original.obj "
         "--json` per pair in `denoise/` of the shared data). theta in degrees; Dmean d, Dmax d and "
-        "the Hausdorff values (exact point-to-triangle, noisy vertices to the clean surface) in model "
+        "the Hausdorff values (symmetric: vertices, edge midpoints and face centroids of each surface "
+        "to the exact nearest point of the other; HD mean averages the two area-weighted means) in model "
         "units; dist n and Dmean n unitless; NMSVE normalised by the squared bounding-box diagonal.",
         f"Machine: {machine_line()}.",
         "",

@@ -126,7 +126,7 @@ def test_denoise_mesh_and_animation_keep_layout(capsys, sphere_file, tmp_path):
     [
         (["info", "/nonexistent/file.ply"], "not found"),
         (["info", "{tmp}/bad.xyzw"], "format|extension"),
-        (["metrics", "{tmp}/a.ply", "{tmp}/b.ply"], "vertex|match|shape"),
+        (["metrics", "{tmp}/a.ply", "{tmp}/b.ply", "--radius", "-1"], "radius"),
         (
             ["denoise", "{tmp}/a.ply", "{tmp}/o.ply", "--method", "nosuch"],
             "unknown denoising method",

@@ -23,7 +23,8 @@ def test_mesh_upcasts_and_does_not_copy_semantics():
     assert m.vertices.dtype == np.float64 and m.faces.dtype == np.int64
     assert m.n_vertices == 8 and m.n_faces == 12
     lo, hi = m.bbox()
-    np.testing.assert_allclose(lo, -1) and np.testing.assert_allclose(hi, 1)
+    np.testing.assert_allclose(lo, -1)
+    np.testing.assert_allclose(hi, 1)
 
 
 def test_mesh_attributes_and_with_vertices():

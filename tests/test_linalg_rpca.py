@@ -117,6 +117,7 @@ def test_tall_skinny_chunks_match_single_pass(monkeypatch):
     assert rel(one.sparse, ref.sparse) < 1e-6
 
 
+@pytest.mark.slow
 def test_tall_skinny_300k_rows_agrees_with_plain_path():
     """A 300000 x 11 patch-like matrix (four row chunks) against the plain full-SVD path."""
     M = knn_like(100_000, seed=5)
@@ -221,7 +222,7 @@ def test_noise_sigma_estimate():
     assert noise_sigma_from_singular_values(s, 400, 200) == pytest.approx(0.1, rel=0.05)
 
 
-@pytest.mark.parametrize("backend", ["chunked", "dense"])
+@pytest.mark.parametrize("backend", [pytest.param("chunked", marks=pytest.mark.slow), "dense"])
 def test_stable_pcp_separates_noise(backend):
     L, S = planted(300, 200, 5, seed=6)
     rng = np.random.default_rng(7)

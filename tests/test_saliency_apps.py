@@ -389,16 +389,23 @@ def test_evaluate_on_synthetic_folder(tmp_path):
     from spectrageo.evaluate.saliency import evaluate, format_markdown
     from spectrageo.geometry import Mesh
 
-    V, F = cube(4)
-    V = V + 0.01 * np.random.default_rng(0).standard_normal(V.shape)
+    V0, F = cube(4)
+    V = V0 + 0.01 * np.random.default_rng(0).standard_normal(V0.shape)
     io.write(tmp_path / "box.obj", Mesh(V, F))
-    gt = saliency(V, F, method="spectral", per="face")
+    # analytic reference, independent of the saliency code: closeness of each face centroid to the
+    # nearest edge of the cube [-1, 1]^3 (second largest |coordinate|, 1 on an edge)
+    gt = np.sort(np.abs(V0[F].mean(axis=1)), axis=1)[:, 1]
     np.savetxt(tmp_path / "box_saliencyValues_of_centroids.csv", gt)
     rows = evaluate(
         tmp_path, methods=["spectral", "combined", "fast"], out=tmp_path / "ev", models=("box",)
     )
     by = {r["method"]: r for r in rows}
-    assert by["spectral"]["pearson"] == pytest.approx(1.0, abs=1e-6)
+    # the harness correlates the map of the mesh it read with the reference file, face by face
+    read = io.read_mesh(tmp_path / "box.obj")
+    s_face = saliency(read.vertices, read.faces, method="spectral", per="face")
+    assert by["spectral"]["pearson"] == pytest.approx(pearsonr(s_face, gt)[0], abs=1e-9)
+    # and the spectral map does find the cube's edges
+    assert by["spectral"]["pearson"] > 0.8 and by["spectral"]["spearman"] > 0.8
     assert by["spectral"]["invariance"] > 0.999
     assert by["fast"]["pearson_vs_combined"] > 0.9
     assert (tmp_path / "ev.md").read_text().startswith("| model")

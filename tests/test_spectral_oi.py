@@ -144,6 +144,7 @@ def test_shifted_factor_solves_and_falls_back_when_indefinite(fan):
         f2.solve(np.ones(4))
 
 
+@pytest.mark.slow
 def test_submesh_eigenbases_exact_and_tracked(fan):
     _, _, C, subs = fan
     exact = list(submesh_eigenbases(C, subs, 0.1, method="exact"))
@@ -186,6 +187,7 @@ def test_one_step_oi_lowpass_close_to_exact(fan):
     assert np.linalg.norm(oi1 - V, axis=1).mean() > e_oi
 
 
+@pytest.mark.slow
 def test_doi_meets_thresholds_for_every_submesh(fan):
     V, F, C, subs = fan
     info: list = []
@@ -219,8 +221,9 @@ def test_doi_grows_and_shrinks_from_a_bad_start(fan):
     small = dynamic_orthogonal_iteration(L, U[:, :5], X, eps_low=0.02, eps_high=0.03)
     big = dynamic_orthogonal_iteration(L, U[:, :200], X, eps_low=0.02, eps_high=0.03, t_max=300)
     for r in (small, big):
-        assert r.converged and 0.02 <= r.residual <= 0.03 or r.residual < 0.02
-        assert r.residual <= 0.03
+        # from too few and from too many columns alike, the iteration lands inside the band
+        assert r.converged
+        assert 0.02 <= r.residual <= 0.03
     assert small.size > 5 and big.size < 200
     # a band too narrow for one column: stops at the larger subspace, below eps_high
     narrow = dynamic_orthogonal_iteration(L, U[:, :30], X, eps_low=0.0200, eps_high=0.0201)
@@ -309,13 +312,23 @@ def test_point_cloud_graph_and_weighted_laplacians(fan):
     pc = lowpass(V, C=W, keep=0.1, method="exact")
     assert pc.shape == V.shape and np.isfinite(pc).all()
     assert np.linalg.norm(pc - V, axis=1).mean() < 0.1 * np.ptp(V, axis=0).max()
+
+    def smoothed_a_little(out):
+        # finite, moved (not the identity), by well under a tenth of the size, and the mean (the
+        # DC component, in every low-pass band) is kept
+        size = np.ptp(V, axis=0).max()
+        d = np.linalg.norm(out - V, axis=1)
+        assert np.isfinite(out).all()
+        assert d.mean() > 1e-4 * size and d.max() < 0.05 * size
+        np.testing.assert_allclose(out.mean(axis=0), V.mean(axis=0), atol=1e-4 * size)
+
     for kind in ("gaussian", "cotangent"):
         out = lowpass(V, F, laplacian=kind, method="oi")
-        assert np.isfinite(out).all()
+        smoothed_a_little(out)
         full = lowpass(V, F, laplacian=kind, method="exact", keep=1.0)
         np.testing.assert_allclose(full, V, atol=1e-8)
     w = lowpass(V, C=W, laplacian="weighted", method="doi")
-    assert np.isfinite(w).all()
+    smoothed_a_little(w)
 
 
 def test_determinism_and_progress_free_iteration(fan):

@@ -168,7 +168,11 @@ def test_isolated_vertex_gets_plain_average():
     holders = [j for j, p in enumerate(subs.parts) if 20 in p]
     assert holders
     assert out[20] == pytest.approx(np.mean(holders))
+    # every vertex gets a convex combination of the part indices holding it
     assert np.isfinite(out).all()
+    for i in range(out.size):
+        held = [j for j, p in enumerate(subs.parts) if i in p]
+        assert min(held) - 1e-12 <= out[i] <= max(held) + 1e-12
 
 
 def test_submesh_laplacian_kinds(fandisk_graph):

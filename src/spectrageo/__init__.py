@@ -1,8 +1,12 @@
 """spectrageo: spectral processing of static and dynamic 3D geometry.
 
 Triangle meshes, point clouds, mesh animations and point-cloud sequences; graph Laplacians, the
-graph Fourier transform, orthogonal iterations, RPCA and matrix completion; denoising, compression,
-completion, outlier removal, saliency and registration built on them.
+graph Fourier transform, orthogonal iterations over overlapped submeshes, and low-rank solvers (RPCA,
+matrix completion, incremental SVD, LASSO). Built on them: denoising of meshes and mesh animations,
+outlier removal for point clouds and point-cloud sequences, and saliency with its applications, plus
+quality metrics, synthetic noise with ground truth and evaluation harnesses. Compression, completion
+of geometry and registration are not implemented (only their metrics: bit rates, registration
+errors).
 """
 
 from ._errors import (

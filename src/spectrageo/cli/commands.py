@@ -39,8 +39,55 @@ def _fmt(v) -> str:
     return str(v)
 
 
+#: Set by ``--quiet`` (see :mod:`.main`): no status lines on stderr.
+QUIET = False
+
+
 def _status(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+    if not QUIET:
+        print(msg, file=sys.stderr, flush=True)
+
+
+def _read(path, *, kind=None, weld=None, nan_points=None):
+    """Read through :func:`spectrageo.io.read_with_report` and say on stderr what was repaired."""
+    from .. import io
+
+    obj, rep = io.read_with_report(path, kind=kind, weld=weld, nan_points=nan_points)
+    name = Path(path).name
+    if rep.n_merged_vertices:
+        extra = f", {rep.n_dropped_faces} collapsed faces dropped" if rep.n_dropped_faces else ""
+        _status(
+            f"{name}: welded {rep.n_input_vertices} vertices into "
+            f"{rep.n_input_vertices - rep.n_merged_vertices} (triangle soup; --no-weld keeps "
+            f"them apart){extra}"
+        )
+    if rep.n_nonfinite_rows:
+        _status(
+            f"{name}: {rep.n_nonfinite_rows} of {rep.n_input_vertices} rows have NaN/inf "
+            "coordinates (no measurement) and are left out"
+        )
+    return obj, rep
+
+
+def _same_file(a, b) -> bool:
+    pa, pb = Path(a), Path(b)
+    try:
+        return pa.exists() and pb.exists() and pa.samefile(pb)
+    except OSError:
+        return False
+
+
+def _check_outputs(inputs, outputs) -> None:
+    """Refuse to write an output over an input file (the input would be lost)."""
+    for out in outputs:
+        if out is None:
+            continue
+        for inp in inputs:
+            if _same_file(inp, out):
+                raise _err(
+                    f"output {out} is the input file {inp}; write to another path "
+                    "(the input would be overwritten)."
+                )
 
 
 # --------------------------------------------------------------------------- info
@@ -102,24 +149,53 @@ def describe(obj) -> dict:
 
 def cmd_info(args) -> int:
     from .. import io
+    from ..geometry import Mesh, MeshAnimation
 
-    obj = io.read(args.file, kind=args.kind)
+    obj, rep = io.read_with_report(
+        args.file, kind=args.kind, weld=False if args.no_weld else None, nan_points="drop"
+    )
     d = {"file": str(args.file), **describe(obj)}
+    d["n_input_rows"] = rep.n_input_vertices
+    d["merged_vertices"] = rep.n_merged_vertices
+    d["dropped_faces"] = rep.n_dropped_faces
+    d["nonfinite_rows"] = rep.n_nonfinite_rows
+    if isinstance(obj, Mesh | MeshAnimation):
+        from ..geometry.topology import mesh_topology
+
+        V = obj.vertices if isinstance(obj, Mesh) else obj.frames[0]
+        d["topology"] = mesh_topology(V, obj.faces)
     if args.json:
         _print_json(d)
     else:
         for k, v in d.items():
             if isinstance(v, list) and k == "n_points_per_frame" and len(v) > 8:
                 v = f"{v[:4]} ... ({len(v)} frames)"
-            print(f"{k:>18}: {_fmt(v) if not isinstance(v, str) else v}")
+            if isinstance(v, dict):
+                for k2, v2 in v.items():
+                    if k2 not in d:  # counts already printed above
+                        print(f"{k2:>24}: {_fmt(v2)}")
+                continue
+            print(f"{k:>24}: {_fmt(v) if not isinstance(v, str) else v}")
     return 0
 
 
 # --------------------------------------------------------------------------- convert
 def cmd_convert(args) -> int:
     from .. import io
+    from ..geometry import Mesh
+    from ..io._api import _MESH_WRITE, _POINTS_WRITE
+    from ..io._common import split_suffix
 
-    obj = io.read(args.input, kind=args.kind, weld=args.weld)
+    _check_outputs([args.input], [args.output])
+    weld = True if args.weld else False if args.no_weld else None
+    obj, _rep = _read(args.input, kind=args.kind, weld=weld)
+    suffix = split_suffix(Path(args.output))[0]
+    if isinstance(obj, Mesh) and suffix in _POINTS_WRITE and suffix not in _MESH_WRITE:
+        raise _err(
+            f"{Path(args.output).name}: {suffix} holds points only, and {Path(args.input).name} "
+            f"is a mesh with {obj.n_faces} faces; pass --kind points to write its vertices "
+            "without the faces, or choose a mesh format (.ply, .obj, .off, .stl)."
+        )
     kw = {}
     if args.ascii:
         kw["binary"] = False
@@ -133,7 +209,8 @@ def cmd_noise(args) -> int:
     from .. import io, noise
     from ..geometry import Mesh, MeshAnimation, PointCloud
 
-    obj = io.read(args.input)
+    _check_outputs([args.input], [args.output])
+    obj, _rep = _read(args.input)
     opts = {"kind": args.kind, "level": args.level, "rng": args.seed}
     if args.fraction is not None:
         opts["fraction"] = args.fraction
@@ -161,18 +238,41 @@ def cmd_noise(args) -> int:
 
 # --------------------------------------------------------------------------- metrics
 def cmd_metrics(args) -> int:
-    from .. import io, metrics
-    from ..geometry import Mesh, MeshAnimation
+    from .. import metrics
+    from .._validation import check_positive
+    from ..geometry import Mesh, MeshAnimation, PointCloud
 
-    res = io.read(args.result)
-    ref = io.read(args.reference)
+    radius = getattr(args, "radius", None)
+    if radius is not None:
+        check_positive(radius, "radius")
+    res, _ = _read(args.result)
+    ref, _ = _read(args.reference)
     if isinstance(res, MeshAnimation) and isinstance(ref, MeshAnimation):
+        if radius is not None:
+            raise _err("`radius` applies to meshes and point clouds, not to animations.")
         d = metrics.compare_animation(res.frames, ref.frames, ref.faces, faces_result=res.faces)
-    elif isinstance(res, Mesh) and isinstance(ref, Mesh):
-        d = metrics.compare(res.vertices, ref.vertices, ref.faces, faces_result=res.faces)
+    elif isinstance(res, Mesh | PointCloud) and isinstance(ref, Mesh | PointCloud):
+        # per-vertex metrics need vertex correspondence: two meshes, same count, identical faces
+        why = None
+        if not (isinstance(res, Mesh) and isinstance(ref, Mesh)):
+            why = "a point cloud has no vertex correspondence"
+        elif res.n_vertices != ref.n_vertices:
+            why = f"{res.n_vertices} and {ref.n_vertices} vertices"
+        elif not np.array_equal(res.faces, ref.faces):
+            why = "different faces"
+        d = {}
+        if why is None:
+            d = metrics.compare(res, ref, hausdorff_distance=False)
+        else:
+            _status(f"no vertex correspondence ({why}): surface metrics only")
+        d.update(metrics.compare_surfaces(res, ref, radius=radius))
+        d["correspondence"] = why is None
+        if why is not None:
+            d["correspondence_reason"] = why
     else:
         raise _err(
-            f"`metrics` compares two meshes or two animations; got {type(res).__name__} and {type(ref).__name__}."
+            "`metrics` compares two meshes, two point clouds, a mesh and a point cloud, or two "
+            f"animations; got {type(res).__name__} and {type(ref).__name__}."
         )
     if args.json:
         _print_json(d)
@@ -180,17 +280,18 @@ def cmd_metrics(args) -> int:
         for k, v in d.items():
             if isinstance(v, list | np.ndarray) and len(v) > 8:
                 v = f"{_fmt(list(v[:4]))} ... ({len(v)} values)"
-            print(f"{k:>20}: {_fmt(v) if not isinstance(v, str) else v}")
+            print(f"{k:>22}: {_fmt(v) if not isinstance(v, str) else v}")
     return 0
 
 
 # --------------------------------------------------------------------------- denoise
 def cmd_denoise(args) -> int:
     from .. import denoise, io
-    from .._progress import progress
-    from ..geometry import Mesh, MeshAnimation
+    from .._progress import activity, progress
+    from ..geometry import Mesh, MeshAnimation, PointCloud
 
-    obj = io.read(args.input)
+    _check_outputs([args.input], [args.output])
+    obj, _rep = _read(args.input, weld=False if args.no_weld else None)
     opts = {}
     if args.preset:
         opts["preset"] = args.preset
@@ -198,18 +299,23 @@ def cmd_denoise(args) -> int:
         opts["pre"] = args.pre
     t0 = time.perf_counter()
     if isinstance(obj, Mesh):
-        out = obj.with_vertices(
-            denoise.denoise(obj.vertices, obj.faces, method=args.method, **opts)
-        )
+        with activity(f"denoise {args.method} ({obj.n_vertices} vertices)"):
+            Vd = denoise.denoise(
+                obj.vertices, obj.faces, method=args.method, weld=not args.no_weld, **opts
+            )
+        out = obj.with_vertices(Vd)
     elif isinstance(obj, MeshAnimation):
         dyn = getattr(denoise, "dynamic_methods", lambda: [])()
         if args.method in dyn:
-            frames = denoise.denoise_animation(obj.frames, obj.faces, method=args.method, **opts)
+            with activity(f"denoise {args.method} ({obj.n_frames} frames)"):
+                frames = denoise.denoise_animation(
+                    obj.frames, obj.faces, method=args.method, **opts
+                )
         else:
             denoise.get(args.method)  # validate the name before the loop
             frames = np.stack(
                 [
-                    denoise.denoise(f, obj.faces, method=args.method, **opts)
+                    denoise.denoise(f, obj.faces, method=args.method, weld=not args.no_weld, **opts)
                     for f in progress(
                         obj.frames, desc=f"{args.method} per frame", total=obj.n_frames
                     )
@@ -217,7 +323,11 @@ def cmd_denoise(args) -> int:
             )
         out = obj.with_frames(frames)
     else:
-        raise _err(f"`denoise` needs a mesh or a mesh animation; got {type(obj).__name__}.")
+        what = "point cloud" if isinstance(obj, PointCloud) else "point-cloud sequence"
+        raise _err(
+            f"{Path(args.input).name} is a {what} (no faces); denoise needs a mesh or a mesh "
+            "animation. For point clouds use `spectrageo outliers` (smoothing: --method rpca)."
+        )
     io.write(args.output, out)
     _status(f"wrote {args.output} ({args.method}, {time.perf_counter() - t0:.2f} s)")
     return 0
@@ -225,38 +335,82 @@ def cmd_denoise(args) -> int:
 
 # --------------------------------------------------------------------------- outliers
 def cmd_outliers(args) -> int:
-    from .. import io, outliers
-    from ..geometry import PointCloud, PointCloudSequence
+    from .. import outliers
+    from ..geometry import Mesh, PointCloud, PointCloudSequence
 
-    obj = io.read(args.input, kind=None)
+    _check_outputs([args.input], [args.output, args.mask, args.scores])
+    obj, rep = _read(args.input, nan_points="drop")
     opts = {"method": args.method, "k": args.k}
     if args.threshold is not None:
         opts["threshold"] = args.threshold
     if isinstance(obj, PointCloudSequence):
         if args.method != "rpca":
             raise _err("sequences are cleaned with --method rpca (Section 5.4.3).")
+        if args.scores:
+            raise _err("--scores is written for single point clouds, not for sequences.")
         res = outliers.clean_sequence(
             obj, k=args.k, **({"tau": args.threshold} if args.threshold else {})
         )
-        io.write(args.output, res.frames)
+        _write(args.output, res.frames)
         keep = np.array(res.keep, dtype=object) if not _same_len(res.keep) else np.stack(res.keep)
         if args.mask:
             _save_npy(args.mask, keep)
         _status(f"wrote {args.output} ({obj.n_frames} frames)")
         return 0
-    if not isinstance(obj, PointCloud):
-        obj = io.read(args.input, kind="points")
-    res = outliers.remove_outliers(obj, **opts)
-    io.write(
-        args.output, res.points if isinstance(res.points, PointCloud) else obj.select(res.keep)
-    )
+    if isinstance(obj, Mesh):
+        cloud = PointCloud(
+            obj.vertices, obj.vertex_normals, obj.vertex_colors, obj.vertex_attributes
+        )
+    elif isinstance(obj, PointCloud):
+        cloud = obj
+    else:
+        raise _err(
+            f"{Path(args.input).name} is a mesh animation; outliers needs a point cloud, a mesh "
+            "or a point-cloud sequence."
+        )
+    res = outliers.remove_outliers(cloud, **opts)
+    keep = np.asarray(res.keep, dtype=bool)
+    scores = np.asarray(res.scores, dtype=np.float64)
+    extra = ""
+    if isinstance(obj, Mesh):
+        # keep the faces whose three corners are kept, re-indexed; say how many went
+        kept_faces = keep[obj.faces].all(axis=1)
+        new_index = np.cumsum(keep) - 1
+        out = Mesh(
+            obj.vertices[keep],
+            new_index[obj.faces[kept_faces]],
+            vertex_normals=None if obj.vertex_normals is None else obj.vertex_normals[keep],
+            vertex_colors=None if obj.vertex_colors is None else obj.vertex_colors[keep],
+            vertex_attributes={k: v[keep] for k, v in obj.vertex_attributes.items()},
+            face_attributes={k: v[kept_faces] for k, v in obj.face_attributes.items()},
+        )
+        extra = f"; {int(kept_faces.sum())} of {obj.n_faces} faces kept (those of kept vertices)"
+    else:
+        out = res.points if isinstance(res.points, PointCloud) else obj.select(keep)
+    n_in = rep.n_input_vertices
+    if rep.source_index is not None:
+        # masks and scores cover every input row: rows without coordinates are not kept, score inf
+        full_keep = np.zeros(n_in, dtype=bool)
+        full_keep[rep.source_index] = keep
+        full_scores = np.full(n_in, np.inf)
+        full_scores[rep.source_index] = scores
+        keep, scores = full_keep, full_scores
+        extra += f"; {rep.n_nonfinite_rows} rows without coordinates (NaN) not kept"
+    _write(args.output, out)
     if args.mask:
-        _save_npy(args.mask, np.asarray(res.keep, dtype=bool))
+        _save_npy(args.mask, keep)
     if args.scores:
-        _save_npy(args.scores, np.asarray(res.scores, dtype=np.float64))
-    n = len(res.keep)
-    _status(f"wrote {args.output}: kept {int(np.sum(res.keep))} of {n} points ({args.method})")
+        _save_npy(args.scores, scores)
+    _status(
+        f"wrote {args.output}: kept {int(np.sum(res.keep))} of {n_in} points ({args.method}){extra}"
+    )
     return 0
+
+
+def _write(path, obj) -> None:
+    from .. import io
+
+    io.write(path, obj)
 
 
 def _same_len(arrs) -> bool:
@@ -271,6 +425,9 @@ def _save_npy(path, arr) -> None:
 
 
 # --------------------------------------------------------------------------- evaluate
+EVALUATIONS = ("denoise", "denoise-dynamic", "outliers", "saliency")
+
+
 def cmd_evaluate(args) -> int:
     from ..datasets import data_dir
 
@@ -302,7 +459,15 @@ def cmd_evaluate(args) -> int:
 
 # --------------------------------------------------------------------------- demo
 def cmd_demo(args) -> int:
+    from ..noise._core import check_level
     from .demo import run_demo
+
+    check_level(args.level)  # before the output folder is created
+    if args.methods:
+        from .. import denoise
+
+        for m in args.methods.split(","):
+            denoise.get(m)
 
     run_demo(
         out_dir=Path(args.out),
@@ -311,6 +476,81 @@ def cmd_demo(args) -> int:
         methods=args.methods.split(",") if args.methods else None,
     )
     return 0
+
+
+# --------------------------------------------------------------------------- help texts
+#: ``command -> (description, example)`` shown by ``spectrageo COMMAND --help``.
+HELP_TEXTS: dict[str, tuple[str, str]] = {
+    "info": (
+        "Summary of a geometry file: kind, counts, bounding box, mean edge length, what reading\n"
+        "repaired (welded soup vertices, rows without coordinates) and, for meshes, the topology\n"
+        "(components, boundary loops, non-manifold edges/vertices, duplicate and unreferenced\n"
+        "vertices, degenerate faces, genus).",
+        "spectrageo info part.stl --json",
+    ),
+    "convert": (
+        "Convert between formats, keeping vertex order, normals, colours, attributes and OBJ\n"
+        "texture coordinates where the target format can hold them. STL and triangle soups are\n"
+        "welded on read (--no-weld keeps the soup).",
+        "spectrageo convert scan.ply scan.obj",
+    ),
+    "noise": (
+        "Add seeded synthetic noise with ground truth: Gaussian along normals (Eq. 4.36), uniform,\n"
+        "impulsive; point clouds also outliers-far | outliers-near.",
+        "spectrageo noise fandisk.off noisy.ply --kind gaussian --level 0.3 --seed 0",
+    ),
+    "metrics": (
+        "Compare a result with a reference: per-vertex metrics (theta, distances, NMSVE) where\n"
+        "vertices correspond, symmetric surface distances (Hausdorff, Chamfer, F-score) always.",
+        "spectrageo metrics denoised.ply original.ply --json",
+    ),
+    "denoise": (
+        "Denoise a mesh or a mesh animation. Seam copies and soup corners are processed welded\n"
+        "and written back in the input's vertex order and count.",
+        "spectrageo denoise noisy.obj clean.ply --method tsgsp\n"
+        "spectrageo denoise crane_noisy.npz crane_clean.npz --method gft-rpca",
+    ),
+    "outliers": (
+        "Remove outliers from a point cloud, the vertices of a mesh (faces of kept vertices are\n"
+        "kept) or a point-cloud sequence. Masks and scores cover every input row.",
+        "spectrageo outliers scan.pcd clean.pcd --method rpca --mask keep.npy",
+    ),
+    "evaluate": (
+        "Run methods and peers over the shared benchmark data; prints markdown tables and, with\n"
+        "--out FILE, writes FILE.md and FILE.csv.",
+        "spectrageo evaluate denoise --out results/denoise",
+    ),
+    "demo": (
+        "Seeded Gaussian noise on the embedded fandisk, every denoiser, a metrics table and\n"
+        "meshes plus an error heatmap in the output folder.",
+        "spectrageo demo --out spectrageo-demo --level 0.3",
+    ),
+    "saliency": (
+        "Saliency map of a mesh, point cloud or animation (Section 6.1), per vertex or face.",
+        "spectrageo saliency part.obj --out saliency.ply --per vertex",
+    ),
+    "features": (
+        "Corner / edge / flat classification of faces or vertices (Section 4.4, Eq. 4.14-4.15).",
+        "spectrageo features part.obj --out classes.npy",
+    ),
+    "curves": (
+        "Feature vertices and feature curves (Section 6.1.1).",
+        "spectrageo curves part.obj --out curves.ply",
+    ),
+    "simplify": (
+        "Saliency-aware simplification (Algorithm 15).",
+        "spectrageo simplify model.off small.ply --ratio 0.8",
+    ),
+    "inspect": (
+        "Saliency deviation of a scanned, scaled or aged copy against a reference (Eq. 6.17-6.19).",
+        "spectrageo inspect reference.ply scan.ply --out heat.ply",
+    ),
+    "view": (
+        "Serve a local web viewer on 127.0.0.1 and open it in the browser. Files given here are\n"
+        "loaded at start; more can be loaded from the page.",
+        "spectrageo view model.ply noisy.ply",
+    ),
+}
 
 
 # --------------------------------------------------------------------------- registration
@@ -324,14 +564,25 @@ def register_all(sub) -> None:
         default=None,
         help="force how the file is interpreted",
     )
+    p.add_argument(
+        "--no-weld",
+        action="store_true",
+        help="keep the corners of STL/soup triangles apart (default: welded)",
+    )
     p.set_defaults(func=cmd_info)
 
     p = sub.add_parser("convert", help="convert between formats (vertex order preserved)")
     p.add_argument("input")
     p.add_argument("output")
     p.add_argument("--kind", choices=["mesh", "points", "animation", "sequence"], default=None)
-    p.add_argument(
-        "--weld", action="store_true", help="merge coincident STL corners into shared vertices"
+    g = p.add_mutually_exclusive_group()
+    g.add_argument(
+        "--weld",
+        action="store_true",
+        help="merge coincident vertices of any mesh (default: STL and triangle soups only)",
+    )
+    g.add_argument(
+        "--no-weld", action="store_true", help="keep STL/soup corners apart (the raw soup)"
     )
     p.add_argument(
         "--ascii", action="store_true", help="write text variants (PLY, PCD) instead of binary"
@@ -344,7 +595,8 @@ def register_all(sub) -> None:
     p.add_argument(
         "--kind",
         default="gaussian",
-        help="gaussian | uniform | impulsive | ... ; point clouds also outliers-far | outliers-near",
+        help="meshes and point clouds: gaussian, uniform, impulsive, quantization; animations "
+        "also spatial-mask; point clouds also outliers-far, outliers-near",
     )
     p.add_argument(
         "--level",
@@ -359,22 +611,54 @@ def register_all(sub) -> None:
     p.set_defaults(func=cmd_noise)
 
     p = sub.add_parser(
-        "metrics", help="compare a result with a reference (theta, distances, NMSVE, Hausdorff)"
+        "metrics",
+        help="compare a result with a reference (theta, distances, NMSVE, Hausdorff, Chamfer, "
+        "F-score)",
     )
-    p.add_argument("result")
-    p.add_argument("reference")
+    p.add_argument("result", help="mesh, point cloud or animation")
+    p.add_argument(
+        "reference",
+        help="mesh or point cloud (any resolution: without vertex correspondence only the "
+        "surface metrics are reported), or an animation for an animation",
+    )
     p.add_argument("--json", action="store_true")
+    p.add_argument(
+        "--radius",
+        type=float,
+        default=None,
+        metavar="R",
+        help="F-score distance threshold in model units (default: 1%% of the reference's "
+        "bounding-box diagonal)",
+    )
     p.set_defaults(func=cmd_metrics)
 
+    from .. import denoise as _den
+
+    static, dynamic = _den.available(), _den.dynamic_methods()
+    presets = {m: _den.get(m).presets for m in static if _den.get(m).presets}
     p = sub.add_parser("denoise", help="denoise a mesh or a mesh animation")
-    p.add_argument("input")
+    p.add_argument("input", help="mesh file, animation .npz or folder of numbered mesh frames")
     p.add_argument("output")
     p.add_argument(
-        "--method", default="tsgsp", help="tsgsp | gnf | bnf | bilateral | taubin | laplacian | ..."
+        "--method",
+        default="tsgsp",
+        metavar="METHOD",
+        help=f"meshes: {', '.join(static)}; animations also: {', '.join(dynamic)} "
+        "(static methods run frame by frame)",
     )
-    p.add_argument("--preset", default=None, help="method preset, e.g. scan | cad for tsgsp")
+    p.add_argument(
+        "--preset",
+        default=None,
+        help="parameter preset: " + "; ".join(f"{m}: {', '.join(ps)}" for m, ps in presets.items()),
+    )
     p.add_argument(
         "--pre", default=None, choices=["coarse"], help="run the TSGSP coarse step first"
+    )
+    p.add_argument(
+        "--no-weld",
+        action="store_true",
+        help="process vertices as stored: no welding of STL/soup corners or seam copies "
+        "(by default seams are processed welded and written back in the input's order)",
     )
     p.set_defaults(func=cmd_denoise)
 
@@ -391,13 +675,18 @@ def register_all(sub) -> None:
     p.add_argument(
         "--mask",
         default=None,
-        help="write the boolean keep mask (input order, True = kept) to .npy",
+        help="write the boolean keep mask to .npy: one entry per input row, in input order "
+        "(True = kept; rows without coordinates, NaN in organized PCDs, are False)",
     )
-    p.add_argument("--scores", default=None, help="write per-point outlier scores to .npy")
+    p.add_argument(
+        "--scores",
+        default=None,
+        help="write per-point outlier scores to .npy, one per input row (inf for NaN rows)",
+    )
     p.set_defaults(func=cmd_outliers)
 
     p = sub.add_parser("evaluate", help="run methods on the shared benchmark data and print tables")
-    p.add_argument("what", help="denoise | outliers | denoise-dynamic | saliency")
+    p.add_argument("what", choices=EVALUATIONS, metavar="AREA", help=" | ".join(EVALUATIONS))
     p.add_argument(
         "--data", default=None, help="data folder (default: $SPECTRAGEO_DATA or ../shared/data)"
     )
@@ -409,9 +698,11 @@ def register_all(sub) -> None:
     p.add_argument(
         "--out", default="spectrageo-demo", help="output folder (default ./spectrageo-demo)"
     )
-    p.add_argument("--level", type=float, default=0.3)
+    p.add_argument(
+        "--level", type=float, default=0.3, help="noise level relative to the mean edge length"
+    )
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--methods", default=None, help="comma-separated subset of denoisers")
+    p.add_argument("--methods", default=None, help=f"comma-separated subset of {', '.join(static)}")
     p.set_defaults(func=cmd_demo)
 
     for name in _COMMAND_MODULES:

@@ -240,7 +240,10 @@ def coarse(
         check_positive(noise_var, "noise_var")
     gen = as_rng(rng)
     if n < 8:
-        raise InvalidInputError(f"`V` must have at least 8 vertices for the coarse step; got {n}.")
+        raise InvalidInputError(
+            f"the mesh has {n} vertices; the TSGSP coarse step needs at least 8 vertices "
+            "(method 'gnf' or 'bnf' works on smaller meshes)."
+        )
 
     sig2, dirs = estimate_noise(V, patch=noise_patch, return_directions=True)
     if noise_var is not None:

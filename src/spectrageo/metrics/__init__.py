@@ -5,11 +5,14 @@ Quick use::
 
     from spectrageo import metrics
     d = metrics.compare(V_denoised, V_ground_truth, F)      # theta_deg, dmean, ..., hd_max
+    s = metrics.compare_surfaces((V, F), (V_other, F_other))  # no correspondence: hd, chamfer, fscore
     a = metrics.compare_animation(frames, frames_ref, F)   # per-frame means, kg, sted
 
 Units: ``theta_deg`` in degrees; ``dmean``, ``dmax``, ``hd_*`` in model units (not normalised);
 ``dist_n``, ``dmean_n`` unitless in [0, 2]; ``nmsve`` normalised by the squared bounding-box
-diagonal; ``kg`` in percent.
+diagonal; ``kg`` in percent. ``hd_mean``/``hd_max`` are symmetric (both directions, surfaces
+sampled at vertices, edge midpoints and face centroids; see :mod:`spectrageo.metrics.surface`);
+``chamfer`` (not squared) in model units; ``fscore``, ``precision``, ``recall`` in [0, 1].
 """
 
 from .dynamic import (
@@ -36,21 +39,26 @@ from .static import (
     vertex_normal_errors,
 )
 from .surface import (
+    SURFACE_KEYS,
     HausdorffResult,
     SurfaceDistance,
+    compare_surfaces,
     hausdorff,
     point_to_surface,
     surface_distance_per_vertex,
+    surface_samples,
 )
 
 __all__ = [
     "METRIC_KEYS",
+    "SURFACE_KEYS",
     "HausdorffResult",
     "StedResult",
     "SurfaceDistance",
     "bits_per_vertex",
     "compare",
     "compare_animation",
+    "compare_surfaces",
     "dist_n",
     "dmax",
     "dmean",
@@ -65,6 +73,7 @@ __all__ = [
     "sted",
     "sted_components",
     "surface_distance_per_vertex",
+    "surface_samples",
     "theta_deg",
     "theta_per_frame",
     "translation_error",

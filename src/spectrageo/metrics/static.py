@@ -23,7 +23,7 @@ from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_choice
 from ..geometry.data import Mesh
 from ..geometry.primitives import edges, face_normals, vertex_normals
-from .surface import hausdorff
+from .surface import _Side, _symmetric
 
 METRIC_KEYS = ("theta_deg", "dmean", "dmax", "dist_n", "dmean_n", "nmsve", "hd_mean", "hd_max")
 
@@ -275,7 +275,21 @@ def compare(
     dict
         ``theta_deg`` (degrees), ``dmean``, ``dmax`` (model units), ``dist_n``, ``dmean_n``
         (unitless), ``nmsve`` (bbox-normalised, see :func:`nmsve`), ``hd_mean``, ``hd_max``
-        (one-sided result -> reference surface, model units). Python floats.
+        (symmetric, model units, exactly as in :func:`spectrageo.metrics.compare_surfaces`: each
+        surface is sampled at its referenced vertices, edge midpoints and face centroids and the
+        samples are measured exactly against the other surface; ``hd_max`` is the larger of the two
+        one-sided maxima, ``hd_mean`` the mean of the two one-sided area-weighted means). Python
+        floats.
+
+    Notes
+    -----
+    Vertices used by no face are not part of either surface and do not enter ``hd_*``; the
+    per-vertex metrics (``dmean``, ``dmax``, ``nmsve``) are over all vertices, which correspond by
+    index. With corresponding vertices ``hd_max <= dmax`` (every surface point of one mesh is a
+    barycentric combination whose counterpart lies on the other).
+
+    Earlier versions computed ``hd_*`` one-sided (result vertices -> reference surface), which scored a
+    mesh collapsed onto a subset of the reference surface as ~0.
 
     Raises
     ------
@@ -314,7 +328,8 @@ def compare(
         "nmsve": _nmsve(V, V_ref, _unique_edges(F, V.shape[0]), "bbox"),
     }
     if hausdorff_distance:
-        h = hausdorff(V, None, V_ref, F, symmetric=False)
-        out["hd_mean"] = h.hd_mean
-        out["hd_max"] = h.hd_max
+        ref_side = _Side(V_ref, F)
+        h = _symmetric(_Side(V, F, like=ref_side), ref_side)
+        out["hd_mean"] = h["hd_mean"]
+        out["hd_max"] = h["hd_max"]
     return out
