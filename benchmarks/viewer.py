@@ -48,15 +48,23 @@ def bumpy_grid(nx: int, ny: int) -> Mesh:
     return Mesh(V, np.r_[np.c_[a, b, c], np.c_[a, c, d]])
 
 
+# the viewer's per-session token (every API request carries it), set when the server starts
+_HEADERS: dict[str, str] = {}
+
+
 def _post(url, data, ctype="application/octet-stream"):
-    req = urllib.request.Request(url, data=data, headers={"Content-Type": ctype})
+    req = urllib.request.Request(url, data=data, headers={**_HEADERS, "Content-Type": ctype})
     with urllib.request.urlopen(req, timeout=600) as r:
         return json.loads(r.read())
 
 
+def _get(url, timeout=600):
+    return urllib.request.urlopen(urllib.request.Request(url, headers=_HEADERS), timeout=timeout)
+
+
 def _wait(base, job):
     while True:
-        with urllib.request.urlopen(f"{base}api/job/{job}", timeout=60) as r:
+        with _get(f"{base}api/job/{job}", timeout=60) as r:
             j = json.loads(r.read())
         if j["state"] != "running":
             return j
@@ -65,6 +73,8 @@ def _wait(base, job):
 
 def server_side(path: Path) -> dict:
     srv = ViewerServer([], port=0).start()
+    _HEADERS.clear()
+    _HEADERS.update(srv.api_headers)
     try:
         data = path.read_bytes()
         t = time.perf_counter()
@@ -73,7 +83,7 @@ def server_side(path: Path) -> dict:
         t = time.perf_counter()
         nbytes = 0
         for what in ("positions", "faces"):
-            with urllib.request.urlopen(f"{srv.url}api/model/{info['id']}/{what}") as r:
+            with _get(f"{srv.url}api/model/{info['id']}/{what}") as r:
                 nbytes += len(r.read())
         t_tr = time.perf_counter() - t
         t = time.perf_counter()
@@ -84,7 +94,7 @@ def server_side(path: Path) -> dict:
         t_feat = time.perf_counter() - t
         assert j["state"] == "done", j
         t = time.perf_counter()
-        with urllib.request.urlopen(f"{srv.url}api/model/{info['id']}/lod") as r:
+        with _get(f"{srv.url}api/model/{info['id']}/lod") as r:
             lod = json.loads(r.read())
         t_lod = time.perf_counter() - t
         return {

@@ -331,3 +331,70 @@ def test_info_piped_into_head_is_not_an_error(tmp_path):
         cmd, shell=True, capture_output=True, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"}
     )
     assert "internal error" not in r.stderr and "Traceback" not in r.stderr
+
+
+# ------------------------------------------------------------------- odd files from real collections
+def test_gltf_with_separate_buffer_file(tmp_path, capsys):
+    import trimesh
+
+    files = trimesh.creation.box().export(
+        file_type="gltf"
+    )  # {"model.gltf": ..., "gltf_buffer_...bin": ...}
+    for fname, data in files.items():
+        (tmp_path / fname).write_bytes(data)
+    gltf = tmp_path / "model.gltf"
+    m = io.read(gltf)
+    assert isinstance(m, Mesh) and m.n_faces == 12
+    # without its buffer file: one clear line, exit 2
+    for fname in files:
+        if fname != "model.gltf":
+            (tmp_path / fname).unlink()
+    code, _, err = run_cli(capsys, "info", gltf)
+    assert code == 2 and "not found" in err and len(err.strip().splitlines()) == 1
+
+
+def test_obj_with_broken_texture_indices_keeps_geometry(tmp_path, capsys):
+    V, F = icosphere(1)
+    lines = [f"v {x} {y} {z}" for x, y, z in V] + ["vn 0 0 1"]
+    lines += [f"f {a + 1}/{a + 1}/1 {b + 1}/{b + 1}/1 {c + 1}/{c + 1}/1" for a, b, c in F]
+    (tmp_path / "t.obj").write_text("\n".join(lines) + "\n")  # vt indices, but no 'vt' lines
+    with pytest.warns(UserWarning, match="texture index 1 is out of range"):
+        m = io.read(tmp_path / "t.obj")
+    assert m.n_vertices == len(V) and m.n_faces == len(F) and "texcoord" not in m.face_attributes
+    code, out, err = run_cli(capsys, "info", tmp_path / "t.obj", "--json")
+    assert code == 0 and json.loads(out)["n_faces"] == len(F)
+    warn_lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(warn_lines) == 1 and warn_lines[0].startswith("spectrageo info: warning: t.obj:")
+
+
+def test_obj_faces_with_two_corners_are_skipped(tmp_path):
+    (tmp_path / "l.obj").write_text(
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1// 2//\nf 1 2 3\nf 1 3 4\n"
+    )
+    with pytest.warns(UserWarning, match="1 OBJ 'f' line"):
+        m = io.read(tmp_path / "l.obj")
+    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [0, 2, 3]])
+
+
+def test_tsgsp_on_tiny_meshes():
+    import trimesh
+
+    box = trimesh.creation.box()  # 8 vertices, 12 faces: the default patch (18) is capped
+    V, F = np.asarray(box.vertices, float), np.asarray(box.faces)
+    Vn = V + np.random.default_rng(0).normal(0, 0.01, V.shape)
+    out = denoise.denoise(Vn, F, method="tsgsp")
+    assert out.shape == V.shape and np.isfinite(out).all()
+    assert not np.array_equal(out, Vn)  # it ran (how much it harms tiny meshes: issue on clean input)
+    tet = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    Ft = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    out = denoise.denoise(tet, Ft, method="tsgsp")  # 4 vertices: fine step only
+    assert out.shape == tet.shape and np.isfinite(out).all()
+
+
+def test_isolated_triangles_give_a_plain_cause(tmp_path, capsys):
+    tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
+    V = np.vstack([tri, tri + 5, tri + 10])
+    F = np.arange(9).reshape(3, 3)
+    io.write(tmp_path / "s.ply", Mesh(V, F))
+    code, _, err = run_cli(capsys, "denoise", tmp_path / "s.ply", tmp_path / "o.ply")
+    assert code == 2 and "triangle soup that welding did not join" in err

@@ -39,14 +39,17 @@ def server(tmp_path_factory):
 
 
 def _get(srv, path):
-    with urllib.request.urlopen(srv.url + path, timeout=30) as r:
+    req = urllib.request.Request(srv.url + path, headers=srv.api_headers)
+    with urllib.request.urlopen(req, timeout=30) as r:
         return r.read(), dict(r.headers)
 
 
 def _json(srv, path, body=None, data=None):
     if body is not None:
         data = json.dumps(body).encode()
-    req = urllib.request.Request(srv.url + path, data=data, method="POST" if data else "GET")
+    req = urllib.request.Request(
+        srv.url + path, data=data, method="POST" if data else "GET", headers=srv.api_headers
+    )
     try:
         with urllib.request.urlopen(req, timeout=60) as r:
             return r.status, json.loads(r.read())
@@ -414,7 +417,8 @@ def test_cli_serves_until_interrupted(monkeypatch, capsys):
     def fake_serve(self):
         seen["url"] = self.url
         self.start()  # serve from a thread so that this one can query it
-        body = urllib.request.urlopen(self.url + "api/state", timeout=10).read()
+        req = urllib.request.Request(self.url + "api/state", headers=self.api_headers)
+        body = urllib.request.urlopen(req, timeout=10).read()
         seen["state"] = json.loads(body)
         self.httpd.shutdown()
         raise KeyboardInterrupt

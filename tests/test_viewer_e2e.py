@@ -98,7 +98,11 @@ def browser():
 @pytest.fixture
 def page(browser):
     srv = ViewerServer([], port=0).start()
-    ctx = browser.new_context(viewport={"width": 1280, "height": 760}, accept_downloads=True)
+    # Playwright's string predicates (wait_for_function) are evaluated with eval(), which the
+    # page's Content-Security-Policy forbids; test_viewer_security checks the page under its CSP.
+    ctx = browser.new_context(
+        viewport={"width": 1280, "height": 760}, accept_downloads=True, bypass_csp=True
+    )
     pg = ctx.new_page()
     pg.set_default_timeout(TIMEOUT)
     errors = []

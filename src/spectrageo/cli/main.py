@@ -7,10 +7,12 @@ failures print one line and exit with status 1 (set ``SPECTRAGEO_DEBUG=1`` for t
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import re
 import sys
 import traceback
+import warnings
 
 from .._errors import SpectrageoError
 
@@ -102,6 +104,22 @@ def main(argv: list[str] | None = None) -> int:
     quiet = bool(getattr(args, "quiet", False))
     _progress.QUIET = quiet
     commands.QUIET = quiet
+    with warnings.catch_warnings():
+        # warnings are one line each, like errors: "spectrageo CMD: warning: ..."
+        warnings.showwarning = functools.partial(_show_warning, args.command)
+        return _run(parser, args)
+
+
+def _show_warning(command, message, category, filename, lineno, file=None, line=None):
+    from .. import _errors
+
+    ours = issubclass(category, _errors.RepairWarning | _errors.ConvergenceWarning)
+    kind = "warning" if ours else f"warning ({category.__name__})"
+    text = " ".join(str(message).split())
+    print(f"spectrageo {command}: {kind}: {text}", file=sys.stderr)
+
+
+def _run(parser: argparse.ArgumentParser, args) -> int:
     try:
         return int(args.func(args) or 0)
     except SpectrageoError as exc:

@@ -202,7 +202,9 @@ def bnf(
         sigma_s = mean_centroid_distance(V, F)
         if not sigma_s > 0:
             raise InvalidInputError(
-                "`F` has no adjacent faces with distinct centroids; pass `sigma_s`."
+                "the mesh has no two adjacent faces with distinct centroids (isolated or duplicated "
+                "triangles, e.g. a triangle soup that welding did not join), so the filter has no "
+                "neighbourhood scale; pass `sigma_s` to give one."
             )
     N = face_normals(V, F)
     W = spatial_weights(

@@ -130,7 +130,9 @@ def gnf(
             lc0 = mean_centroid_distance(V, F, pairs=pairs)
             if not lc0 > 0:
                 raise InvalidInputError(
-                    "`F` has no adjacent faces with distinct centroids; pass `radius` and `sigma_s`."
+                    "the mesh has no two adjacent faces with distinct centroids (isolated or duplicated "
+                    "triangles, e.g. a triangle soup that welding did not join); pass `radius` "
+                    "and `sigma_s` to give the filter a scale."
                 )
             radius = float(p["radius_factor"]) * lc0
         nbr = face_radius_neighbors(face_centroids(V, F), radius, adjacency=ps.P)
@@ -144,7 +146,9 @@ def gnf(
         s = sigma_s if sigma_s is not None else mean_centroid_distance(X, F, pairs=pairs)
         if not s > 0:
             raise InvalidInputError(
-                "`F` has no adjacent faces with distinct centroids; pass `sigma_s`."
+                "the mesh has no two adjacent faces with distinct centroids (isolated or duplicated "
+                "triangles, e.g. a triangle soup that welding did not join), so the filter has no "
+                "neighbourhood scale; pass `sigma_s` to give one."
             )
         g = guided_normals(N, A, ps, measure=measure)
         N = joint_bilateral_normals(N, g, spatial_weights(C, A, nbr, s), sigma_r)

@@ -381,7 +381,7 @@ def select_neighborhoods(
     (m,) int64: the centre ``j`` of the patch chosen for each face (``i`` for flat faces).
     """
     N = np.ascontiguousarray(N, dtype=np.float64)
-    nb = np.ascontiguousarray(nb, dtype=np.int64)
+    nb = _check_patch_indices(nb)
     feature = np.ascontiguousarray(feature, dtype=np.bool_)
     m = nb.shape[0]
     if not feature.any():
@@ -390,20 +390,47 @@ def select_neighborhoods(
     return _select(N, nb, feature, lam, *_inverse_patches(nb))
 
 
+def _check_patch_indices(nb: np.ndarray) -> np.ndarray:
+    """``nb`` as C-contiguous int64 with every entry in ``[0, m)`` (m = number of rows)."""
+    nb = np.ascontiguousarray(nb, dtype=np.int64)
+    m = nb.shape[0]
+    if nb.size and (nb.min() < 0 or nb.max() >= m):
+        raise InvalidInputError(
+            f"`nb` (kNN patches) must hold face indices in [0, {m}); got "
+            f"{int(nb.min())}..{int(nb.max())} (non-finite or overflowing face centroids?)."
+        )
+    return nb
+
+
 def _inverse_patches(nb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Invert the kNN lists: the candidates of face ``i`` are ``cand[indptr[i]:indptr[i + 1]]``,
-    the centres ``j`` with ``i`` in ``P_j`` (ascending ``j``). Depends on the patches only."""
-    return _inverse_kernel(np.ascontiguousarray(nb, dtype=np.int64))
+    the centres ``j`` with ``i`` in ``P_j`` (ascending ``j``). Depends on the patches only.
+
+    Every member index must lie in ``[0, m)``: a kNN query that met an overflowing distance can
+    return the "missing neighbour" sentinel ``m``, and the compiled kernels below index with these
+    values (the kernel checks them too, so a bad index is an error, never a write out of bounds).
+    """
+    nb = _check_patch_indices(nb)
+    m = nb.shape[0]
+    indptr, cand, ok = _inverse_kernel(nb)
+    if not ok:  # pragma: no cover - guarded above; the kernel's own check is the last line
+        raise InvalidInputError(f"patch member indices must be in [0, {m}).")
+    return indptr, cand
 
 
 @numba.njit(cache=True)
 def _inverse_kernel(nb):  # pragma: no cover - jitted
-    """Counting sort of the (centre, member) pairs by member, centres ascending."""
+    """Counting sort of the (centre, member) pairs by member, centres ascending. Returns
+    ``(indptr, cand, ok)``; ``ok`` is False (and nothing was written out of bounds) when a member
+    index is outside ``[0, m)``."""
     m, k = nb.shape
     indptr = np.zeros(m + 1, dtype=np.int64)
     for j in range(m):
         for q in range(k):
-            indptr[nb[j, q] + 1] += 1
+            g = nb[j, q]
+            if g < 0 or g >= m:
+                return indptr, np.empty(0, dtype=np.int64), False
+            indptr[g + 1] += 1
     for i in range(m):
         indptr[i + 1] += indptr[i]
     fill = indptr[:-1].copy()
@@ -413,7 +440,7 @@ def _inverse_kernel(nb):  # pragma: no cover - jitted
             g = nb[j, q]
             cand[fill[g]] = j
             fill[g] += 1
-    return indptr, cand
+    return indptr, cand, True
 
 
 @numba.njit(cache=True)
@@ -788,7 +815,10 @@ def fine(
             )
     m = F.shape[0]
     if patch is None:
-        patch = int(p["patch"])
+        # the preset's patch, capped by the face count (a 12-face cube has no 18-face patches)
+        patch = min(int(p["patch"]), m)
+        if patch < 3:  # one or two faces: no patch to filter over
+            return V.copy()
     if isinstance(patch, bool) or not isinstance(patch, (int, np.integer)) or patch < 3:
         raise InvalidInputError(f"`patch` must be an integer >= 3; got {patch!r}.")
     if patch > m:
@@ -798,7 +828,9 @@ def fine(
         lc = mean_centroid_distance(V, F)
         if not lc > 0:
             raise InvalidInputError(
-                "`F` has no adjacent faces with distinct centroids; pass `sigma_c`."
+                "the mesh has no two adjacent faces with distinct centroids (isolated or "
+                "duplicated triangles, e.g. a triangle soup that welding did not join), so the "
+                "filter has no neighbourhood scale; pass `sigma_c` to give one."
             )
         sigma_c = lc * float(np.sqrt(patch / 6.0))
     X = V.copy()
@@ -890,6 +922,12 @@ def tsgsp(
     Returns
     -------
     (n, 3) float64 denoised positions, same vertex order and faces.
+
+    Notes
+    -----
+    Meshes with fewer than 8 vertices have no spectrum worth learning a subspace on: the coarse
+    step is skipped there and only the fine step runs (:func:`coarse` itself refuses them). The
+    fine step's patch is capped by the number of faces when it is not given.
     """
     if pre not in (None, "coarse"):
         raise InvalidInputError(f"`pre` must be None or 'coarse'; got {pre!r}.")
@@ -903,6 +941,9 @@ def tsgsp(
     if "source" in fine_options:
         raise InvalidInputError("`source` is set by `input_weight`; do not pass it to tsgsp.")
     V = as_points(V, "V")
+    if V.shape[0] < 8 and not coarse_options:
+        # too few vertices for a spectrum: the fine step alone (documented in Notes)
+        return fine(V, F, preset=preset, **fine_options)
     Vc = coarse(V, F, rng=rng, **(coarse_options or {}))
     source = Vc + float(input_weight) * (V - Vc) if input_weight > 0 else None
     return fine(Vc, F, preset=preset, source=source, **fine_options)

@@ -14,8 +14,14 @@ get a level-of-detail proxy (vertex clustering to at most 100,000 faces / 150,00
 options: ``?lod=0`` (always full detail), ``lod_faces=``, ``lod_points=``, ``lod_budget=``,
 ``lod_point_budget=``, ``lod_settle_ms=`` (thresholds, budgets, delay before the full redraw) and
 ``aa=0|1`` (multisampling; by default on for GPUs, off for software renderers such as SwiftShader).
+
+Security: the server answers on the loopback interface only, to its own origin only, and every API
+request must carry the per-session token written into the page (scripts use
+``srv.api_headers``); uploads, jobs, loaded models, connections and timeouts are bounded by
+:class:`ViewerLimits` (``spectrageo view --max-upload/--max-models/--max-memory`` or
+``SPECTRAGEO_VIEW_*`` environment variables). See :mod:`spectrageo.viewer.server`.
 """
 
-from .server import ViewerServer, ViewerSession, colorbar
+from .server import ViewerLimits, ViewerServer, ViewerSession, colorbar
 
-__all__ = ["ViewerServer", "ViewerSession", "colorbar"]
+__all__ = ["ViewerLimits", "ViewerServer", "ViewerSession", "colorbar"]

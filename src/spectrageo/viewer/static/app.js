@@ -9,20 +9,35 @@ const RED = [255, 0, 0];
 const CURVE_COLORS = [[228, 26, 28], [55, 126, 184], [77, 175, 74], [152, 78, 163], [255, 127, 0]];
 
 // ------------------------------------------------------------------ API helpers
+// Every API request carries the per-session token that the server wrote into index.html; the
+// server refuses requests without it (and any cross-origin request). Names and other data are only
+// ever inserted with textContent, never as HTML.
+const TOKEN = (document.querySelector('meta[name="spectrageo-token"]') || {}).content || '';
+function api(url, opts = {}) {
+  const headers = new Headers(opts.headers || {});
+  headers.set('X-Spectrageo-Token', TOKEN);
+  return fetch(url, { ...opts, headers, credentials: 'same-origin', cache: 'no-store' });
+}
+function el(tag, text, attrs = {}) {
+  const e = document.createElement(tag);
+  if (text !== undefined) e.textContent = String(text);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, String(v));
+  return e;
+}
 async function errorOf(r) {
   try { const j = await r.json(); return j.error || r.statusText; } catch { return r.statusText; }
 }
 async function getJSON(url, body) {
   const opts = body === undefined ? {} : {
     method: 'POST', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(body) };
-  const r = await fetch(url, opts);
+  const r = await api(url, opts);
   if (!r.ok) throw new Error(await errorOf(r));
   return r.json();
 }
 const TYPES = { float32: Float32Array, uint32: Uint32Array, uint8: Uint8Array, int8: Int8Array,
   int32: Int32Array, float64: Float64Array };
 async function getArray(url) {
-  const r = await fetch(url);
+  const r = await api(url);
   if (!r.ok) throw new Error(await errorOf(r));
   const T = TYPES[r.headers.get('X-Dtype')] || Uint8Array;
   return new T(await r.arrayBuffer());
@@ -66,7 +81,11 @@ async function runJob(url, body, label) {
   }
 }
 async function guard(fn) {
-  try { await fn(); } catch (e) { message(String(e.message || e)); }
+  try { await fn(); } catch (e) {
+    const text = String(e.message || e);
+    message(text);
+    if (/was unloaded/.test(text)) refreshState().catch(() => {});  // drop it from the lists
+  }
 }
 
 // ------------------------------------------------------------------ rendering
@@ -344,7 +363,7 @@ async function selectModel(id) {
     S.compare = null; S.rightMode = 'features'; S.playing = false;
     $('model-select').value = id;
     $('drop-hint').hidden = true;
-    $('metrics-table').innerHTML = '';
+    $('metrics-table').replaceChildren();
     S.faces = info.n_faces ? await getArray(`/api/model/${id}/faces`) : null;
     const pos = await positionsOf(info, 0);
     clearProxy();
@@ -388,10 +407,10 @@ function fillInfo() {
 function fillModelLists() {
   for (const sel of [$('model-select'), $('compare-select')]) {
     const keep = sel.value;
-    sel.innerHTML = '';
+    sel.replaceChildren();
     for (const m of S.models) {
-      const o = document.createElement('option');
-      o.value = m.id; o.textContent = `${m.name} (${m.kind})`;
+      const o = el('option', `${m.name} (${m.kind})`);
+      o.value = m.id;
       sel.appendChild(o);
     }
     if (keep) sel.value = keep;
@@ -399,7 +418,7 @@ function fillModelLists() {
 }
 function fillFieldList() {
   const sel = $('heat-field');
-  sel.innerHTML = '';
+  sel.replaceChildren();
   for (const f of S.info.fields) {
     const o = document.createElement('option'); o.value = f; o.textContent = f; sel.appendChild(o);
   }
@@ -407,7 +426,7 @@ function fillFieldList() {
 let FORMATS = null;
 function fillDownloadFormats() {
   const sel = $('download-format');
-  sel.innerHTML = '';
+  sel.replaceChildren();
   for (const f of (FORMATS && FORMATS.write[S.info.kind]) || []) {
     if (f.endsWith('/')) continue;
     const o = document.createElement('option'); o.value = f; o.textContent = f; sel.appendChild(o);
@@ -417,6 +436,7 @@ function fillDownloadFormats() {
 async function refreshState() {
   const st = await getJSON('/api/state');
   S.models = st.models;
+  S.limits = st.limits || null;
   FORMATS = st.formats;
   const dm = $('denoise-method');
   if (!dm.options.length) {
@@ -548,7 +568,12 @@ async function upload(file) {
   busy(+1);
   try {
     $('progress-text').textContent = `uploading ${file.name}…`;
-    const r = await fetch('/api/upload?name=' + encodeURIComponent(file.name),
+    const limit = S.limits && S.limits.max_upload_bytes;
+    if (limit && file.size > limit) {
+      throw new Error(`${file.name} is too large (${(file.size / 2 ** 20).toFixed(1)} MB; ` +
+        `the viewer accepts up to ${(limit / 2 ** 20).toFixed(0)} MB, see --max-upload)`);
+    }
+    const r = await api('/api/upload?name=' + encodeURIComponent(file.name),
       { method: 'POST', body: file });
     if (!r.ok) throw new Error(await errorOf(r));
     const { model } = await r.json();
@@ -610,7 +635,7 @@ $('field-input').addEventListener('change', (e) => guard(async () => {
   const f = e.target.files[0];
   e.target.value = '';
   if (!f || !S.info) return;
-  const r = await fetch(`/api/field-upload?model=${S.info.id}&name=${encodeURIComponent(f.name)}`,
+  const r = await api(`/api/field-upload?model=${S.info.id}&name=${encodeURIComponent(f.name)}`,
     { method: 'POST', body: f });
   if (!r.ok) throw new Error(await errorOf(r));
   const j = await r.json();
@@ -631,11 +656,13 @@ $('compare-btn').addEventListener('click', () => guard(async () => {
   setGeometry(views[1], pos, S.faces);
   recolor();
   const t = $('metrics-table');
-  t.innerHTML = '<tr><th colspan="2">' + bInfo.name + ' vs ' + S.info.name + '</th></tr>';
+  const head = el('tr');
+  head.appendChild(el('th', `${bInfo.name} vs ${S.info.name}`, { colspan: 2 }));
+  t.replaceChildren(head);
   for (const [k, v] of Object.entries(r.metrics)) {
-    const tr = document.createElement('tr');
+    const tr = el('tr');
     tr.dataset.metric = k;
-    tr.innerHTML = `<th>${k}</th><td>${Number(v).toPrecision(5)}</td>`;
+    tr.append(el('th', k), el('td', Number(v).toPrecision(5)));
     t.appendChild(tr);
   }
 }));
@@ -657,7 +684,7 @@ $('outlier-btn').addEventListener('click', () => guard(() => processAndShow(
 $('download-btn').addEventListener('click', () => guard(async () => {
   if (!S.info) return;
   const fmt = $('download-format').value;
-  const r = await fetch(`/api/model/${S.info.id}/download?format=${encodeURIComponent(fmt)}`);
+  const r = await api(`/api/model/${S.info.id}/download?format=${encodeURIComponent(fmt)}`);
   if (!r.ok) throw new Error(await errorOf(r));
   const blob = await r.blob();
   const a = document.createElement('a');
