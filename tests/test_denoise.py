@@ -255,11 +255,11 @@ def test_tsgsp_input_weight_recovers_acute_ridges():
     V = U / (np.abs(U[:, 2]) + 0.4 * np.linalg.norm(U[:, :2], axis=1))[:, None]
     Vn = noise.apply(V, F, kind="gaussian", level=0.3, rng=0)
     Vc = tsgsp.coarse(Vn, F)
-    literal = tsgsp.tsgsp(Vn, F, input_weight=0)
+    literal = tsgsp.tsgsp(Vn, F, input_weight=0, trust=None)
     np.testing.assert_array_equal(literal, tsgsp.fine(Vc, F))
     # the source equal to the guidance mesh is the plain fine step
     np.testing.assert_array_equal(tsgsp.fine(Vc, F, source=Vc), literal)
-    blended = tsgsp.tsgsp(Vn, F)  # input_weight=0.7 is the default
+    blended = tsgsp.tsgsp(Vn, F, trust=None)  # input_weight=0.7 is the default
     np.testing.assert_array_equal(blended, tsgsp.fine(Vc, F, source=Vc + 0.7 * (Vn - Vc)))
     t_lit = metrics.theta_deg(literal, V, F)
     t_new = metrics.theta_deg(blended, V, F)
