@@ -222,7 +222,6 @@ def test_ply_meshlab_quad_texcoord_follows_fan(tmp_path):
 
 def test_obj_corner_index_errors(tmp_path):
     cases = [
-        ("t.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/2 2/1 3/1\n", r"t.obj: OBJ face texture"),
         (
             "n.obj",
             "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//0 3//1\n",
@@ -235,6 +234,10 @@ def test_obj_corner_index_errors(tmp_path):
             r"w.obj: OBJ 'vn' lines",
         ),
     ]
+    # an out-of-range texture index drops the texture coordinates (the geometry is intact)
+    with pytest.warns(UserWarning, match=r"t.obj: OBJ face texture index 2 is out of range"):
+        m = io.read(put(tmp_path, "t.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/2 2/1 3/1\n"))
+    assert m.n_faces == 1 and "texcoord" not in m.face_attributes
     for name, text, match in cases:
         with pytest.raises(InvalidInputError, match=match):
             io.read(put(tmp_path, name, text))
@@ -456,8 +459,13 @@ def test_gltf_embedded_and_external_buffers(tmp_path):
     files = box.export(file_type="gltf")
     for key, data in files.items():
         (tmp_path / key).write_bytes(data)
+    # separate buffer files next to the .gltf are read (from a path), refused from bytes alone
+    m = io.read(tmp_path / "model.gltf")
+    np.testing.assert_allclose(m.vertices, box.vertices)
+    from spectrageo.io._trimesh_formats import read_gltf
+
     with pytest.raises(InvalidInputError, match=r"model.gltf: the glTF buffers are separate files"):
-        io.read(tmp_path / "model.gltf")
+        read_gltf(files["model.gltf"], "model.gltf")
 
 
 def test_gltf_glb_errors(tmp_path):

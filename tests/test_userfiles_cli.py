@@ -384,7 +384,9 @@ def test_tsgsp_on_tiny_meshes():
     Vn = V + np.random.default_rng(0).normal(0, 0.01, V.shape)
     out = denoise.denoise(Vn, F, method="tsgsp")
     assert out.shape == V.shape and np.isfinite(out).all()
-    assert not np.array_equal(out, Vn)  # it ran (how much it harms tiny meshes: issue on clean input)
+    assert not np.array_equal(
+        out, Vn
+    )  # it ran (how much it harms tiny meshes: issue on clean input)
     tet = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
     Ft = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
     out = denoise.denoise(tet, Ft, method="tsgsp")  # 4 vertices: fine step only

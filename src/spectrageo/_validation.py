@@ -18,10 +18,17 @@ def _shape_str(a: Any) -> str:
     return str(tuple(shape)) if shape is not None else type(a).__name__
 
 
+#: Largest coordinate magnitude accepted by :func:`as_points`: squared distances and cross products
+#: of coordinates up to 1e150 stay below the float64 maximum (1.8e308), so no kernel overflows to
+#: inf (an inf turned into an index by compiled code would read or write out of bounds).
+MAX_COORDINATE = 1e150
+
+
 def as_points(
     V: Any, name: str = "V", *, allow_empty: bool = False, copy: bool = False
 ) -> np.ndarray:
-    """Return ``V`` as a C-contiguous float64 array of shape (n, 3) with finite entries."""
+    """Return ``V`` as a C-contiguous float64 array of shape (n, 3) with finite entries of
+    magnitude at most :data:`MAX_COORDINATE` (1e150)."""
     try:
         arr = np.array(V, dtype=np.float64, copy=copy) if copy else np.asarray(V, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -36,6 +43,13 @@ def as_points(
         bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
         raise InvalidInputError(
             f"`{name}` contains NaN or inf coordinates at {bad.size} row(s), first at index {int(bad[0])}."
+        )
+    if arr.size and np.abs(arr).max() > MAX_COORDINATE:
+        big = np.flatnonzero((np.abs(arr) > MAX_COORDINATE).any(axis=1))
+        raise InvalidInputError(
+            f"`{name}` has coordinates of magnitude above {MAX_COORDINATE:g} at {big.size} row(s), "
+            f"first at index {int(big[0])} ({float(np.abs(arr[big[0]]).max()):.3g}); squared "
+            "distances would overflow. Rescale the data."
         )
     return np.ascontiguousarray(arr)
 
@@ -56,16 +70,16 @@ def as_faces(F: Any, n_vertices: int, name: str = "F", *, allow_empty: bool = Fa
         raise InvalidInputError(
             f"`{name}` must hold integer vertex indices; got dtype {arr.dtype}."
         )
-    arr = np.ascontiguousarray(arr, dtype=np.int64)
     if arr.shape[0] == 0 and not allow_empty:
         raise InvalidInputError(f"`{name}` is empty; a mesh needs at least one face.")
     if arr.size:
+        # in the original dtype: a uint64 index >= 2**63 must not wrap to a negative int64
         lo, hi = int(arr.min()), int(arr.max())
         if lo < 0 or hi >= n_vertices:
             raise InvalidInputError(
                 f"`{name}` has vertex indices out of range: expected 0..{n_vertices - 1}; got {lo}..{hi}."
             )
-    return arr
+    return np.ascontiguousarray(arr, dtype=np.int64)
 
 
 def as_scalar_field(x: Any, n: int, name: str) -> np.ndarray:
@@ -119,7 +133,8 @@ def as_rng(rng: Any) -> np.random.Generator:
 
 def as_frames(frames: Any, name: str = "frames") -> np.ndarray:
     """Validate animation frames: a (T, n, 3) float64 array (or an object with ``.frames``),
-    T, n >= 1, all finite; the first non-finite vertex is named in the error."""
+    T, n >= 1, all finite and at most :data:`MAX_COORDINATE` in magnitude; the first bad vertex is
+    named in the error."""
     try:
         A = np.asarray(getattr(frames, "frames", frames), dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -134,5 +149,11 @@ def as_frames(frames: Any, name: str = "frames") -> np.ndarray:
         bad = np.argwhere(~np.isfinite(A).all(axis=2))[0]
         raise InvalidInputError(
             f"`{name}` contains NaN or inf coordinates (first at frame {bad[0]}, vertex {bad[1]})."
+        )
+    if np.abs(A).max() > MAX_COORDINATE:
+        bad = np.argwhere((np.abs(A) > MAX_COORDINATE).any(axis=2))[0]
+        raise InvalidInputError(
+            f"`{name}` has coordinates of magnitude above {MAX_COORDINATE:g} (first at frame "
+            f"{bad[0]}, vertex {bad[1]}); squared distances would overflow. Rescale the data."
         )
     return A

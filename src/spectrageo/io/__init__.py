@@ -42,6 +42,18 @@ Policies
       ``source_index`` attribute (and in :class:`ReadReport`), so per-point outputs can be mapped
       back to every input row.
     * Every write is atomic (:func:`atomic_write`): a failure leaves no partial file and no temporary.
+      Temporaries are named ``.NAME.spectrageo-tmp-XXXXXXXX.EXT`` (those of killed writes older than
+      an hour are removed on the next write); an existing target keeps its permission bits, a
+      symbolic link is written through to its target, and a FIFO/device or read-only target is
+      refused with a clear error.
+    * Hostile or corrupted files: every size a file declares (element and point counts, array
+      shapes, VLRs, chunk tables, compressed and decompressed sizes) is checked against the bytes
+      present and against a memory cap before anything is allocated or handed to native code
+      (lazrs, python-lzf); gzip is inflated in a bounded stream. The cap is the environment
+      variable ``SPECTRAGEO_MAX_BYTES`` (bytes, or with a suffix ``K M G T``: ``16G``); default: the
+      smallest of 8 GiB, half the physical memory and a quarter of the address-space limit
+      (``ulimit -v``). Header/body disagreements are errors (see each reader's docstring), and so
+      is running out of memory on a file (``MemoryError`` becomes :class:`InvalidInputError`).
 """
 
 from ._api import (

@@ -7,6 +7,7 @@ import importlib
 import io
 import os
 import re
+import warnings
 import zipfile
 import zlib
 from collections.abc import Callable
@@ -16,13 +17,14 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import InvalidInputError, UnsupportedFormatError
+from .._errors import ConvergenceWarning, InvalidInputError, RepairWarning, UnsupportedFormatError
 from ..geometry.data import Mesh, MeshAnimation, PointCloud, PointCloudSequence
 from ..geometry.repair import WELD_TOL, Weld, is_soup
 from ..geometry.repair import weld as weld_mesh
 from ._common import (
     atomic_dir,
     atomic_write,
+    check_alloc,
     exc_text,
     natural_key,
     read_bytes,
@@ -184,6 +186,9 @@ def read(
         What to do with points whose coordinates are NaN/inf. None: ``"drop"`` for PCD (NaN marks
         "no measurement" in organized clouds; the kept points' original indices go to the attribute
         ``source_index``), ``"raise"`` elsewhere. Mesh vertices are never dropped (indices would move).
+        Normals or colours with NaN/inf in some rows (of points that are kept) are not read at
+        all, with a :class:`~spectrageo.RepairWarning` giving the count: the coordinates are
+        kept, and no NaN normal reaches the result (processing recomputes normals when needed).
 
     Returns
     -------
@@ -218,7 +223,51 @@ def read_with_report(
     format: str | None = None,
     nan_points: str | None = None,
 ) -> tuple[Geometry, ReadReport]:
-    """:func:`read`, also returning a :class:`ReadReport` (vertices merged, rows dropped)."""
+    """:func:`read`, also returning a :class:`ReadReport` (vertices merged, rows dropped).
+
+    Hostile input: the readers check every size a file declares against the bytes present and the
+    memory cap (``SPECTRAGEO_MAX_BYTES``, see :mod:`spectrageo.io._common`) before allocating;
+    an allocation that still fails (``MemoryError``) becomes :class:`InvalidInputError` naming the
+    file. Warnings of the libraries underneath (numpy casts, trimesh, plyfile) are silenced while
+    reading; spectrageo's own :class:`~spectrageo.RepairWarning` s are emitted after a successful
+    read only, so that a failed read reports one error and nothing else.
+    """
+    with warnings.catch_warnings(record=True) as caught, np.errstate(all="ignore"):
+        warnings.simplefilter("always")
+        try:
+            out = _read_with_report(
+                path, kind=kind, weld=weld, weld_tol=weld_tol, format=format, nan_points=nan_points
+            )
+        except MemoryError as exc:
+            raise InvalidInputError(
+                f"{Path(path).name}: not enough memory to read this file (the sizes it declares "
+                f"need more than is available{': ' + str(exc) if str(exc) else ''})."
+            ) from None
+        except RecursionError as exc:
+            raise InvalidInputError(f"{Path(path).name}: malformed file ({exc}).") from None
+        except InvalidInputError as exc:
+            # one line, whatever a library message or a name inside the file contains
+            msg = str(exc)
+            if not msg.isprintable():
+                flat = " ".join(msg.split())
+                flat = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in flat)
+                raise type(exc)(flat) from exc
+            raise
+    for w in caught:
+        if issubclass(w.category, RepairWarning | ConvergenceWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return out
+
+
+def _read_with_report(
+    path: str | os.PathLike,
+    *,
+    kind: str | None,
+    weld: bool | None,
+    weld_tol: float | None,
+    format: str | None,
+    nan_points: str | None,
+) -> tuple[Geometry, ReadReport]:
     _check_kind(kind)
     if nan_points is not None and nan_points not in NAN_POLICIES:
         raise InvalidInputError(
@@ -263,7 +312,44 @@ def _read_raw(p: Path, suffix: str, gz: bool) -> RawGeometry:
     data = read_bytes(p, gz)
     if not data.strip():
         raise InvalidInputError(f"{p.name}: empty file.")
-    return _reader(suffix)(data, p.name)
+    if suffix == ".gltf":  # separate buffer files are found next to the .gltf
+        rg = _reader(suffix)(data, p.name, folder=p.parent)
+    else:
+        rg = _reader(suffix)(data, p.name)
+    _check_face_range(rg, p.name)
+    return rg
+
+
+def _check_face_range(rg: RawGeometry, name: str) -> None:
+    """Face indices within ``[0, n_vertices)``, checked before anything sizes arrays by them."""
+    F = rg.faces
+    if F is None or not len(F):
+        return
+    n = rg.vertices.shape[0]
+    lo, hi = int(F.min()), int(F.max())
+    if lo < 0 or hi >= n:
+        raise InvalidInputError(
+            f"{name}: `faces` has vertex indices out of range: expected 0..{n - 1} (the file has "
+            f"{n} vertices); got {lo}..{hi}."
+        )
+
+
+def _drop_nonfinite(a, n: int, name: str, what: str):
+    """Per-vertex normals/colours with NaN/inf rows are not kept (the geometry is): a RepairWarning
+    says how many rows were bad. Returns ``a`` or None."""
+    if a is None:
+        return None
+    a = np.asarray(a)
+    if a.dtype.kind != "f" or np.isfinite(a).all():
+        return a
+    cnt = _nonfinite_rows(a.reshape(a.shape[0], -1)).size
+    warnings.warn(
+        f"{name}: {cnt} of {n} {what} are NaN or inf; the file's {what} are not read "
+        "(coordinates kept).",
+        RepairWarning,
+        stacklevel=3,
+    )
+    return None
 
 
 def _nonfinite_rows(a: np.ndarray) -> np.ndarray:
@@ -346,8 +432,8 @@ def _build_with_report(
             return Mesh(
                 rg.vertices,
                 rg.faces,
-                vertex_normals=rg.normals,
-                vertex_colors=rg.colors,
+                vertex_normals=_drop_nonfinite(rg.normals, n, name, "vertex normals"),
+                vertex_colors=_drop_nonfinite(rg.colors, n, name, "vertex colours"),
                 vertex_attributes=rg.vertex_attributes,
                 face_attributes=rg.face_attributes,
             ), report
@@ -371,9 +457,9 @@ def _build_with_report(
         colors = None if colors is None else colors[keep]
         attrs = {k: v[keep] for k, v in attrs.items()}
         attrs.setdefault("source_index", np.flatnonzero(keep))
-    if normals is not None and not np.isfinite(normals).all():
-        cnt = _nonfinite_rows(normals).size
-        raise InvalidInputError(f"{name}: {cnt} point normals are NaN or inf.")
+    # one bad normal must not cost the whole cloud: the normals are dropped, the points kept
+    normals = _drop_nonfinite(normals, P.shape[0], name, "point normals")
+    colors = _drop_nonfinite(colors, P.shape[0], name, "point colours")
     report = ReadReport(
         n_input_vertices=n,
         n_nonfinite_rows=int(bad.size),
@@ -385,14 +471,39 @@ def _build_with_report(
         raise InvalidInputError(f"{name}: {exc}") from exc
 
 
+def _keys(keys) -> str:
+    """Archive member names for a message: printable, one line, at most 10 of them."""
+    shown = [k if k.isprintable() else ascii(k) for k in sorted(keys)]
+    return ", ".join(shown[:10]) + (f", ... ({len(shown)} in all)" if len(shown) > 10 else "")
+
+
 def _npz_array(d, key: str, name: str) -> np.ndarray:
+    """Array ``key`` of the archive: the member's declared size is checked against the memory cap,
+    the member read (zipfile stops at the declared size and checks the CRC), then parsed by
+    :func:`._simple.parse_npy`, which checks the header's shape against the bytes."""
+    from ._simple import parse_npy
+
+    zf = d.zip
+    member = key if key in zf.namelist() else key + ".npy"
     try:
-        arr = d[key]
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as exc:
+        info = zf.getinfo(member)
+        check_alloc(info.file_size, name, f"array {key!r}")
+        raw = zf.read(member)
+    except InvalidInputError:
+        raise
+    except (
+        ValueError,
+        OSError,
+        EOFError,
+        zipfile.BadZipFile,
+        zlib.error,
+        KeyError,
+        NotImplementedError,
+        RuntimeError,
+        OverflowError,
+    ) as exc:
         raise InvalidInputError(f"{name}: cannot read array {key!r} ({exc_text(exc)}).") from exc
-    if not isinstance(arr, np.ndarray):  # a member that is not in .npy format comes back as bytes
-        raise InvalidInputError(f"{name}: cannot read array {key!r} (not a .npy member).")
-    return arr
+    return parse_npy(raw, f"{name}: cannot read array {key!r}")
 
 
 def _read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCloudSequence:
@@ -402,7 +513,17 @@ def _read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCl
     name = p.name
     try:
         d = np.load(io.BytesIO(data), allow_pickle=False)
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+    except (
+        ValueError,
+        OSError,
+        EOFError,
+        zipfile.BadZipFile,
+        OverflowError,
+        KeyError,
+        NotImplementedError,  # "zip file version 24.3", unknown compression
+        RuntimeError,  # encrypted members
+        zlib.error,
+    ) as exc:
         raise InvalidInputError(f"{name}: not a valid .npz archive ({exc_text(exc)}).") from exc
     if not isinstance(d, np.lib.npyio.NpzFile):
         raise InvalidInputError(f"{name}: not a .npz archive (a single .npy array).")
@@ -416,11 +537,11 @@ def _read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCl
         if "faces" in keys or kind == "animation" or (vkey is not None and "points" not in keys):
             if "faces" not in keys and kind != "sequence":
                 raise InvalidInputError(
-                    f"{name}: animation .npz lacks key 'faces' (has {', '.join(sorted(keys))})."
+                    f"{name}: animation .npz lacks key 'faces' (has {_keys(keys)})."
                 )
             if vkey is None:
                 raise InvalidInputError(
-                    f"{name}: animation .npz lacks key 'vertices' (has {', '.join(sorted(keys))})."
+                    f"{name}: animation .npz lacks key 'vertices' (has {_keys(keys)})."
                 )
             frames = _npz_array(d, vkey, name)
             _check_frames(frames, name, vkey)
@@ -463,7 +584,7 @@ def _read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCl
                 f"{name}: 'points' must have shape (T, n, 3), or (N, 3) with 'counts' (T,); got {pts.shape}."
             )
         raise InvalidInputError(
-            f"{name}: .npz has keys {', '.join(sorted(keys)) or '(none)'}; expected 'vertices' and "
+            f"{name}: .npz has keys {_keys(keys) or '(none)'}; expected 'vertices' and "
             "'faces' (animation) or 'points' [+ 'counts'] (sequence)."
         )
 

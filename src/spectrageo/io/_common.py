@@ -1,4 +1,16 @@
-"""Helpers shared by the format modules: paths, gzip, atomic writes, polygon fans, frame sorting."""
+"""Helpers shared by the format modules: paths, gzip, atomic writes, polygon fans, frame sorting,
+and the size limits every reader applies to what a file declares.
+
+Memory cap
+    Readers check the sizes a file declares (point and element counts, array shapes, decompressed
+    sizes) against the bytes actually present and against a cap on the memory one file may ask
+    for, *before* allocating or handing the bytes to a native library. The cap is read from the
+    environment variable ``SPECTRAGEO_MAX_BYTES`` (a number of bytes, optionally with a suffix
+    ``K``, ``M``, ``G`` or ``T``, powers of 1024: ``SPECTRAGEO_MAX_BYTES=16G``); by default it is the
+    smallest of 8 GiB, half of the physical memory and a quarter of the process's address-space
+    limit (``ulimit -v``) when one is set. A file whose decoding would exceed it is refused with
+    :class:`~spectrageo.InvalidInputError` naming the file, the field and the value.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +19,9 @@ import gzip
 import os
 import re
 import shutil
+import stat
 import tempfile
+import time
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
@@ -16,6 +30,80 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+
+MAX_BYTES_ENV = "SPECTRAGEO_MAX_BYTES"
+_DEFAULT_MAX = 8 * 1024**3
+_UNITS = {"": 1, "K": 1024, "M": 1024**2, "G": 1024**3, "T": 1024**4}
+
+
+def _default_max_bytes() -> int:
+    cap = _DEFAULT_MAX
+    try:
+        phys = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        if phys > 0:
+            cap = min(cap, phys // 2)
+    except (ValueError, OSError, AttributeError):
+        pass
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft not in (resource.RLIM_INFINITY, -1) and soft > 0:
+            cap = min(cap, soft // 4)
+    except (ImportError, ValueError, OSError):
+        pass
+    return int(cap)
+
+
+def max_bytes() -> int:
+    """Memory cap (bytes) for what one file may ask to allocate; see the module docstring.
+
+    Raises
+    ------
+    InvalidInputError
+        When ``SPECTRAGEO_MAX_BYTES`` is set but is not a positive size.
+    """
+    text = os.environ.get(MAX_BYTES_ENV, "").strip()
+    if not text:
+        return _default_max_bytes()
+    m = re.fullmatch(r"(\d+(?:\.\d+)?)\s*([KMGT]?)(?:i?B)?", text, flags=re.IGNORECASE)
+    if m is None or float(m.group(1)) <= 0:
+        raise InvalidInputError(
+            f"environment variable {MAX_BYTES_ENV} must be a positive size in bytes "
+            f"(e.g. 8G, 500M, 1000000); got {text!r}."
+        )
+    return int(float(m.group(1)) * _UNITS[m.group(2).upper()])
+
+
+def _fmt_bytes(n: int) -> str:
+    for unit, k in (("TiB", 1024**4), ("GiB", 1024**3), ("MiB", 1024**2), ("KiB", 1024)):
+        if n >= k:
+            return f"{n / k:.1f} {unit}"
+    return f"{n} bytes"
+
+
+def check_alloc(need: int, name: str, what: str) -> None:
+    """Refuse to allocate ``need`` bytes for ``what`` when it exceeds :func:`max_bytes`.
+
+    ``need`` is a Python int (exact, no overflow), e.g. ``count * record_size`` from a header.
+    """
+    cap = max_bytes()
+    if need > cap:
+        raise InvalidInputError(
+            f"{name}: {what} needs {_fmt_bytes(need)}, more than the memory cap of "
+            f"{_fmt_bytes(cap)} (set {MAX_BYTES_ENV} to raise it)."
+        )
+
+
+def check_count(value: Any, name: str, field: str, *, minimum: int = 0) -> int:
+    """A count read from a header as a Python int >= ``minimum`` (error names the field)."""
+    try:
+        v = int(value)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise InvalidInputError(f"{name}: {field} must be an integer; got {value!r}.") from exc
+    if v < minimum:
+        raise InvalidInputError(f"{name}: {field} must be >= {minimum}; got {v}.")
+    return v
 
 
 def split_suffix(path: Path) -> tuple[str, bool]:
@@ -27,8 +115,19 @@ def split_suffix(path: Path) -> tuple[str, bool]:
 
 
 def read_bytes(path: Path, gzipped: bool) -> bytes:
-    """Whole content of ``path``, gunzipped when ``gzipped``; errors become InvalidInputError."""
+    """Whole content of ``path``, gunzipped when ``gzipped``; errors become InvalidInputError.
+
+    Gzip data is inflated in a bounded stream (chunks of at most 16 MiB, stopping as soon as the
+    output would exceed :func:`max_bytes`), so a small "gzip bomb" cannot exhaust memory; several
+    concatenated gzip members are read as one stream, as ``gunzip`` does.
+    """
     try:
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            if stat.S_ISDIR(st.st_mode):
+                raise InvalidInputError(f"{path.name}: expected a file, got a folder.")
+            raise InvalidInputError(f"{path.name}: not a regular file (a pipe or device).")
+        check_alloc(st.st_size, path.name, "reading the file")
         raw = path.read_bytes()
     except IsADirectoryError as exc:
         raise InvalidInputError(f"{path.name}: expected a file, got a folder.") from exc
@@ -36,12 +135,57 @@ def read_bytes(path: Path, gzipped: bool) -> bytes:
         raise InvalidInputError(f"file not found: {path}") from exc
     if not gzipped:
         return raw
+    return gunzip(raw, path.name)
+
+
+_GZ_CHUNK = 16 * 1024**2
+
+
+def gunzip(raw: bytes, name: str) -> bytes:
+    """Inflate gzip ``raw`` (one or more members) with the output bounded by :func:`max_bytes`."""
+    cap = max_bytes()
+    parts: list[bytes] = []
+    total = 0
+    data = memoryview(raw)
     try:
-        return gzip.decompress(raw)
-    except (gzip.BadGzipFile, EOFError, zlib.error, OSError) as exc:
+        if len(raw) < 2 or raw[:2] != b"\x1f\x8b":
+            raise InvalidInputError(f"{name}: corrupted or truncated gzip data (not a gzip file).")
+        while True:
+            d = zlib.decompressobj(16 + zlib.MAX_WBITS)
+            buf = data
+            while True:
+                out = d.decompress(buf, _GZ_CHUNK)
+                total += len(out)
+                if total > cap:
+                    raise InvalidInputError(
+                        f"{name}: gzip data expands to more than the memory cap of "
+                        f"{_fmt_bytes(cap)} (set {MAX_BYTES_ENV} to raise it)."
+                    )
+                parts.append(out)
+                if d.eof:
+                    break
+                buf = d.unconsumed_tail
+                if not buf and not out:
+                    out = d.flush(_GZ_CHUNK)
+                    total += len(out)
+                    parts.append(out)
+                    if not d.eof:
+                        raise InvalidInputError(
+                            f"{name}: corrupted or truncated gzip data (the stream ends early)."
+                        )
+            rest = d.unused_data
+            if not rest.strip(b"\x00"):
+                break
+            if rest[:2] != b"\x1f\x8b":
+                raise InvalidInputError(
+                    f"{name}: corrupted gzip data ({len(rest)} bytes of trailing garbage)."
+                )
+            data = memoryview(rest)
+    except zlib.error as exc:
         raise InvalidInputError(
-            f"{path.name}: corrupted or truncated gzip data ({type(exc).__name__}: {exc})."
+            f"{name}: corrupted or truncated gzip data ({type(exc).__name__}: {exc})."
         ) from exc
+    return b"".join(parts)
 
 
 def write_bytes(target: Path, data: bytes, gzipped: bool) -> None:
@@ -62,34 +206,101 @@ def _read_umask() -> int:
 _UMASK = _read_umask()
 
 
+TMP_TAG = ".spectrageo-tmp-"
+STALE_SECONDS = 3600.0
+
+
+def _remove_stale_temporaries(parent: Path, name: str) -> None:
+    """Remove ``.NAME.spectrageo-tmp-*`` left next to ``NAME`` by a killed write (older than 1 h)."""
+    prefix = f".{name}{TMP_TAG}"
+    now = time.time()
+    try:
+        entries = list(os.scandir(parent))
+    except OSError:
+        return
+    for e in entries:
+        if not e.name.startswith(prefix):
+            continue
+        try:
+            st = e.stat(follow_symlinks=False)
+            if now - st.st_mtime < STALE_SECONDS:
+                continue
+            if stat.S_ISDIR(st.st_mode):
+                shutil.rmtree(e.path, ignore_errors=True)
+            elif stat.S_ISREG(st.st_mode):
+                os.unlink(e.path)
+        except OSError:
+            continue
+
+
+def _resolve_target(path: str | os.PathLike) -> tuple[Path, os.stat_result | None]:
+    """The file an atomic write replaces: symlinks are followed (the link is kept and its target
+    gets the new content); FIFOs, devices and sockets are refused, as are read-only files."""
+    target = Path(path)
+    if target.is_symlink():
+        resolved = Path(os.path.realpath(target))
+        if resolved.is_dir():
+            raise InvalidInputError(
+                f"cannot write {target}: it is a link to a folder ({resolved})."
+            )
+        target = resolved
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise InvalidInputError(f"output folder does not exist: {parent}")
+    try:
+        st = os.stat(target)
+    except FileNotFoundError:
+        return target, None
+    except OSError as exc:
+        raise InvalidInputError(f"cannot write {target}: {exc.strerror or exc}.") from exc
+    if stat.S_ISDIR(st.st_mode):
+        raise InvalidInputError(f"cannot write {target}: a folder with that name exists.")
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a FIFO (named pipe)" if stat.S_ISFIFO(st.st_mode) else "not a regular file"
+        raise InvalidInputError(
+            f"cannot write {target}: it is {kind}; refusing to replace it with a regular file."
+        )
+    if not (st.st_mode & 0o222) or not os.access(target, os.W_OK):
+        raise InvalidInputError(
+            f"cannot write {target}: the file is read-only (mode "
+            f"{stat.S_IMODE(st.st_mode):o}); make it writable or choose another name."
+        )
+    return target, st
+
+
 @contextlib.contextmanager
 def atomic_write(path: str | os.PathLike) -> Iterator[Path]:
     """Context manager for an atomic file write.
 
-    Yields the path of a temporary file in the same folder as ``path`` (same final suffix, so that
-    libraries choosing a format from the name still do); when the block exits normally the temporary
-    file replaces ``path`` with :func:`os.replace` (atomic on POSIX and Windows). When the block raises,
-    the temporary file is removed and ``path`` is left untouched (absent or with its old content).
+    Yields the path of a temporary file ``.NAME.spectrageo-tmp-XXXXXXXX.SUFFIX`` in the same folder
+    as ``path`` (same final suffix, so that libraries choosing a format from the name still do);
+    when the block exits normally the temporary file replaces ``path`` with :func:`os.replace`
+    (atomic on POSIX and Windows). When the block raises, the temporary file is removed and ``path``
+    is left untouched (absent or with its old content).
+
+    * An existing target keeps its permission bits; a new file gets ``0o666 & ~umask``.
+    * A symbolic link is written through: its target file gets the new content, the link stays.
+    * A FIFO, device or socket is refused (it would be silently replaced by a regular file), and
+      so is a read-only file (no write permission bit), with :class:`InvalidInputError`.
+    * Temporaries of writes that were killed (``.NAME.spectrageo-tmp-*`` older than one hour) are
+      removed from the folder before writing.
 
     Examples
     --------
     >>> with atomic_write("out.npy") as tmp:  # doctest: +SKIP
     ...     np.save(tmp, arr)
     """
-    target = Path(path)
+    target, st = _resolve_target(path)
     parent = target.parent if str(target.parent) else Path(".")
-    if not parent.is_dir():
-        raise InvalidInputError(f"output folder does not exist: {parent}")
-    if target.is_dir():
-        raise InvalidInputError(f"cannot write {target}: a folder with that name exists.")
+    _remove_stale_temporaries(parent, target.name)
     fd, tmp_name = tempfile.mkstemp(
-        prefix=f".{target.name}.", suffix=".tmp" + target.suffix, dir=parent
+        prefix=f".{target.name}{TMP_TAG}", suffix=target.suffix, dir=parent
     )
     os.close(fd)
     tmp = Path(tmp_name)
     try:
         yield tmp
-        os.chmod(tmp, 0o666 & ~_UMASK)
+        os.chmod(tmp, stat.S_IMODE(st.st_mode) if st is not None else 0o666 & ~_UMASK)
         os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -103,14 +314,16 @@ def atomic_dir(path: Path) -> Iterator[Path]:
 
     When ``path`` does not exist, the staged folder is renamed to it (atomic). When it exists, the
     staged files are moved into it one by one with :func:`os.replace` (each atomic). On failure the
-    staging folder is removed and ``path`` is untouched.
+    staging folder is removed and ``path`` is untouched. The staging folder is named
+    ``.NAME.spectrageo-tmp-XXXXXXXX``; stale ones (older than one hour) are removed first.
     """
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise InvalidInputError(f"output folder does not exist: {parent}")
     if path.exists() and not path.is_dir():
         raise InvalidInputError(f"cannot write frames to {path}: a file with that name exists.")
-    stage = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent))
+    _remove_stale_temporaries(parent, path.name)
+    stage = Path(tempfile.mkdtemp(prefix=f".{path.name}{TMP_TAG}", dir=parent))
     try:
         yield stage
         if not path.exists():
@@ -134,6 +347,21 @@ def natural_key(name: str) -> tuple:
     return tuple((0, int(p), p) if p.isdigit() else (1, 0, p.lower()) for p in parts)
 
 
+_I64 = np.iinfo(np.int64)
+
+
+def _check_int64(a: np.ndarray, where: str) -> None:
+    """Face indices must be representable as int64 (unsigned or float values beyond it would wrap
+    to a negative index)."""
+    if a.size == 0 or a.dtype.kind not in "uf" or (a.dtype.kind == "u" and a.dtype.itemsize < 8):
+        return
+    lo, hi = a.min(), a.max()
+    if hi > _I64.max or lo < _I64.min or (a.dtype.kind == "f" and not np.isfinite([lo, hi]).all()):
+        bad = hi if hi > _I64.max or not np.isfinite(hi) else lo
+        text = str(int(bad)) if a.dtype.kind == "u" else f"{float(bad):.17g}"
+        raise InvalidInputError(f"{where}: face vertex index {text} is out of range.")
+
+
 def fan_triangulate(polygons: Any, where: str) -> tuple[np.ndarray, np.ndarray | None]:
     """Triangulate polygons as fans ``(v0, vk, vk+1)``, keeping the file's face order.
 
@@ -152,6 +380,7 @@ def fan_triangulate(polygons: Any, where: str) -> tuple[np.ndarray, np.ndarray |
     """
     if isinstance(polygons, np.ndarray) and polygons.dtype != object and polygons.ndim == 2:
         arr = polygons
+        _check_int64(arr, where)
         m, k = arr.shape
         if k == 3:
             return arr.astype(np.int64, copy=False), None
@@ -169,6 +398,8 @@ def fan_triangulate(polygons: Any, where: str) -> tuple[np.ndarray, np.ndarray |
             raise InvalidInputError(
                 f"{where}: face {bad} has {int(lens[bad])} vertices; faces need at least 3."
             )
+        for p in seq:
+            _check_int64(np.asarray(p), where)
         if (lens == 3).all():
             return np.asarray(seq, dtype=np.int64).reshape(-1, 3), None
         flat = np.concatenate([np.asarray(p, dtype=np.int64).ravel() for p in seq])

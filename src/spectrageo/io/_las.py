@@ -12,16 +12,43 @@ stored as int32 with offset = minimum and a power-of-ten scale chosen so that th
 (resolution ``scale`` = 10**ceil(log10(extent / 2e9)), e.g. 1e-9 for a unit-size cloud), or the
 ``las_scale`` given. Colours are written 16-bit (8-bit value x 257). Normals and attributes that are
 not standard dimensions go to extra-bytes dimensions ((n, k) attributes as ``name_0 ... name_k-1``).
+
+Hostile input: before any byte reaches laspy or lazrs, the public LAS 1.0-1.4 header is parsed
+here (:func:`check_las`) and every size it declares is checked against the bytes present and the
+memory cap (:func:`spectrageo.io._common.max_bytes`): version 1.0-1.4, header size, offset to the
+point data, the number of VLRs and each VLR's length (walked within the bytes before the points),
+EVLRs (1.4), point format and record length, the point count (1.4: the 64-bit count, and the
+legacy 32-bit count must be 0 or equal), scales (finite and non-zero: a scale of 0 would collapse
+every point) and offsets (finite). Header and body must agree:
+
+* LAS: the point records must all be present (a file truncated at a record boundary is an error,
+  not a shorter cloud), and whole records beyond the declared count (before the EVLRs or the end
+  of the file) are an error too (a header count that is too small would silently drop points);
+  fewer than one record's worth of trailing bytes is tolerated (padding).
+* LAZ: the ``laszip encoded`` VLR must be present and well formed (its chunk size times the
+  record length within the memory cap: lazrs allocates a whole chunk), the chunk-table offset must
+  point inside the file, the chunk table must declare as many chunks as the point count implies
+  (fixed-size chunks) or chunks whose point counts add up to it (variable-size chunks), and the
+  chunks' byte counts must add up to the compressed data. These checks keep a duplicated or
+  shifted chunk from making lazrs allocate tens of gigabytes (a process abort, not an exception).
+  A count that is wrong by less than one chunk cannot be detected without decoding; lazrs
+  reports a short last chunk as an error.
 """
 
 from __future__ import annotations
 
+import contextlib
 import io
+import math
+import os
+import struct
+import sys
+import tempfile
 
 import numpy as np
 
 from .._errors import InvalidInputError, UnsupportedFormatError
-from ._common import exc_text
+from ._common import check_alloc, exc_text
 from ._raw import RawGeometry
 
 _STANDARD = (
@@ -52,14 +79,335 @@ def _laspy(compressed: bool):
     return laspy
 
 
-def read_las(raw: bytes, name: str, *, compressed: bool) -> RawGeometry:
-    laspy = _laspy(compressed)
+# point data format -> minimum record length (LAS 1.4 R15, table of point data record formats)
+_POINT_SIZES = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
+_MIN_HEADER = {0: 227, 1: 227, 2: 227, 3: 235, 4: 375}
+_VLR_HEADER = 54
+_EVLR_HEADER = 60
+_LASZIP_USER = b"laszip encoded"
+_LASZIP_RECORD = 22204
+
+
+class LasLayout:
+    """What :func:`check_las` found in the header (all sizes in bytes, counts as Python ints)."""
+
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+
+def _u(raw: bytes, fmt: str, off: int):
+    return struct.unpack_from("<" + fmt, raw, off)[0]
+
+
+def check_las(raw: bytes, name: str, *, compressed: bool) -> LasLayout:
+    """Parse and check the LAS/LAZ header of ``raw`` (see the module docstring for the rules).
+
+    ``compressed`` is what the extension says; the header's point format decides how the body is
+    checked (laspy reads a LAZ named ``.las`` too).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the file, the header field and its value, when a declared size disagrees with the
+        bytes present, exceeds the memory cap, or a field is invalid.
+    """
+    size = len(raw)
+    if size < 4 or raw[:4] != b"LASF":
+        raise InvalidInputError(f"{name}: not a LAS/LAZ file (no 'LASF' signature).")
+    if size < 227:
+        raise InvalidInputError(
+            f"{name}: truncated LAS header ({size} bytes; a LAS header has at least 227)."
+        )
+    major, minor = raw[24], raw[25]
+    if major != 1 or minor not in _MIN_HEADER:
+        raise InvalidInputError(
+            f"{name}: LAS version field {major}.{minor} is not supported (1.0 to 1.4)."
+        )
+    hsize = _u(raw, "H", 94)
+    off = _u(raw, "I", 96)
+    n_vlrs = _u(raw, "I", 100)
+    fmt_id = raw[104]
+    rec_len = _u(raw, "H", 105)
+    legacy = _u(raw, "I", 107)
+    if hsize < _MIN_HEADER[minor] or hsize > size:
+        raise InvalidInputError(
+            f"{name}: LAS header size {hsize} is invalid for version 1.{minor} (at least "
+            f"{_MIN_HEADER[minor]}, at most the file size {size})."
+        )
+    if off < hsize or off > size:
+        raise InvalidInputError(
+            f"{name}: LAS offset to point data {off} is outside the file (header size {hsize}, "
+            f"file size {size})."
+        )
+    # VLRs: each at least 54 bytes, all between the header and the point data
+    if n_vlrs * _VLR_HEADER > off - hsize:
+        raise InvalidInputError(
+            f"{name}: LAS header declares {n_vlrs} VLRs, but only {off - hsize} bytes lie between "
+            f"the header and the point data (a VLR needs at least {_VLR_HEADER})."
+        )
+    pos = hsize
+    laszip = None
+    for i in range(n_vlrs):
+        rl = _u(raw, "H", pos + 20)
+        if pos + _VLR_HEADER + rl > off:
+            raise InvalidInputError(
+                f"{name}: LAS VLR {i} (record length {rl}) runs past the offset to point data "
+                f"{off}."
+            )
+        if raw[pos + 2 : pos + 18].rstrip(b"\0") == _LASZIP_USER and (
+            _u(raw, "H", pos + 18) == _LASZIP_RECORD
+        ):
+            laszip = bytes(raw[pos + _VLR_HEADER : pos + _VLR_HEADER + rl])
+        pos += _VLR_HEADER + rl
+    is_compressed = bool(fmt_id & 0xC0)
+    fmt = fmt_id & 0x3F
+    if fmt not in _POINT_SIZES:
+        raise InvalidInputError(f"{name}: LAS point data format {fmt_id} is not supported (0-10).")
+    if rec_len < _POINT_SIZES[fmt]:
+        raise InvalidInputError(
+            f"{name}: LAS point record length {rec_len} is shorter than the {_POINT_SIZES[fmt]} "
+            f"bytes of point format {fmt}."
+        )
+    if minor >= 4:
+        n = _u(raw, "Q", 247)
+        if legacy not in (0, n):
+            raise InvalidInputError(
+                f"{name}: LAS legacy point count {legacy} differs from the point count {n}."
+            )
+    else:
+        n = legacy
+    for axis, k in zip("xyz", range(3)):
+        sc, of = _u(raw, "d", 131 + 8 * k), _u(raw, "d", 155 + 8 * k)
+        if not math.isfinite(sc) or sc == 0.0:
+            raise InvalidInputError(
+                f"{name}: LAS {axis} scale factor is {sc!r}; it must be a finite non-zero number "
+                "(a scale of 0 collapses every point)."
+            )
+        if not math.isfinite(of):
+            raise InvalidInputError(f"{name}: LAS {axis} offset is {of!r}; it must be finite.")
+    check_alloc(n * (2 * rec_len + 80), name, f"{n} LAS points of {rec_len} bytes")
+    # EVLRs (1.4): bounded by the file, walked so that laspy's loop over them is bounded too
+    evlr_start = n_evlrs = 0
+    if minor >= 4:
+        evlr_start, n_evlrs = _u(raw, "Q", 235), _u(raw, "I", 243)
+        if n_evlrs:
+            if evlr_start < off or evlr_start + n_evlrs * _EVLR_HEADER > size:
+                raise InvalidInputError(
+                    f"{name}: LAS header declares {n_evlrs} EVLRs starting at {evlr_start}, "
+                    f"outside the file ({size} bytes; the point data start at {off})."
+                )
+            epos = evlr_start
+            for i in range(n_evlrs):
+                if epos + _EVLR_HEADER > size:
+                    raise InvalidInputError(f"{name}: LAS EVLR {i} runs past the end of the file.")
+                epos += _EVLR_HEADER + _u(raw, "Q", epos + 20)
+                if epos > size:
+                    raise InvalidInputError(f"{name}: LAS EVLR {i} runs past the end of the file.")
+    layout = LasLayout(
+        minor=minor, n=n, offset=off, record_length=rec_len, point_format=fmt, laszip=laszip
+    )
+    if not is_compressed:
+        end = off + n * rec_len
+        limit = size
+        if n_evlrs and evlr_start >= off:
+            limit = min(limit, evlr_start)
+        if minor >= 3:
+            wave = _u(raw, "Q", 227)
+            if off < wave < limit:
+                limit = wave
+        if end > limit:
+            have = max(limit - off, 0) // rec_len
+            raise InvalidInputError(
+                f"{name}: truncated LAS: the header declares {n} points of {rec_len} bytes, the "
+                f"file holds {have} (point data of {max(limit - off, 0)} bytes at offset {off})."
+            )
+        extra = (limit - end) // rec_len
+        if extra:
+            raise InvalidInputError(
+                f"{name}: LAS header declares {n} points, but the file holds {n + extra} whole "
+                f"point records of {rec_len} bytes (header point count too small?)."
+            )
+        return layout
+    _laspy(True)  # the header decides, whatever the extension says
+    _check_laz_chunks(raw, name, layout)
+    return layout
+
+
+def _check_laz_chunks(raw: bytes, name: str, lay: LasLayout) -> None:
+    size, off, n = len(raw), lay.offset, lay.n
+    vlr = lay.laszip
+    if vlr is None or len(vlr) < 34:
+        raise InvalidInputError(
+            f"{name}: LAZ file without a valid 'laszip encoded' VLR (record 22204)."
+        )
+    chunk_size = _u(vlr, "I", 12)
+    n_items = _u(vlr, "H", 32)
+    if len(vlr) != 34 + 6 * n_items:
+        raise InvalidInputError(
+            f"{name}: LAZ 'laszip encoded' VLR of {len(vlr)} bytes does not match its "
+            f"{n_items} items."
+        )
+    item_bytes = sum(_u(vlr, "H", 34 + 6 * i + 2) for i in range(n_items))
+    if item_bytes != lay.record_length:
+        raise InvalidInputError(
+            f"{name}: LAZ items describe {item_bytes}-byte points, the header's point record "
+            f"length is {lay.record_length}."
+        )
+    if chunk_size == 0:
+        raise InvalidInputError(f"{name}: LAZ chunk size 0 in the 'laszip encoded' VLR.")
+    if chunk_size != 0xFFFFFFFF:  # lazrs sizes a buffer for a whole chunk, whatever n is
+        check_alloc(chunk_size * lay.record_length, name, f"a LAZ chunk of {chunk_size} points")
+    if n == 0:
+        return
+    if off + 8 > size:
+        raise InvalidInputError(f"{name}: truncated LAZ: no chunk table offset after the header.")
+    cto = _u(raw, "q", off)
+    if cto == -1 and size >= 8:  # writer could not seek back: the offset is at the end
+        cto = _u(raw, "q", size - 8)
+    if not off + 8 <= cto <= size - 8:
+        raise InvalidInputError(
+            f"{name}: LAZ chunk table offset {cto} is outside the compressed data "
+            f"({off + 8}..{size - 8}); the file is truncated or corrupted."
+        )
+    version, n_chunks = _u(raw, "I", cto), _u(raw, "I", cto + 4)
+    variable = chunk_size == 0xFFFFFFFF
+    expected = None if variable else -(-n // chunk_size)
+    if (
+        version != 0
+        or n_chunks == 0
+        or n_chunks > cto - off - 8
+        or (expected is not None and n_chunks != expected)
+        or (variable and n_chunks > n)
+    ):
+        want = f"{expected}" if expected is not None else f"1..{min(n, cto - off - 8)}"
+        raise InvalidInputError(
+            f"{name}: LAZ chunk table at {cto} declares {n_chunks} chunks (version {version}); "
+            f"{n} points in chunks of {'variable size' if variable else chunk_size} need {want}. "
+            "The file is truncated or corrupted."
+        )
+    import lazrs
+
     try:
-        las = laspy.read(io.BytesIO(raw))
-    except (laspy.errors.LaspyException, ValueError, OSError, EOFError, RuntimeError) as exc:
+        src = io.BytesIO(raw)
+        src.seek(off)
+        table = lazrs.read_chunk_table(src, lazrs.LazVlr(vlr))
+    except (lazrs.LazrsError, ValueError, OSError, RuntimeError) as exc:
+        raise InvalidInputError(f"{name}: corrupted LAZ chunk table ({exc_text(exc)}).") from exc
+    total_bytes = sum(int(b) for _, b in table)
+    total_points = sum(int(p) for p, _ in table)
+    if len(table) != n_chunks or total_bytes != cto - off - 8:
+        raise InvalidInputError(
+            f"{name}: LAZ chunk table lists {len(table)} chunks of {total_bytes} bytes in all; the "
+            f"compressed points occupy {cto - off - 8} bytes. The file is corrupted."
+        )
+    if variable and total_points != n:
+        raise InvalidInputError(
+            f"{name}: LAZ header declares {n} points, the chunk table {total_points}."
+        )
+    items = [_u(vlr, "H", 34 + 6 * i) for i in range(n_items)]
+    items_sz = [_u(vlr, "H", 34 + 6 * i + 2) for i in range(n_items)]
+    items_v = [_u(vlr, "H", 34 + 6 * i + 4) for i in range(n_items)]
+    if any(v >= 3 and t in _LAYERS for t, v in zip(items, items_v)):
+        n_layers = sum(
+            (sz if t == 14 else _LAYERS[t]) for t, sz in zip(items, items_sz) if t in _LAYERS
+        )
+        _check_layers(raw, name, off + 8, table, lay.record_length, n_layers)
+
+
+# layered (LAZ 1.4, item version 3) items -> number of layers per chunk: Point14 9, RGB14 1,
+# RGBNIR14 2, Wavepacket14 1, Byte14 one per byte
+_LAYERS = {10: 9, 11: 1, 12: 2, 13: 1, 14: 0}
+
+
+def _check_layers(raw: bytes, name: str, start: int, table, rec_len: int, n_layers: int) -> None:
+    """Each layered chunk: the first point raw, a u32 point count, ``n_layers`` u32 layer sizes,
+    then the layers. The sizes are checked against the chunk's bytes: lazrs allocates a buffer per
+    layer from them (0xFFFFFFFF made it abort)."""
+    pos = start
+    for k, (_count, nbytes) in enumerate(table):
+        head = rec_len + 4 + 4 * n_layers
+        sizes = (
+            struct.unpack_from(f"<{n_layers}I", raw, pos + rec_len + 4) if nbytes >= head else ()
+        )
+        if nbytes < head or sum(sizes) > nbytes - head:
+            raise InvalidInputError(
+                f"{name}: corrupted LAZ chunk {k}: its layer sizes ({sum(sizes)} bytes in all) do "
+                f"not fit in the chunk's {nbytes} bytes."
+            )
+        pos += int(nbytes)
+
+
+@contextlib.contextmanager
+def _native_stderr_held():
+    """Hold what native code writes to file descriptor 2 while laspy/lazrs decode.
+
+    A Rust panic in lazrs prints a multi-line report on fd 2 before it reaches Python as an
+    exception, which the reader turns into one clear error. The report is kept in a temporary file
+    and written back to fd 2 when the block succeeds (nothing is lost), and dropped when it
+    fails (the error message replaces it).
+    """
+    try:
+        fd = sys.stderr.fileno() if sys.stderr is not None else 2
+    except (AttributeError, OSError, ValueError):
+        fd = 2
+    try:
+        saved = os.dup(fd)
+    except OSError:  # no usable stderr: nothing to hold
+        yield
+        return
+    with tempfile.TemporaryFile() as hold:
+        with contextlib.suppress(AttributeError, OSError, ValueError):
+            sys.stderr.flush()
+        os.dup2(hold.fileno(), fd)
+        ok = False
+        try:
+            yield
+            ok = True
+        finally:
+            os.dup2(saved, fd)
+            os.close(saved)
+            if ok:
+                hold.seek(0)
+                text = hold.read()
+                if text:
+                    os.write(fd, text)
+
+
+def read_las(raw: bytes, name: str, *, compressed: bool) -> RawGeometry:
+    """LAS/LAZ bytes -> points (see the module docstring: the header is checked first)."""
+    laspy = _laspy(compressed)
+    check_las(raw, name, compressed=compressed)
+    errors: tuple[type[BaseException], ...] = (
+        laspy.errors.LaspyException,
+        ValueError,
+        OSError,
+        EOFError,
+        RuntimeError,
+        KeyError,
+        IndexError,
+        TypeError,
+        ArithmeticError,
+        struct.error,
+    )
+    if compressed:
+        import lazrs
+
+        errors = (*errors, lazrs.LazrsError)
+    try:
+        with _native_stderr_held():
+            las = laspy.read(io.BytesIO(raw))
+    except errors as exc:
         raise InvalidInputError(
             f"{name}: malformed or truncated LAS/LAZ ({exc_text(exc)})."
         ) from exc
+    except BaseException as exc:
+        # lazrs turns a Rust panic on corrupted chunk data into pyo3's PanicException, which
+        # derives from BaseException; anything else (KeyboardInterrupt...) goes on unchanged
+        if type(exc).__name__ != "PanicException":
+            raise
+        raise InvalidInputError(
+            f"{name}: corrupted LAZ point data (the decoder failed: {exc_text(exc)})."
+        ) from None
     V = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1).astype(
         np.float64
     )

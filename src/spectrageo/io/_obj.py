@@ -37,10 +37,11 @@ Writing
 from __future__ import annotations
 
 import re
+import warnings
 
 import numpy as np
 
-from .._errors import InvalidInputError
+from .._errors import InvalidInputError, RepairWarning
 from ._common import exc_text, fan_triangulate, text_colors
 from ._raw import RawGeometry
 
@@ -89,6 +90,13 @@ def _table(text: str, key: str, name: str, min_cols: int, *, pad: bool = False) 
 _MISSING = np.iinfo(np.int64).min
 
 
+def _fits_int64(tok: str) -> bool:
+    try:
+        return -(2**63) <= int(tok) < 2**63
+    except ValueError:
+        return True
+
+
 def _indices(tokens: list[str], name: str, what: str) -> np.ndarray:
     """Integers of ``tokens``; empty tokens give ``_MISSING``."""
     present = np.fromiter((bool(t) for t in tokens), dtype=bool, count=len(tokens))
@@ -97,6 +105,11 @@ def _indices(tokens: list[str], name: str, what: str) -> np.ndarray:
             return np.array(tokens).astype(np.int64) if tokens else np.zeros(0, np.int64)
         out = np.full(len(tokens), _MISSING, dtype=np.int64)
         out[present] = np.array([t for t in tokens if t]).astype(np.int64)
+    except OverflowError as exc:  # an index beyond int64: name it as written, never wrapped
+        big = next((t for t in tokens if t and not _fits_int64(t)), "?")
+        raise InvalidInputError(
+            f"{name}: OBJ face {what} index {big} is out of range (larger than any file can hold)."
+        ) from exc
     except ValueError as exc:
         raise InvalidInputError(
             f"{name}: malformed OBJ: non-integer {what} index in an 'f' line ({exc_text(exc)})."
@@ -117,11 +130,16 @@ def _resolve(idx: np.ndarray, count: int, name: str, what: str, *, required: boo
     if not required:
         bad = ~missing & ((out < 0) | (out >= count))
         if bad.any():
+            # the geometry is intact: drop the broken attribute, keep the mesh, and say so
             raw = int(idx[np.flatnonzero(bad)[0]])
-            raise InvalidInputError(
+            key = "vt" if what == "texture" else "vn"
+            warnings.warn(
                 f"{name}: OBJ face {what} index {raw} is out of range (the file has {count} "
-                f"'{'vt' if what == 'texture' else 'vn'}' lines)."
+                f"'{key}' lines); the {what} coordinates of the file are ignored.",
+                RepairWarning,
+                stacklevel=2,
             )
+            return np.full(idx.shape, -1, dtype=np.int64)
     elif (out < 0).any():  # relative index before the first vertex: left to the Mesh range check
         out = np.where(out < 0, np.iinfo(np.int64).max, out)
     return out
@@ -163,6 +181,17 @@ def read_obj(raw: bytes, name: str) -> RawGeometry:
         return RawGeometry(V, None, normals, colors)
 
     rows = [ln.split() for ln in face_lines]
+    short = sum(1 for r in rows if len(r) < 3)
+    if short:
+        # 'f' lines with one or two corners are points or lines, not faces: skipped, and said
+        warnings.warn(
+            f"{name}: {short} OBJ 'f' line(s) with fewer than 3 corners skipped.",
+            RepairWarning,
+            stacklevel=2,
+        )
+        rows = [r for r in rows if len(r) >= 3]
+        if not rows:
+            return RawGeometry(V, None, normals, colors)
     lens = np.fromiter((len(r) for r in rows), dtype=np.int64, count=len(rows))
     flat = [t for r in rows for t in r]
     if any("/" in t for t in flat):

@@ -10,6 +10,11 @@ Conventions: ``#`` starts a comment; the counts may sit on the keyword line (``O
 colours of ``COFF`` become ``vertex_colors`` (uint8 when written as integers 0-255, floats otherwise);
 normals of ``NOFF`` become vertex normals; polygons are fan-triangulated in file order; per-face
 colours are ignored. ``4OFF``/``nOFF`` (other dimensions) are rejected.
+
+Header and body must agree (an error otherwise): the counts line must declare non-negative vertex
+and face counts, that many vertex and face lines must follow, and no further non-comment line may
+follow the faces (a counts line saying 0 faces above face lines would otherwise read as a point
+cloud). Face indices must lie in ``0 .. n_vertices - 1``; the message gives the index as written.
 """
 
 from __future__ import annotations
@@ -107,34 +112,60 @@ def read_off(raw: bytes, name: str) -> RawGeometry:
         raise InvalidInputError(
             f"{name}: truncated OFF: {nf} faces declared, {len(flines)} face lines found."
         )
-    faces = _faces(flines, name)
+    rest = len(lines) - (start + nv + nf)
+    if rest > 0:
+        raise InvalidInputError(
+            f"{name}: OFF counts line declares {nv} vertices and {nf} faces, but {rest} more "
+            "line(s) follow them; the counts disagree with the body."
+        )
+    faces = _faces(flines, name, nv)
     return RawGeometry(V, faces, normals, colors)
 
 
-def _faces(flines: list[str], name: str) -> np.ndarray:
+def _out_of_range(name: str, value, nv: int) -> InvalidInputError:
+    return InvalidInputError(
+        f"{name}: `faces` has vertex indices out of range: expected 0..{nv - 1} (the file declares "
+        f"{nv} vertices); got {value}."
+    )
+
+
+def _faces(flines: list[str], name: str, nv: int) -> np.ndarray:
     if not flines:
         return np.zeros((0, 3), dtype=np.int64)
     ft = _table(flines)
     if ft is not None and ft.shape[1] >= 1:
         k = ft[:, 0]
-        if (k == k[0]).all() and k[0] == int(k[0]) and ft.shape[1] >= 1 + int(k[0]):
+        if (
+            (k == k[0]).all()
+            and np.isfinite(k[0])
+            and k[0] == int(k[0])
+            and 3 <= int(k[0]) <= ft.shape[1] - 1
+        ):
             kk = int(k[0])
             idx = ft[:, 1 : 1 + kk]
-            if (idx != np.round(idx)).any():
+            if (idx != np.round(idx)).any() or not np.isfinite(idx).all():
                 raise InvalidInputError(f"{name}: OFF face indices must be integers.")
+            if idx.min() < 0 or idx.max() >= nv:  # checked as floats: no int64 wrap-around
+                row = int(np.flatnonzero(((idx < 0) | (idx >= nv)).any(axis=1))[0])
+                toks = flines[row].split()[1 : 1 + kk]  # the index as written, exact
+                bad = next(t for t, v in zip(toks, idx[row]) if v < 0 or v >= nv)
+                raise _out_of_range(name, bad, nv)
             return fan_triangulate(idx.astype(np.int64), name)[0]
     polys = []
     for i, line in enumerate(flines):
         tok = line.split()
         try:
             k = int(tok[0])
-            idx = [int(t) for t in tok[1 : 1 + k]]
+            idx = [int(t) for t in tok[1 : 1 + max(k, 0)]]
         except (ValueError, IndexError) as exc:
             raise InvalidInputError(f"{name}: malformed OFF face line {i}: {line[:60]!r}.") from exc
         if len(idx) != k:
             raise InvalidInputError(
                 f"{name}: OFF face line {i} declares {k} vertices but lists {len(idx)}."
             )
+        for v in idx:
+            if not 0 <= v < nv:
+                raise _out_of_range(name, v, nv)
         polys.append(idx)
     return fan_triangulate(polys, name)[0]
 

@@ -20,7 +20,16 @@ Invalid points: organized clouds (HEIGHT > 1, e.g. Kinect frames) mark pixels wi
 with NaN coordinates. The reader reports them to the public API, whose default policy for PCD is to
 drop them (``nan_points="drop"``) and to keep the original point index in the attribute
 ``source_index`` so the image layout can be recovered; ``nan_points="raise"`` makes them an error as
-in the other formats.
+in the other formats. Normals that are NaN/inf in some rows are not read (with a warning; points
+kept), see :func:`spectrageo.io.read`.
+
+Header and body must agree (an error otherwise, naming the field and the value): POINTS must equal
+WIDTH*HEIGHT; ``ascii`` must have exactly POINTS data rows; ``binary`` exactly POINTS records
+(fewer than one record of trailing bytes is tolerated); ``binary_compressed`` must declare the
+uncompressed size the header implies, a compressed size present in the file, and an expansion LZF
+can produce (at most 88x: a header claiming millions of points over a small block is refused
+before python-lzf allocates its output). Declared sizes are also checked against the memory cap
+(``SPECTRAGEO_MAX_BYTES``).
 """
 
 from __future__ import annotations
@@ -32,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError, UnsupportedFormatError
-from ._common import exc_text
+from ._common import check_alloc, exc_text
 from ._raw import RawGeometry
 
 _TYPES = {
@@ -49,6 +58,8 @@ _TYPES = {
 }
 _DATA = ("ascii", "binary", "binary_compressed")
 _MAX_HEADER_LINES = 64
+_MAX_COUNT = 1 << 20  # values per field (COUNT); PCL's largest descriptors have a few hundred
+_LZF_MAX_RATIO = 88  # LZF's longest back-reference: 3 bytes for 264
 
 
 def _parse_header(raw: bytes, name: str) -> tuple[dict[str, Any], int]:
@@ -110,12 +121,18 @@ def _layout(hdr: dict[str, Any], name: str):
         n = int(hdr["POINTS"][0]) if "POINTS" in hdr else width * height
     except (ValueError, IndexError) as exc:
         raise InvalidInputError(f"{name}: malformed numbers in the PCD header.") from exc
+    for key, v in (("WIDTH", width), ("HEIGHT", height), ("POINTS", n)):
+        if v < 0:
+            raise InvalidInputError(f"{name}: PCD header {key} must be >= 0; got {v}.")
     if n != width * height:
         raise InvalidInputError(
             f"{name}: PCD header POINTS={n} differs from WIDTH*HEIGHT={width * height}."
         )
-    if n < 0 or min(counts, default=1) < 1:
-        raise InvalidInputError(f"{name}: negative or zero counts in the PCD header.")
+    for f, c in zip(fields, counts):
+        if not 1 <= c <= _MAX_COUNT:
+            raise InvalidInputError(
+                f"{name}: PCD header COUNT of field '{f}' must be in 1..{_MAX_COUNT}; got {c}."
+            )
     dts = []
     for f, s, t, c in zip(fields, sizes, types, counts):
         key = (t.upper(), s)
@@ -153,6 +170,14 @@ def _decode(raw: bytes, pos: int, dts, n: int, data: str, name: str) -> dict[str
     if data == "ascii":
         if not raw[pos:].strip():
             raise InvalidInputError(f"{name}: truncated PCD: {n} points declared, no data rows.")
+        # at least 2 bytes ("0\n") per declared row, and the table's float64 copy within the cap
+        rows_max = (len(raw) - pos + 1) // 2
+        if n > rows_max:
+            raise InvalidInputError(
+                f"{name}: truncated PCD: {n} points declared, the {len(raw) - pos} bytes of ascii "
+                f"data hold at most {rows_max} rows."
+            )
+        check_alloc(8 * n * sum(c for _, _, c in dts), name, f"{n} PCD points")
         try:
             table = np.loadtxt(io.BytesIO(raw[pos:]), dtype=np.float64, ndmin=2)
         except ValueError as exc:
@@ -161,6 +186,10 @@ def _decode(raw: bytes, pos: int, dts, n: int, data: str, name: str) -> dict[str
         if table.shape[0] < n:
             raise InvalidInputError(
                 f"{name}: truncated PCD: {n} points declared, {table.shape[0]} rows found."
+            )
+        if table.shape[0] > n:
+            raise InvalidInputError(
+                f"{name}: PCD header declares POINTS {n}, the file holds {table.shape[0]} data rows."
             )
         if table.shape[1] != width:
             raise InvalidInputError(
@@ -180,17 +209,33 @@ def _decode(raw: bytes, pos: int, dts, n: int, data: str, name: str) -> dict[str
                     raise InvalidInputError(
                         f"{name}: PCD integer field '{f}' holds non-integer values."
                     )
+                info = np.iinfo(dt) if dt.kind in "iu" else None
+                if info is not None and (block.min() < info.min or block.max() > info.max):
+                    bad = block.min() if block.min() < info.min else block.max()
+                    raise InvalidInputError(
+                        f"{name}: PCD field '{f}' value {bad:.17g} is out of range for its TYPE "
+                        f"{dt.kind.upper()} SIZE {dt.itemsize}."
+                    )
                 vals = block.astype(dt.newbyteorder("="))
                 vals = vals[:, 0] if c == 1 else vals
             cols[f] = vals
         return cols
+    rec_size = sum(dt.itemsize * c for _, dt, c in dts)
     if data == "binary":
-        rec = np.dtype([(f, dt, (c,)) if c > 1 else (f, dt) for f, dt, c in dts])
-        need = n * rec.itemsize
+        need = n * rec_size
         if len(raw) - pos < need:
             raise InvalidInputError(
-                f"{name}: truncated PCD: binary data needs {need} bytes, the file has {len(raw) - pos}."
+                f"{name}: truncated PCD: binary data needs {need} bytes (POINTS {n} of "
+                f"{rec_size} bytes), the file has {len(raw) - pos}."
             )
+        extra = (len(raw) - pos - need) // rec_size
+        if extra:
+            raise InvalidInputError(
+                f"{name}: PCD header declares POINTS {n}, the binary data hold {n + extra} records "
+                f"of {rec_size} bytes."
+            )
+        check_alloc(2 * need, name, f"{n} PCD points")
+        rec = np.dtype([(f, dt, (c,)) if c > 1 else (f, dt) for f, dt, c in dts])
         arr = np.frombuffer(raw, dtype=rec, count=n, offset=pos)
         for f, dt, _c in dts:
             cols[f] = arr[f].astype(dt.newbyteorder("="))
@@ -206,12 +251,18 @@ def _decode(raw: bytes, pos: int, dts, n: int, data: str, name: str) -> dict[str
         raise InvalidInputError(
             f"{name}: truncated PCD: compressed block of {csize} bytes, {len(payload)} present."
         )
-    expected = n * sum(dt.itemsize * c for _, dt, c in dts)
+    expected = n * rec_size
     if usize != expected:
         raise InvalidInputError(
             f"{name}: corrupt PCD: uncompressed size {usize} differs from the {expected} bytes "
-            "the header implies."
+            f"the header implies (POINTS {n} of {rec_size} bytes)."
         )
+    if usize > _LZF_MAX_RATIO * csize + 64:
+        raise InvalidInputError(
+            f"{name}: corrupt PCD: a compressed block of {csize} bytes cannot expand to the "
+            f"{usize} bytes that POINTS {n} needs (LZF expands at most {_LZF_MAX_RATIO}x)."
+        )
+    check_alloc(2 * usize, name, f"{n} PCD points")
     try:
         buf = lzf.decompress(payload, usize) if usize else b""
     except ValueError as exc:

@@ -35,6 +35,16 @@ Texture coordinates
     ``u0 v0 u1 v1 u2 v2`` per triangle) is read as the face attribute ``texcoord`` (m, 6) float64, the
     layout the OBJ reader gives (polygons: the values follow the fan, ``(c0, ck, ck+1)``); a (m, 6)
     face attribute ``texcoord`` is written back as ``property list uchar float texcoord``.
+Header and body
+    Element counts are checked before any array is sized by them: negative counts are an error; in
+    ascii every row is one line, so the lines after the header must hold exactly the declared rows
+    (missing lines: truncated; non-blank lines left over: an error, since a count that is too
+    small would leave data unread); in binary every row needs at least its scalars and its list
+    length prefixes, so the declared counts must fit in the bytes present, and at least one row's
+    worth of bytes left over after the last element is an error too. List lengths must fit their
+    declared type (``uchar``: 0..255) and be non-negative; the ``face`` element's vertex indices
+    must be a list property. All of these raise :class:`~spectrageo.InvalidInputError` naming the
+    element, the property and the value.
 """
 
 from __future__ import annotations
@@ -46,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._common import exc_text, fan_triangulate
+from ._common import check_alloc, exc_text, fan_triangulate
 from ._raw import RawGeometry
 
 _NORMAL_NAMES = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
@@ -88,17 +98,97 @@ def _parse_header(raw: bytes, name: str):
     return header, stream.tell()
 
 
-def _read_full_plyfile(raw: bytes, name: str) -> dict[str, dict[str, np.ndarray]]:
+def _min_row_bytes(elt, bo: str) -> int:
+    """Fewest bytes a binary row of ``elt`` can take: its scalars and its lists' length prefixes."""
+    plyfile = _plyfile()
+    size = 0
+    for p in elt.properties:
+        if isinstance(p, plyfile.PlyListProperty):
+            size += np.dtype(p.list_dtype(bo)[0]).itemsize
+        else:
+            size += np.dtype(p.dtype(bo)).itemsize
+    return size
+
+
+def _line_starts(body) -> np.ndarray:
+    """Start offsets of the lines of ``body`` (a last line without newline counts)."""
+    nl = np.flatnonzero(np.frombuffer(body, dtype=np.uint8) == 10)
+    starts = np.r_[0, nl + 1]
+    return starts[starts < len(body)] if len(body) else np.zeros(0, dtype=np.int64)
+
+
+def _check_counts(raw: bytes, header, offset: int, name: str) -> None:
+    """Element counts against the body, before anything is sized by them (module docstring)."""
+    elements = header.elements
+    for elt in elements:
+        if elt.count < 0:
+            raise InvalidInputError(
+                f"{name}: PLY element '{elt.name}' count must be >= 0; got {elt.count}."
+            )
+    body = memoryview(raw)[offset:]
+    if header.text:
+        starts = _line_starts(body)
+        declared = sum(elt.count for elt in elements)
+        if declared > starts.size:
+            row = 0
+            for elt in elements:
+                if row + elt.count > starts.size:
+                    raise InvalidInputError(
+                        f"{name}: truncated PLY: element '{elt.name}' declares {elt.count} rows "
+                        f"but only {max(starts.size - row, 0)} lines remain."
+                    )
+                row += elt.count
+        if declared < starts.size and bytes(body[starts[declared] :]).strip():
+            extra = sum(1 for ln in bytes(body[starts[declared] :]).split(b"\n") if ln.strip())
+            raise InvalidInputError(
+                f"{name}: PLY body holds {extra} more non-empty line(s) than the {declared} rows "
+                f"the header declares ({', '.join(f'{e.name} {e.count}' for e in elements)})."
+            )
+        for elt in elements:
+            check_alloc(16 * elt.count * max(len(elt.properties), 1), name, f"PLY '{elt.name}'")
+        return
+    bo = header.byte_order
+    need = 0
+    for elt in elements:
+        row = max(_min_row_bytes(elt, bo), 1)
+        if need + elt.count * row > len(body):
+            raise InvalidInputError(
+                f"{name}: truncated PLY: element '{elt.name}' needs {elt.count * row} bytes "
+                f"({elt.count} rows of at least {row}) at offset {offset + need}, the file has "
+                f"{max(len(body) - need, 0)}."
+            )
+        need += elt.count * row
+        check_alloc(2 * elt.count * max(row, 8), name, f"PLY '{elt.name}'")
+
+
+def _check_trailing(left: int, header, name: str) -> None:
+    """Binary body: ``left`` bytes after the last element; one row's worth or more is an error."""
+    if not header.elements or left <= 0:
+        return
+    last = header.elements[-1]
+    row = max(_min_row_bytes(last, header.byte_order), 1)
+    if left >= row:
+        raise InvalidInputError(
+            f"{name}: PLY body has {left} bytes after the declared elements "
+            f"({', '.join(f'{e.name} {e.count}' for e in header.elements)}); an element count "
+            "is too small or the file is corrupted."
+        )
+
+
+def _read_full_plyfile(raw: bytes, name: str, header=None) -> dict[str, dict[str, np.ndarray]]:
     """Fallback: plyfile's own reader for every element."""
     plyfile = _plyfile()
+    stream = io.BytesIO(raw)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # plyfile's loadtxt on empty lists
-            data = plyfile.PlyData.read(io.BytesIO(raw), mmap=False)
+            data = plyfile.PlyData.read(stream, mmap=False)
     except plyfile.PlyParseError as exc:
         raise InvalidInputError(f"{name}: malformed or truncated PLY ({exc_text(exc)}).") from exc
-    except (ValueError, TypeError, UnicodeDecodeError, EOFError) as exc:
+    except (ValueError, TypeError, UnicodeDecodeError, EOFError, OverflowError) as exc:
         raise InvalidInputError(f"{name}: malformed or truncated PLY ({exc_text(exc)}).") from exc
+    if header is not None and not header.text:
+        _check_trailing(len(raw) - stream.tell(), header, name)
     out: dict[str, dict[str, np.ndarray]] = {}
     for elt in data.elements:
         cols: dict[str, np.ndarray] = {}
@@ -162,7 +252,15 @@ def _ascii_elements(raw: bytes, header, offset: int, name: str) -> dict | None:
                     return None
                 lens = table[:, c]
                 L = lens[0]
-                if not (lens == L).all() or L < 0 or L != int(L):
+                len_info = np.iinfo(np.dtype(p.list_dtype()[0]))
+                if lens.min() < 0 or lens.max() > len_info.max:
+                    bad = lens.min() if lens.min() < 0 else lens.max()
+                    raise InvalidInputError(
+                        f"{name}: PLY list length {bad:.17g} of property '{p.name}' of element "
+                        f"'{elt.name}' is out of range for its length type "
+                        f"{np.dtype(p.list_dtype()[0])} (0..{len_info.max})."
+                    )
+                if not (lens == L).all() or L != int(L):
                     return None
                 L = int(L)
                 vals = table[:, c + 1 : c + 1 + L]
@@ -202,8 +300,10 @@ def _binary_elements(raw: bytes, header, offset: int, name: str) -> dict | None:
     bo = header.byte_order
     out: dict[str, dict[str, np.ndarray]] = {}
     pos = offset
+    complete = True
     for i_elt, elt in enumerate(header.elements):
         if _WANTED <= out.keys() or not any(e.name in _WANTED for e in header.elements[i_elt:]):
+            complete = False
             break
         count = elt.count
         props = elt.properties
@@ -219,8 +319,15 @@ def _binary_elements(raw: bytes, header, offset: int, name: str) -> dict | None:
                     if p0 + len_t.itemsize > len(raw):
                         return None
                     L = int(np.frombuffer(raw, len_t, 1, p0)[0])
+                    if L < 0:
+                        raise InvalidInputError(
+                            f"{name}: PLY list length {L} of property '{p.name}' of element "
+                            f"'{elt.name}' is negative."
+                        )
                     list_lens[p.name] = L
                     p0 += len_t.itemsize + L * val_t.itemsize
+                    if p0 > len(raw):  # the first row alone runs past the end: not fixed-size
+                        return None
                 else:
                     p0 += np.dtype(p.dtype(bo)).itemsize
         for p in props:
@@ -252,7 +359,25 @@ def _binary_elements(raw: bytes, header, offset: int, name: str) -> dict | None:
         if elt.name in _WANTED:
             out[elt.name] = cols
         pos += need
+    if complete:
+        _check_trailing(len(raw) - pos, header, name)
     return out
+
+
+def _check_face_lists(header, name: str) -> None:
+    """The vertex indices of ``face`` / ``tristrips`` must be a list property."""
+    plyfile = _plyfile()
+    for elt in header.elements:
+        if elt.name not in ("face", "tristrips"):
+            continue
+        for p in elt.properties:
+            if p.name not in _FACE_INDEX_NAMES:
+                continue
+            if not isinstance(p, plyfile.PlyListProperty):
+                raise InvalidInputError(
+                    f"{name}: PLY '{elt.name}' property '{p.name}' must be a list "
+                    f"('property list uchar int {p.name}'); got a scalar {p.val_dtype}."
+                )
 
 
 def _pick(cols: dict, candidates: tuple[tuple[str, ...], ...], width: int) -> tuple | None:
@@ -265,12 +390,14 @@ def _pick(cols: dict, candidates: tuple[tuple[str, ...], ...], width: int) -> tu
 def read_ply(raw: bytes, name: str) -> RawGeometry:
     """Parse PLY bytes into a :class:`RawGeometry` (see module docstring for the mapping)."""
     header, offset = _parse_header(raw, name)
+    _check_counts(raw, header, offset, name)
+    _check_face_lists(header, name)
     if header.text:
         elements = _ascii_elements(raw, header, offset, name)
     else:
         elements = _binary_elements(raw, header, offset, name)
     if elements is None:
-        elements = _read_full_plyfile(raw, name)
+        elements = _read_full_plyfile(raw, name, header)
     if "vertex" not in elements:
         raise InvalidInputError(f"{name}: PLY file has no 'vertex' element.")
     vcols = dict(elements["vertex"])

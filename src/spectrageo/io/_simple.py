@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import io
+import tokenize
 import warnings
 
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._common import exc_text, text_colors
+from ._common import check_alloc, exc_text, text_colors
 from ._raw import RawGeometry
 
 # ------------------------------------------------------------------------------------------ XYZ
@@ -248,12 +249,67 @@ def write_xyz(P: np.ndarray, normals=None) -> bytes:
 
 
 # ------------------------------------------------------------------------------------------ NPY
-def read_npy(raw: bytes, name: str) -> RawGeometry:
-    """A (n, 3) numeric array saved with :func:`numpy.save` (pickles are refused)."""
+def parse_npy(raw: bytes, name: str) -> np.ndarray:
+    """The array of ``.npy`` bytes, with the header checked before anything is allocated.
+
+    The header (format version 1.0, 2.0 or 3.0) is parsed with :mod:`numpy.lib.format`; its shape
+    times the item size must equal the bytes that follow it exactly (fewer: truncated; more: the
+    header's shape is too small, an error too) and stay within the memory cap
+    (``SPECTRAGEO_MAX_BYTES``). Object arrays (pickles) are refused. The array is a read-only view
+    of ``raw``.
+    """
+    from numpy.lib import format as npf
+
+    f = io.BytesIO(raw)
     try:
-        arr = np.load(io.BytesIO(raw), allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
+        version = npf.read_magic(f)
+        if version == (1, 0):
+            shape, fortran, dtype = npf.read_array_header_1_0(f)
+        elif version == (2, 0):
+            shape, fortran, dtype = npf.read_array_header_2_0(f)
+        elif version == (3, 0):  # utf-8 header; numpy has no public reader for it
+            try:
+                from numpy.lib import _format_impl as impl
+            except ImportError:  # numpy < 2
+                impl = npf
+            shape, fortran, dtype = impl._read_array_header(f, version)
+        else:
+            raise ValueError(f"unsupported .npy format version {version[0]}.{version[1]}")
+    except (
+        ValueError,
+        OSError,
+        EOFError,
+        OverflowError,
+        SyntaxError,
+        TypeError,
+        KeyError,
+        tokenize.TokenError,  # numpy re-tokenizes old-style headers
+    ) as exc:
         raise InvalidInputError(f"{name}: not a valid .npy array ({exc_text(exc)}).") from exc
+    if dtype.hasobject:
+        raise InvalidInputError(
+            f"{name}: not a valid .npy array (it holds Python objects, a pickle; refused)."
+        )
+    count = 1
+    for d in shape:
+        count *= int(d)
+    need = count * dtype.itemsize
+    have = len(raw) - f.tell()
+    if need != have:
+        what = "truncated" if need > have else "the header's shape disagrees with the data"
+        raise InvalidInputError(
+            f"{name}: not a valid .npy array ({what}: the header declares shape {tuple(shape)} "
+            f"of {dtype}, {need} bytes; the file holds {have} bytes of data)."
+        )
+    check_alloc(2 * need, name, f"a .npy array of shape {tuple(shape)}")
+    arr = np.frombuffer(raw, dtype=dtype, count=count, offset=f.tell())
+    return arr.reshape(shape, order="F" if fortran else "C")
+
+
+def read_npy(raw: bytes, name: str) -> RawGeometry:
+    """A (n, 3) numeric array saved with :func:`numpy.save` (pickles are refused; the header's
+    shape must match the data, see :func:`parse_npy`)."""
+    arr = parse_npy(raw, name)
     if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "iuf":
         raise InvalidInputError(
             f"{name}: .npy must hold a numeric (n, 3) array; got dtype {getattr(arr, 'dtype', type(arr))}."

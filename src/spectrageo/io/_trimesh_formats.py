@@ -15,9 +15,9 @@ glTF / GLB
     also has triangles are appended after the mesh vertices as unreferenced vertices, so that
     ``read(kind="points")`` still gives every point. Line primitives are ignored.
 
-    A ``.gltf`` whose buffers are separate files (``"uri": "model.bin"``) is refused with a clear
-    error: the reader receives the file's bytes, not its folder; buffers embedded as ``data:`` URIs
-    and ``.glb`` files are read.
+    A ``.gltf`` whose buffers are separate files (``"uri": "model.bin"``) is read from a path with
+    the buffers next to it (inside its folder); from bytes alone (an upload) it is refused with a
+    clear error. Buffers embedded as ``data:`` URIs and ``.glb`` files are always read.
 3MF
     Read with the standard library (:mod:`zipfile`, :mod:`xml.etree.ElementTree`): trimesh's 3MF
     loader needs ``lxml`` and ``networkx``, which are not dependencies of spectrageo. The root
@@ -54,8 +54,10 @@ def read_glb(raw: bytes, name: str) -> RawGeometry:
     return _read_trimesh_scene(raw, name, "glb")
 
 
-def read_gltf(raw: bytes, name: str) -> RawGeometry:
-    """Text glTF 2.0 (``.gltf``) with embedded (``data:`` URI) buffers."""
+def read_gltf(raw: bytes, name: str, *, folder=None) -> RawGeometry:
+    """Text glTF 2.0 (``.gltf``): buffers embedded (``data:`` URIs) or, when ``folder`` is given
+    (reading from a path), separate files relative to it (plain relative names inside the folder
+    only; each must exist and hold at least the ``byteLength`` the glTF declares)."""
     try:
         doc = json.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, ValueError) as exc:
@@ -64,8 +66,38 @@ def read_gltf(raw: bytes, name: str) -> RawGeometry:
         ) from exc
     if not isinstance(doc, dict):
         raise InvalidInputError(f"{name}: not a glTF file (the JSON is not an object).")
-    _check_external(doc, name)
-    return _read_trimesh_scene(raw, name, "gltf")
+    if folder is None:
+        _check_external(doc, name)
+        return _read_trimesh_scene(raw, name, "gltf")
+    _check_external_files(doc, name, folder)
+    return _read_trimesh_scene(raw, name, "gltf", folder=folder)
+
+
+def _check_external_files(doc: dict, name: str, folder) -> None:
+    from pathlib import Path
+
+    root = Path(folder).resolve()
+    for b in doc.get("buffers", []) or []:
+        if not isinstance(b, dict) or not isinstance(b.get("uri"), str):
+            continue
+        uri = b["uri"]
+        if uri.startswith("data:"):
+            continue
+        from urllib.parse import unquote
+
+        target = (root / unquote(uri)).resolve()
+        if root not in target.parents:
+            raise InvalidInputError(
+                f"{name}: glTF buffer {uri!r} is outside the file's folder; refused."
+            )
+        if not target.is_file():
+            raise InvalidInputError(f"{name}: glTF buffer file {uri!r} not found next to it.")
+        declared = b.get("byteLength")
+        if isinstance(declared, int) and target.stat().st_size < declared:
+            raise InvalidInputError(
+                f"{name}: glTF buffer {uri!r} holds {target.stat().st_size} bytes, fewer than "
+                f"the {declared} its byteLength declares."
+            )
 
 
 def _check_external(doc: dict, name: str) -> None:
@@ -109,11 +141,16 @@ def _stored_vertex_normals(geom) -> np.ndarray | None:
     return np.asarray(vn, dtype=np.float64)
 
 
-def _read_trimesh_scene(raw: bytes, name: str, file_type: str) -> RawGeometry:
+def _read_trimesh_scene(raw: bytes, name: str, file_type: str, *, folder=None) -> RawGeometry:
     import trimesh
 
+    kw = {}
+    if folder is not None:
+        from trimesh.resolvers import FilePathResolver
+
+        kw["resolver"] = FilePathResolver(str(folder))
     try:
-        scene = trimesh.load_scene(io.BytesIO(raw), file_type=file_type, process=False)
+        scene = trimesh.load_scene(io.BytesIO(raw), file_type=file_type, process=False, **kw)
     except Exception as exc:  # noqa: BLE001 - trimesh raises many types on malformed input
         raise InvalidInputError(
             f"{name}: malformed or unsupported {file_type.upper()} file ({exc_text(exc)})."
