@@ -10,6 +10,14 @@ with the labels (an oracle for the baseline); ``rpca-oracle`` is likewise the RP
 threshold of best F1 chosen with the labels (an upper bound for the automatic threshold of
 ``rpca``, same scores and time). ``open3d-sor`` runs when ``open3d`` imports.
 
+Outlier patterns (:func:`evaluate_splits`): the patterns of
+:func:`spectrageo.noise.corrupt_outliers` at 5/10/20/30 % on two splits fixed in code --
+:data:`TUNING_SPLIT` (``uniform``, ``halo`` on bun000, milk, cloud_bin_0, table_scene_mug), on
+which the constants of the automatic RPCA threshold were chosen, and :data:`VALIDATION_SPLIT`
+(``blobs``, ``flying``, ``lidar``, ``mixed`` on top2, cloud_bin_1, autzen, face000, b9), never
+used to choose a constant -- with ``rpca``, the per-case oracles of all three filters and Open3D's
+SOR / radius removal when it imports, plus the fraction of points flagged on the unmodified scans.
+
 Sequences: an animation's vertices as a point sequence, with 10-30 % of the points of every frame
 displaced by 1-5 % of the bounding-box diagonal in random directions; per-frame theta (degrees,
 face normals against the clean frame) and mean point-to-surface distance after consolidation
@@ -29,7 +37,16 @@ from .._errors import InvalidInputError
 from .._progress import progress
 from ._tables import rows_to_csv, write_md_csv
 
-__all__ = ["DEFAULT_METHODS", "SCANS", "evaluate_outliers", "format_markdown"]
+__all__ = [
+    "DEFAULT_METHODS",
+    "SCANS",
+    "SPLITS",
+    "TUNING_SPLIT",
+    "VALIDATION_SPLIT",
+    "evaluate_outliers",
+    "evaluate_splits",
+    "format_markdown",
+]
 
 #: (label, path relative to the data folder) of the evaluated scans.
 SCANS = (
@@ -43,6 +60,31 @@ SCANS = (
 )
 SEQUENCES = (("horse-gallop", "animations/horse-gallop.npz"),)
 DEFAULT_METHODS = ("rpca", "sor", "sor-grid", "radius", "open3d-sor", "sequence")
+
+#: Tuning split, fixed: constants of the outlier filters may be chosen on these cases only
+#: (patterns of :func:`spectrageo.noise.corrupt_outliers` x scans).
+TUNING_SPLIT = {
+    "patterns": ("uniform", "halo"),
+    "scans": (
+        ("bunny bun000", "scans/bunny/bun000.ply.gz"),
+        ("kinect milk", "scans/pcl/milk.pcd"),
+        ("fragment cloud_bin_0", "scans/registration/open3d/cloud_bin_0.pcd"),
+        ("kinect table_scene_mug", "scans/pcl/table_scene_mug_stereo_textured.pcd"),
+    ),
+}
+#: Validation split, fixed: other patterns on other scans, never used to choose a constant.
+VALIDATION_SPLIT = {
+    "patterns": ("blobs", "flying", "lidar", "mixed"),
+    "scans": (
+        ("bunny top2", "scans/bunny/top2.ply.gz"),
+        ("fragment cloud_bin_1", "scans/registration/open3d/cloud_bin_1.pcd"),
+        ("lidar autzen", "scans/lidar/autzen_trim.laz"),
+        ("rangemap face000", "scans/rangemap/face000.ply"),
+        ("b9", "scans/b9.ply"),
+    ),
+}
+SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
+SPLIT_FRACTIONS = (0.05, 0.1, 0.2, 0.3)
 _SOR_GRID = ((10, 20, 30), (0.5, 1.0, 1.5, 2.0, 2.5, 3.0))
 
 
@@ -81,8 +123,15 @@ def evaluate_outliers(
     scans: tuple[tuple[str, str], ...] = SCANS,
     sequence_fractions: tuple[float, ...] = (0.1, 0.2, 0.3),
     seed: int = 0,
+    splits: tuple[str, ...] | None = None,
+    split_fractions: tuple[float, ...] = SPLIT_FRACTIONS,
 ) -> list[dict]:
     """Run the outlier benchmark; return one row per (dataset, kind, fraction, method).
+
+    ``splits`` (default: both ``("tuning", "validation")`` when ``scans`` is left at its
+    default, none otherwise) adds the pattern benchmark of :func:`evaluate_splits`: rows with a
+    ``split`` column, ``kind`` = the outlier pattern (or ``"clean"`` for the unmodified scan, with
+    the fraction of points flagged in ``flagged``).
 
     Rows carry ``dataset, kind, fraction, method, params, precision, recall, f1, time_s,
     n_points`` (static) or ``theta_deg, p2s_mean, p2s_max_frame`` and per-frame lists
@@ -162,11 +211,99 @@ def evaluate_outliers(
                         keep = _open3d_sor(Q, 10, 1.0)
                         dt = time.perf_counter() - t0
                         rows.append(_row(base, m, "nb_neighbors=10, std_ratio=1", ~keep, lab, dt))
+    if splits is None:
+        splits = tuple(SPLITS) if scans is SCANS else ()
+    if splits:
+        rows.extend(
+            evaluate_splits(data, splits=tuple(splits), fractions=split_fractions, seed=seed)
+        )
     if "sequence" in methods:
         rows.extend(_evaluate_sequences(data, sequence_fractions, seed))
     if out is not None:
         _write(rows, out)
     return rows
+
+
+def evaluate_splits(
+    data_dir: Any,
+    *,
+    splits: tuple[str, ...] = tuple(SPLITS),
+    fractions: tuple[float, ...] = SPLIT_FRACTIONS,
+    seed: int = 0,
+) -> list[dict]:
+    """F1 of every filter on the fixed tuning / validation splits (:data:`SPLITS`).
+
+    Each scan of a split gets every pattern of the split at every fraction
+    (:func:`spectrageo.noise.corrupt_outliers`, ``rng=seed``). Methods: ``rpca`` (defaults,
+    automatic threshold), ``rpca-oracle``, ``sor`` (k = 10, std_ratio 1), ``sor-oracle`` (k = 10,
+    the std_ratio of best F1 chosen with the labels), ``radius`` (k = 10, default radius),
+    ``radius-oracle`` (best radius chosen with the labels) and, when ``open3d`` imports,
+    ``open3d-sor`` / ``open3d-radius`` at the same default parameters. On the unmodified scan a
+    ``clean`` row per method gives the fraction of points flagged (``flagged``).
+    """
+    from .. import io, noise
+    from ..outliers import remove_outliers
+
+    data = Path(data_dir)
+    bad = [s for s in splits if s not in SPLITS]
+    if bad:
+        raise InvalidInputError(f"unknown split(s) {bad}; choose from {sorted(SPLITS)}.")
+    o3d_ok = _have_open3d()
+    rows: list[dict] = []
+    for split in splits:
+        spec = SPLITS[split]
+        for label, rel in spec["scans"]:
+            path = data / rel
+            if not path.exists():
+                continue
+            P = io.read(path, kind="points").points
+            cases = [("clean", 0.0, P, np.zeros(P.shape[0], dtype=bool))]
+            for pat in spec["patterns"]:
+                for frac in fractions:
+                    Q, lab = noise.corrupt_outliers(P, pattern=pat, fraction=frac, rng=seed)
+                    cases.append((pat, frac, Q, lab))
+            for pat, frac, Q, lab in cases:
+                base = {
+                    "split": split,
+                    "dataset": label,
+                    "kind": pat,
+                    "fraction": frac,
+                    "n_points": Q.shape[0],
+                }
+                for m in ("rpca", "sor", "radius"):
+                    t0 = time.perf_counter()
+                    # the pattern splits measure the valley rule (opt-in until the outlier
+                    # benchmark is regenerated with it as the default)
+                    opts = {"threshold_rule": "valley"} if m == "rpca" else {}
+                    r = remove_outliers(Q, method=m, k=10, return_points=False, **opts)
+                    dt = time.perf_counter() - t0
+                    rows.append(_row(base, m, f"k=10, auto ({r.threshold:.3g})", ~r.keep, lab, dt))
+                    if pat != "clean":
+                        tau = _oracle_threshold(r.scores, lab)
+                        rows.append(
+                            _row(base, f"{m}-oracle", f"k=10, {tau:.3g}", r.scores >= tau, lab, dt)
+                        )
+                if o3d_ok:
+                    for m, fn in (("open3d-sor", _open3d_sor), ("open3d-radius", _open3d_radius)):
+                        t0 = time.perf_counter()
+                        keep = fn(Q, 10, 1.0) if m == "open3d-sor" else fn(Q, 10)
+                        dt = time.perf_counter() - t0
+                        rows.append(_row(base, m, "defaults (k=10)", ~keep, lab, dt))
+    return rows
+
+
+def _open3d_radius(P: np.ndarray, k: int) -> np.ndarray:
+    """Open3D radius removal, ``nb_points = k`` and the radius default of ``remove_outliers``."""
+    import open3d as o3d
+
+    from ..outliers import radius_scores
+
+    radius = 2.0 * float(np.median(radius_scores(P, k)))
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
+    _, ind = pc.remove_radius_outlier(nb_points=k, radius=radius)
+    keep = np.zeros(P.shape[0], dtype=bool)
+    keep[np.asarray(ind, dtype=np.int64)] = True
+    return keep
 
 
 def _oracle_threshold(scores: np.ndarray, labels: np.ndarray) -> float:
@@ -182,9 +319,12 @@ def _oracle_threshold(scores: np.ndarray, labels: np.ndarray) -> float:
 
 
 def _row(base: dict, method: str, params: str, removed, labels, dt: float) -> dict:
-    p, r, f = _prf(np.asarray(removed, bool), labels)
+    removed = np.asarray(removed, bool)
+    p, r, f = _prf(removed, labels)
+    extra = {"flagged": round(float(removed.mean()), 4)} if base.get("kind") == "clean" else {}
     return {
         **base,
+        **extra,
         "method": method,
         "params": params,
         "precision": round(p, 4),
@@ -263,6 +403,8 @@ _COLS = (
     "n_points",
     "theta_deg",
     "p2s_mean",
+    "flagged",
+    "split",
 )
 
 
@@ -273,6 +415,8 @@ def _uses_labels(method: str) -> bool:
 
 def format_markdown(rows: list[dict]) -> str:
     """Markdown tables: static F1 per scan/kind/fraction/method, then the sequence results."""
+    split_rows = [r for r in rows if r.get("split")]
+    rows = [r for r in rows if not r.get("split")]
     static = [r for r in rows if r.get("kind") != "sequence"]
     seq = [r for r in rows if r.get("kind") == "sequence"]
     out = []
@@ -314,7 +458,83 @@ def format_markdown(rows: list[dict]) -> str:
                 f"{_fmt(r['precision'])} | {_fmt(r['recall'])} | {_fmt(r['f1'])} | "
                 f"{r['theta_deg']:.3f} | {r['p2s_mean']:.4g} | {r['time_s']:.2f} |"
             )
+    if split_rows:
+        out.append("")
+        out.extend(_split_tables(split_rows))
     return "\n".join(out)
+
+
+_SPLIT_METHODS = (
+    "rpca",
+    "rpca-oracle",
+    "sor",
+    "sor-oracle",
+    "radius",
+    "radius-oracle",
+    "open3d-sor",
+    "open3d-radius",
+)
+
+
+def _split_summary(rows: list[dict], methods: list[str]) -> str:
+    """Mean and worst F1 per (pattern, fraction) over the scans, and points per second."""
+    lines = [
+        "| pattern | outliers | " + " | ".join(f"{m} mean / min" for m in methods) + " |",
+        "|---|---|" + "---|" * len(methods),
+    ]
+    keys = sorted({(r["kind"], r["fraction"]) for r in rows if r["kind"] != "clean"})
+    for pat, frac in keys:
+        cells = []
+        for m in methods:
+            f = [r["f1"] for r in rows if (r["kind"], r["fraction"], r["method"]) == (pat, frac, m)]
+            cells.append(f"{np.mean(f):.3f} / {min(f):.3f}" if f else "-")
+        lines.append(f"| {pat} | {int(round(100 * frac))}% | " + " | ".join(cells) + " |")
+    speed = []
+    for m in ("rpca", "sor", "radius", "open3d-sor", "open3d-radius"):
+        rs = [r for r in rows if r["method"] == m and r["time_s"] > 0]
+        if rs:
+            pps = sum(r["n_points"] for r in rs) / sum(r["time_s"] for r in rs)
+            speed.append(f"{m} {pps:,.0f}")
+    lines.append("")
+    lines.append("Points per second (all cases of the split, same run): " + ", ".join(speed) + ".")
+    return "\n".join(lines)
+
+
+def _split_tables(rows: list[dict]) -> list[str]:
+    """Per split: F1 per (pattern, fraction, scan) and method; then the clean-scan flag rates."""
+    out: list[str] = []
+    methods = [m for m in _SPLIT_METHODS if any(r["method"] == m for r in rows)]
+    for split in dict.fromkeys(r["split"] for r in rows):
+        sr = [r for r in rows if r["split"] == split]
+        cases: dict[tuple, dict] = {}
+        for r in sr:
+            if r["kind"] != "clean":
+                cases.setdefault((r["kind"], r["fraction"], r["dataset"]), {})[r["method"]] = r
+        out.append(f"### {split} split: F1 per outlier pattern (oracles choose with the labels)")
+        out.append("")
+        out.append("| pattern | outliers | dataset | " + " | ".join(methods) + " |")
+        out.append("|---|---|---|" + "---|" * len(methods))
+        for (pat, frac, ds), m in sorted(cases.items(), key=lambda kv: kv[0][:2]):
+            cells = [f"{m[x]['f1']:.3f}" if x in m else "-" for x in methods]
+            out.append(f"| {pat} | {int(round(100 * frac))}% | {ds} | " + " | ".join(cells) + " |")
+        out.append("")
+        out.append(_split_summary(sr, methods))
+        out.append("")
+        clean = [r for r in sr if r["kind"] == "clean"]
+        if clean:
+            ms = [m for m in methods if any(r["method"] == m for r in clean)]
+            out.append(f"### {split} split: fraction of points flagged on the unmodified scans")
+            out.append("")
+            out.append("| dataset | " + " | ".join(ms) + " |")
+            out.append("|---|" + "---|" * len(ms))
+            by: dict[str, dict] = {}
+            for r in clean:
+                by.setdefault(r["dataset"], {})[r["method"]] = r
+            for ds, m in by.items():
+                cells = [f"{m[x]['flagged']:.4f}" if x in m else "-" for x in ms]
+                out.append(f"| {ds} | " + " | ".join(cells) + " |")
+            out.append("")
+    return out
 
 
 def _summary(static: list[dict]) -> list[str]:
@@ -362,6 +582,9 @@ def _write(rows: list[dict], out: Any) -> tuple[Path, Path]:
         "scans (far: uniform in the enlarged bounding box; near: 1-3 spacings along the normal), "
         "F1 of the removed points. `sor-grid` is the best SOR over k x std_ratio chosen with "
         "the labels; `rpca-oracle` is the `rpca` scores cut at the best threshold chosen with "
-        "the labels (how much the automatic threshold loses).\n\n" + format_markdown(rows),
+        "the labels (how much the automatic threshold loses). The split sections run the outlier "
+        "patterns of `spectrageo.noise.corrupt_outliers` on the fixed tuning and validation "
+        "splits; `sor-oracle` / `radius-oracle` are the best std_ratio / radius chosen with the "
+        "labels per case.\n\n" + format_markdown(rows),
         rows_to_csv(rows, _COLS),
     )

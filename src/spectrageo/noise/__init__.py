@@ -13,17 +13,26 @@ Levels are relative to the mean edge length (Eq. 4.36): ``sigma = level * l``.
 
 from ._core import NoiseResult
 from .animation import ANIMATION_KINDS, animation_noise, spatial_mask
-from .corruption import CorruptionResult, add_outliers, make_holes, remove_vertices
+from .corruption import (
+    OUTLIER_PATTERNS,
+    CorruptionResult,
+    add_outliers,
+    corrupt_outliers,
+    make_holes,
+    remove_vertices,
+)
 from .static import KINDS, apply, gaussian, impulsive, quantize, region_varying, uniform
 
 __all__ = [
     "ANIMATION_KINDS",
     "KINDS",
+    "OUTLIER_PATTERNS",
     "CorruptionResult",
     "NoiseResult",
     "add_outliers",
     "animation_noise",
     "apply",
+    "corrupt_outliers",
     "gaussian",
     "impulsive",
     "make_holes",

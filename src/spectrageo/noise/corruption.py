@@ -215,3 +215,164 @@ def make_holes(V, F, *, n_holes: int = 1, size: float = 0.05, rng=None) -> Corru
         take = take[np.isfinite(dist[take])]  # stay in the seed's connected component
         labels[take] = h
     return _apply_removal(V, F, labels >= 0, labels)
+
+
+#: Outlier patterns of :func:`corrupt_outliers`.
+OUTLIER_PATTERNS = ("uniform", "halo", "blobs", "flying", "lidar", "mixed")
+
+
+def corrupt_outliers(
+    P,
+    *,
+    pattern: str = "uniform",
+    fraction: float = 0.1,
+    rng=None,
+    viewpoint=None,
+    margin: float = 0.1,
+    shuffle: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Append ``round(fraction * n)`` labelled outliers of a given spatial pattern to a cloud.
+
+    Distances are in units of the point spacing ``s`` (the mean nearest-neighbour distance of
+    ``P``, as in :func:`add_outliers`); ``diag`` is the bounding-box diagonal of ``P``.
+
+    Patterns
+    --------
+    ``"uniform"``
+        Uniform in the bounding box of ``P`` enlarged on every side by ``margin * diag``.
+    ``"halo"``
+        A random inlier (with replacement) displaced by ``U(2, 20) s`` along a uniformly random
+        unit direction (so within 2-20 spacings of its inlier, possibly nearer the surface).
+    ``"blobs"``
+        Clustered outliers: clusters of 10-50 points (the last one smaller), each an isotropic
+        Gaussian of standard deviation ``U(2, 5) s`` around a centre uniform in the enlarged
+        bounding box.
+    ``"flying"``
+        Flying pixels of range sensors: a random inlier, drawn with probability proportional to
+        its local depth range (the spread of the depths of its 10 nearest neighbours seen from
+        ``viewpoint``, plus a floor of ``s``), so depth edges give most of them, moved along its
+        sensor ray (the line from ``viewpoint``) by ``+-U(2, 30) s`` (random sign).
+    ``"lidar"``
+        Structured LiDAR artefacts, half each: *multipath* returns -- a random inlier moved
+        *behind* its surface along its sensor ray by ``U(5, 50) s``; *vegetation-like scatter* --
+        a random inlier moved ``U(2, 10) s`` along a random direction in the hemisphere of its
+        PCA normal that faces ``viewpoint``.
+    ``"mixed"``
+        Half ``"uniform"``, half a halo at ``U(5, 15) s`` (the case of the outlier issue).
+
+    Parameters
+    ----------
+    P : (n, 3) array_like
+        Clean points (the inliers), ``n >= 11`` for the patterns that use neighbourhoods.
+    pattern : str
+        One of :data:`OUTLIER_PATTERNS`.
+    fraction : float
+        Outliers relative to the number of inliers, >= 0 (``labels.sum() == round(fraction * n)``).
+    rng : int, Generator or None
+    viewpoint : (3,) array_like, optional
+        Sensor position for ``"flying"`` and ``"lidar"``. Default: ``centroid + 2 diag u`` with
+        ``u`` the smallest principal axis of ``P`` (sign fixed: largest-magnitude entry positive),
+        i.e. a sensor looking at the cloud across its thinnest extent.
+    margin : float
+        Bounding-box enlargement (fraction of ``diag``) of ``"uniform"``, ``"blobs"``, ``"mixed"``.
+    shuffle : bool
+        True (default): all rows permuted with ``rng``; False: outliers appended after ``P``.
+
+    Returns
+    -------
+    P_out : (n + m, 3) float64
+    labels : (n + m,) bool
+        True for the injected outliers.
+    """
+    P = as_points(P, "P")
+    check_choice(pattern, "pattern", OUTLIER_PATTERNS)
+    if isinstance(fraction, bool) or not isinstance(
+        fraction, int | float | np.integer | np.floating
+    ):
+        raise InvalidInputError(f"`fraction` must be a number >= 0; got {fraction!r}.")
+    if not np.isfinite(fraction) or fraction < 0:
+        raise InvalidInputError(f"`fraction` must be a finite number >= 0; got {fraction!r}.")
+    check_positive(margin, "margin", allow_zero=True)
+    rng = as_rng(rng)
+    n = P.shape[0]
+    if n < 11:
+        raise InvalidInputError(f"`P` needs at least 11 points for outlier patterns; got {n}.")
+    m = int(round(float(fraction) * n))
+    s = mean_spacing(P, None)
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    diag = float(np.linalg.norm(hi - lo))
+    pad = margin * diag
+
+    def uniform(c: int) -> np.ndarray:
+        return rng.uniform(lo - pad, hi + pad, size=(c, 3))
+
+    def halo(c: int, a: float, b: float) -> np.ndarray:
+        return P[rng.integers(0, n, size=c)] + rng.uniform(a, b, (c, 1)) * s * _unit(rng, c)
+
+    if pattern in ("flying", "lidar"):
+        vp = _viewpoint(P, diag) if viewpoint is None else np.asarray(viewpoint, dtype=np.float64)
+        if vp.shape != (3,) or not np.isfinite(vp).all():
+            raise InvalidInputError(f"`viewpoint` must be 3 finite numbers; got {viewpoint!r}.")
+    if pattern == "uniform":
+        Q = uniform(m)
+    elif pattern == "halo":
+        Q = halo(m, 2.0, 20.0)
+    elif pattern == "mixed":
+        Q = np.concatenate([uniform(m // 2), halo(m - m // 2, 5.0, 15.0)])
+    elif pattern == "blobs":
+        parts, left = [], m
+        while left > 0:
+            c = min(left, int(rng.integers(10, 51)))
+            centre = uniform(1)
+            parts.append(centre + rng.uniform(2.0, 5.0) * s * rng.standard_normal((c, 3)))
+            left -= c
+        Q = np.concatenate(parts) if parts else np.empty((0, 3))
+    elif pattern == "flying":
+        from scipy.spatial import cKDTree
+
+        ray = P - vp
+        depth = np.linalg.norm(ray, axis=1)
+        _, nb = cKDTree(P).query(P, k=11)
+        w = np.ptp(depth[nb], axis=1) + s
+        base = rng.choice(n, size=m, p=w / w.sum())
+        sign = rng.choice([-1.0, 1.0], size=(m, 1))
+        u = ray[base] / np.maximum(depth[base], 1e-300)[:, None]
+        Q = P[base] + sign * rng.uniform(2.0, 30.0, (m, 1)) * s * u
+    else:  # lidar
+        from scipy.spatial import cKDTree
+
+        half = m // 2
+        base = rng.integers(0, n, size=half)
+        ray = P[base] - vp
+        u = ray / np.maximum(np.linalg.norm(ray, axis=1), 1e-300)[:, None]
+        multi = P[base] + rng.uniform(5.0, 50.0, (half, 1)) * s * u
+        base = rng.integers(0, n, size=m - half)
+        _, nb = cKDTree(P).query(P[base], k=11)
+        Y = P[nb] - P[nb].mean(axis=1, keepdims=True)
+        _, vec = np.linalg.eigh(np.einsum("nki,nkj->nij", Y, Y))
+        nrm = vec[:, :, 0]
+        nrm *= np.where(np.einsum("ij,ij->i", nrm, vp - P[base]) < 0, -1.0, 1.0)[:, None]
+        d = _unit(rng, m - half)
+        d *= np.where(np.einsum("ij,ij->i", d, nrm) < 0, -1.0, 1.0)[:, None]
+        veg = P[base] + rng.uniform(2.0, 10.0, (m - half, 1)) * s * d
+        Q = np.concatenate([multi, veg])
+    out = np.concatenate([P, Q])
+    labels = np.r_[np.zeros(n, dtype=bool), np.ones(Q.shape[0], dtype=bool)]
+    if shuffle:
+        perm = rng.permutation(out.shape[0])
+        out, labels = out[perm], labels[perm]
+    return out, labels
+
+
+def _unit(rng: np.random.Generator, c: int) -> np.ndarray:
+    d = rng.standard_normal((c, 3))
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def _viewpoint(P: np.ndarray, diag: float) -> np.ndarray:
+    c = P.mean(axis=0)
+    _, vec = np.linalg.eigh(np.cov((P - c).T))
+    u = vec[:, 0]
+    if u[np.argmax(np.abs(u))] < 0:
+        u = -u
+    return c + 2.0 * max(diag, 1e-300) * u

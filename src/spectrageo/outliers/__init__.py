@@ -11,7 +11,14 @@
 from .robot import RobotResult, bilateral_point_filter, knn_triangles, robot_pipeline
 from .rpca import PatchRPCAResult, knn_patch_matrix, rpca_scores
 from .sequence import SequenceResult, clean_sequence, weighted_laplacian
-from .static import OutlierResult, auto_threshold, radius_scores, remove_outliers, sor_scores
+from .static import (
+    OutlierResult,
+    auto_threshold,
+    radius_scores,
+    remove_outliers,
+    sor_scores,
+    valley_threshold,
+)
 
 __all__ = [
     "OutlierResult",
@@ -28,5 +35,6 @@ __all__ = [
     "robot_pipeline",
     "rpca_scores",
     "sor_scores",
+    "valley_threshold",
     "weighted_laplacian",
 ]
