@@ -335,7 +335,7 @@ def cmd_denoise(args) -> int:
 
 # --------------------------------------------------------------------------- outliers
 def cmd_outliers(args) -> int:
-    from .. import outliers
+    from .. import io, outliers
     from ..geometry import Mesh, PointCloud, PointCloudSequence
 
     _check_outputs([args.input], [args.output, args.mask, args.scores])
@@ -351,7 +351,7 @@ def cmd_outliers(args) -> int:
         res = outliers.clean_sequence(
             obj, k=args.k, **({"tau": args.threshold} if args.threshold else {})
         )
-        _write(args.output, res.frames)
+        io.write(args.output, res.frames)
         keep = np.array(res.keep, dtype=object) if not _same_len(res.keep) else np.stack(res.keep)
         if args.mask:
             _save_npy(args.mask, keep)
@@ -396,7 +396,7 @@ def cmd_outliers(args) -> int:
         full_scores[rep.source_index] = scores
         keep, scores = full_keep, full_scores
         extra += f"; {rep.n_nonfinite_rows} rows without coordinates (NaN) not kept"
-    _write(args.output, out)
+    io.write(args.output, out)
     if args.mask:
         _save_npy(args.mask, keep)
     if args.scores:
@@ -405,12 +405,6 @@ def cmd_outliers(args) -> int:
         f"wrote {args.output}: kept {int(np.sum(res.keep))} of {n_in} points ({args.method}){extra}"
     )
     return 0
-
-
-def _write(path, obj) -> None:
-    from .. import io
-
-    io.write(path, obj)
 
 
 def _same_len(arrs) -> bool:

@@ -232,20 +232,6 @@ def weld(V, F, *, tol: float = WELD_TOL) -> Weld:
     return Weld(Vw, Fw[kept], index_map, kept, abs_tol)
 
 
-def has_coincident_vertices(V, *, tol: float = WELD_TOL) -> bool:
-    """True when two vertices of ``V`` lie within ``tol`` times the bounding-box diagonal."""
-    from scipy.spatial import cKDTree
-
-    V = as_points(V, "V")
-    if V.shape[0] < 2:
-        return False
-    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-    if tol == 0 or diag == 0:
-        return np.unique(V, axis=0).shape[0] < V.shape[0]
-    d, _ = cKDTree(V).query(V, k=2)
-    return bool((d[:, 1] <= tol * diag).any())
-
-
 def is_soup(F, n_vertices: int) -> bool:
     """True when no vertex is shared by two faces (and there are at least two faces)."""
     F = np.asarray(F, dtype=np.int64)

@@ -13,6 +13,17 @@ from .._validation import as_faces, as_points, as_rng, check_choice, check_posit
 from ._core import check_fraction, mean_spacing, unique_edges
 
 
+def _check_fraction(fraction) -> None:
+    """Outlier fractions are relative to the clean point count and may exceed 1 (unlike
+    :func:`._core.check_fraction`)."""
+    if isinstance(fraction, bool) or not isinstance(
+        fraction, int | float | np.integer | np.floating
+    ):
+        raise InvalidInputError(f"`fraction` must be a number >= 0; got {fraction!r}.")
+    if not np.isfinite(fraction) or fraction < 0:
+        raise InvalidInputError(f"`fraction` must be a finite number >= 0; got {fraction!r}.")
+
+
 def add_outliers(
     P,
     *,
@@ -62,12 +73,7 @@ def add_outliers(
     """
     P = as_points(P, "P")
     check_choice(kind, "kind", ("far", "near"))
-    if isinstance(fraction, bool) or not isinstance(
-        fraction, int | float | np.integer | np.floating
-    ):
-        raise InvalidInputError(f"`fraction` must be a number >= 0; got {fraction!r}.")
-    if not np.isfinite(fraction) or fraction < 0:
-        raise InvalidInputError(f"`fraction` must be a finite number >= 0; got {fraction!r}.")
+    _check_fraction(fraction)
     check_positive(margin, "margin", allow_zero=True)
     lo_d, hi_d = (float(x) for x in distance)
     if not (np.isfinite(lo_d) and np.isfinite(hi_d)) or lo_d < 0 or hi_d < lo_d:
@@ -286,12 +292,7 @@ def corrupt_outliers(
     """
     P = as_points(P, "P")
     check_choice(pattern, "pattern", OUTLIER_PATTERNS)
-    if isinstance(fraction, bool) or not isinstance(
-        fraction, int | float | np.integer | np.floating
-    ):
-        raise InvalidInputError(f"`fraction` must be a number >= 0; got {fraction!r}.")
-    if not np.isfinite(fraction) or fraction < 0:
-        raise InvalidInputError(f"`fraction` must be a finite number >= 0; got {fraction!r}.")
+    _check_fraction(fraction)
     check_positive(margin, "margin", allow_zero=True)
     rng = as_rng(rng)
     n = P.shape[0]
