@@ -5,7 +5,8 @@ Every denoiser is registered under a name with :func:`register` and can be liste
 registry, so a new method joins them automatically.
 """
 
+from ._guard import noise_level
 from ._registry import DenoiserInfo, available, denoise, get, register
 from .dynamic import denoise_animation, dynamic_methods  # noqa: F401 (mesh animations)
 
-__all__ = ["DenoiserInfo", "available", "denoise", "get", "register"]
+__all__ = ["DenoiserInfo", "available", "denoise", "get", "noise_level", "register"]

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._errors import InvalidInputError
+from .._validation import as_faces, as_points, check_positive
+from ._guard import MIN_NOISE, TRUST, apply_trust, is_clean, trust_radius
 
 
 @dataclass(frozen=True)
@@ -29,6 +31,9 @@ _PLUGINS = (
     "spectrageo.denoise.tsgsp",
 )
 _loaded = False
+#: methods whose displacements :func:`denoise` bounds with the trust region (``tsgsp`` bounds its
+#: own; the Laplacian and Taubin smoothers are left as defined)
+_TRUSTED = ("tsgsp-saliency", "gnf", "bnf", "bilateral")
 
 
 def register(name: str, *, summary: str, reference: str, presets: tuple[str, ...] = ()):
@@ -77,6 +82,7 @@ def denoise(
     preset: str | None = None,
     pre: str | None = None,
     weld: bool = True,
+    min_noise: float | None = None,
     **options,
 ) -> np.ndarray:
     """Denoise the vertex positions of mesh ``(V, F)`` with the registered ``method``.
@@ -99,21 +105,55 @@ def denoise(
         unwelded STL corners) are merged first, and every copy receives its merged vertex's result,
         so seams stay closed. Input order and count are kept. False: process ``(V, F)`` as given
         (each seam copy is then a boundary vertex and the seam can open).
+    min_noise : float or None
+        Do-no-harm gate (:mod:`spectrageo.denoise._guard`): a mesh whose curvature-robust noise
+        level (:func:`spectrageo.denoise.noise_level`, noise standard deviation over the median
+        16-neighbour patch radius) is below ``min_noise`` is returned unchanged, whatever the
+        method. Default :data:`spectrageo.denoise._guard.MIN_NOISE` (0.015, chosen on the tuning
+        split); ``0`` or a negative value disables the gate.
     **options
-        Keyword options of the method.
+        Keyword options of the method. ``trust`` (noise standard deviations of Eq. 5.15, default
+        6; None disables it) bounds every vertex displacement of the feature-preserving
+        filters: ``tsgsp`` applies it itself, and for ``tsgsp-saliency``, ``gnf``, ``bnf`` and
+        ``bilateral`` this function shortens every displacement longer than ``trust`` noise
+        deviations (the Laplacian and Taubin smoothers are left as they are defined).
 
     Returns
     -------
     (n, 3) float64 denoised positions, same vertex order.
     """
     info = get(method)
+    if min_noise is None:
+        min_noise = MIN_NOISE
+    V = as_points(V, "V")
+    F = as_faces(F, V.shape[0], "F")
+    trust = options.pop("trust", TRUST) if method in _TRUSTED else options.get("trust")
+    if trust is not None:
+        check_positive(trust, "trust")
+    # the gate runs on the input as given (so a clean input comes back bit for bit), except on
+    # a triangle soup, which is gated after welding (or refused by the method if welding
+    # leaves isolated triangles)
+    from ..geometry.repair import is_soup
+
+    gate_here = min_noise > 0 and not is_soup(F, V.shape[0])
+    if gate_here and is_clean(V, min_noise=min_noise):
+        return V.copy()  # no noise found: nothing to remove
+    if method in _TRUSTED:
+        options["trust"] = trust  # handed to the welded call below, popped again there
     if weld:
         from ..geometry.repair import weld as weld_mesh
 
         w = weld_mesh(V, F)
         if w.n_merged:
             out = denoise(
-                w.vertices, w.faces, method=method, preset=preset, pre=pre, weld=False, **options
+                w.vertices,
+                w.faces,
+                method=method,
+                preset=preset,
+                pre=pre,
+                weld=False,
+                min_noise=0 if gate_here else min_noise,
+                **options,
             )
             return w.expand(out)
     if pre is not None and pre != "coarse":
@@ -126,11 +166,20 @@ def denoise(
                 f"`preset` must be one of {', '.join(info.presets)} for {method!r}; got {preset!r}."
             )
         options["preset"] = preset
+    if method in _TRUSTED:
+        options.pop("trust", None)
+    else:
+        trust = None  # tsgsp bounds its own displacements; the smoothers are not bounded
+    V0 = V
     if pre == "coarse" and method != "tsgsp":
         from .tsgsp import coarse
 
         V = coarse(V, F, rng=options.get("rng", 0))
-    return info.func(V, F, **options)
+    out = info.func(V, F, **options)
+    if trust is None:
+        return out
+    V0 = np.asarray(V0, dtype=np.float64)
+    return apply_trust(V0, out, trust_radius(V0, trust))
 
 
 def warm_up(methods, V, F, *, n_faces: int = 2000) -> None:

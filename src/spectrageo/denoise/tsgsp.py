@@ -42,9 +42,10 @@ from ..graph import adjacency_matrix
 from ..graph.adjacency import knn
 from ..linalg._common import single_thread_blas
 from ..spectral import overlapped_submeshes, reassemble, submesh_eigenbases
+from ._guard import apply_trust, noise_sigma
 from ._normals import fast_update_vertices, mean_centroid_distance
 from ._registry import register
-from ._tsgsp_mbl import _mbl_search
+from ._tsgsp_mbl import RULES, _mbl_search
 
 #: Parameter presets (Fig. 5.16): ``"scan"`` for scanned / organic models with small-scale detail
 #: (wide range kernel ``sigma_s = 1``, ``zeta = 3`` filtering steps, 5 vertex updates), ``"cad"`` for
@@ -74,6 +75,10 @@ class CoarseResult:
         Global noise variance ``sigma_z^2`` of Eq. (5.15) (along the minimum-variance direction).
     subspace_sizes : (n_submeshes, 3) int
         Learned ``n_l`` per submesh and coordinate (Algorithm 1).
+    max_sizes : (n_submeshes,) int
+        Largest size considered per submesh (``max_keep`` times its vertex count, the number
+        of eigenvectors tracked); ``subspace_sizes == max_sizes[:, None]`` marks the signals
+        whose walk reached the bound.
     submesh_noise : (n_submeshes, 3) float
         Learned noise variance per submesh and coordinate (Eq. 5.7).
     n_submeshes : int
@@ -89,6 +94,7 @@ class CoarseResult:
     noise_var: float
     subspace_sizes: np.ndarray
     submesh_noise: np.ndarray
+    max_sizes: np.ndarray
     n_submeshes: int
     n_iter: int
     converged: bool
@@ -157,7 +163,8 @@ def coarse(
     zeta: int = 4,
     oi_iter: int = 1,
     n_em: int = 10,
-    tol: float = 0.1,
+    tol: float = 0.0,
+    rule: str = "residual",
     noise_var: float | None = None,
     noise_patch: int = 12,
     full_output: bool = False,
@@ -169,8 +176,8 @@ def coarse(
     ``n_l`` lowest-frequency eigenvectors of the submesh's binary Laplacian ``L = D - C``. The
     posterior mean ``H`` (Eq. 5.5), its covariance (Eq. 5.6), the noise variance (Eq. 5.7), the prior
     scale (Eq. 5.8) and the Toeplitz correlation (Eq. 5.9-5.10) are learned by EM; ``n_l`` is walked
-    (Algorithm 1; gallop + bisection instead of unit steps, which reaches the same boundary) until the
-    learned noise variance matches the reference level. The result of the submesh is ``U_nl H``.
+    (Algorithm 1; gallop + bisection instead of unit steps, which reaches the same boundary) until
+    the residual ``||v - U H||^2 / n_m`` reaches the reference level (``rule``). The result of the submesh is ``U_nl H``.
 
     Reference noise per submesh and coordinate (reading of Eq. 5.15 for noise acting along the
     normals): ``sigma_ref[i, j] = sigma_z^2 * mean_{v in submesh i} u_vj^2`` with ``sigma_z^2`` from
@@ -191,12 +198,11 @@ def coarse(
         Overlap fraction of neighbouring submeshes.
     max_keep : float in (0, 1]
         Largest subspace considered, as a fraction of the submesh size (the eigenvectors tracked).
-        The thesis fixes no upper bound. With the noise estimate of Eq. (5.15), Algorithm 1 rarely
-        meets its noise band before the bound on the shared pairs (with 0.5 the median learned
-        ``n_l`` was the bound on every pair), so the bound acts as the cut-off of the coarse
-        low-pass. 0.3 was chosen over 0.2-0.5 on the mean final theta of all shared pairs (0.25:
-        5.57, 0.3: 5.54, 0.35: 5.55, 0.5: 5.68 degrees; flat optimum, no per-model choice); it
-        also makes the orthogonal iterations, whose QR and Rayleigh-Ritz steps cost
+        The thesis fixes no upper bound. With the residual rule the learned sizes settle below it
+        on most submeshes of the CAD pairs (median 121 of 150 on Fandisk0.3); rough organic
+        submeshes still reach it, where it caps the subspace. 0.3 was kept over 0.4 and 0.5 on
+        the tuning split (mean theta of the eight shared pairs 4.998 / 5.127 / 5.213 degrees);
+        it also makes the orthogonal iterations, whose QR and Rayleigh-Ritz steps cost
         ``O(n_i k^2)`` for ``k`` tracked vectors, 2-3x cheaper than 0.5.
     method : {"oi", "exact"}
         Subspace tracking with orthogonal iterations (Eq. 4.7) or a dense eigendecomposition of every
@@ -206,7 +212,14 @@ def coarse(
     n_em : int
         EM iterations per subspace size (``b`` in Algorithm 1).
     tol : float
-        Relative half-width ``epsilon / sigma_ref`` of the noise band of Algorithm 1.
+        Relative half-width ``epsilon / sigma_ref`` of the noise band of Algorithm 1 on the
+        increase side; ``0`` ends the walk at the first size whose residual reaches the
+        reference (the band is then one size step wide). Chosen on the tuning split (mean theta
+        of the eight shared pairs: 4.998 degrees with 0, 5.188 with 0.1).
+    rule : {"residual", "em"}
+        Statistic of the walk (:mod:`spectrageo.denoise._tsgsp_mbl`): the residual
+        ``||v - U H||^2 / n_m`` as written in Algorithm 1, or the EM noise variance of
+        Eq. (5.7) (earlier versions; it reaches ``max_keep`` on most submeshes).
     noise_var : float, optional
         Known noise variance ``sigma_z^2`` (model units squared); default estimated (Eq. 5.15).
     noise_patch : int
@@ -236,6 +249,7 @@ def coarse(
     check_choice(method, "method", ("oi", "exact"))
     check_positive(n_em, "n_em", integer=True)
     check_positive(tol, "tol", allow_zero=True)
+    check_choice(rule, "rule", RULES)
     if noise_var is not None:
         check_positive(noise_var, "noise_var")
     gen = as_rng(rng)
@@ -254,7 +268,8 @@ def coarse(
     if not sig2 > 0:
         out = V.copy()
         zeros = np.zeros((n_sub, 3))
-        res = CoarseResult(out, 0.0, zeros.astype(np.int64), zeros, n_sub, 0, True, 0.0)
+        none = np.zeros(n_sub, dtype=np.int64)
+        res = CoarseResult(out, 0.0, zeros.astype(np.int64), zeros, none, n_sub, 0, True, 0.0)
         return res if full_output else out
     Cb = C.copy()
     Cb.data[:] = 1.0
@@ -268,20 +283,37 @@ def coarse(
     # the per-submesh algebra is on small dense matrices: one BLAS thread is fastest and avoids
     # oversubscription on busy machines
     with single_thread_blas():
-        values, sizes, noise, visits, all_conv = _coarse_loop(
-            V, C, subs, frac0, sig2, dirs, max_keep, method, zeta, oi_iter, n_em, tol, gen
+        values, sizes, noise, maxs, visits, all_conv = _coarse_loop(
+            V,
+            C,
+            subs,
+            frac0,
+            sig2,
+            dirs,
+            max_keep,
+            method,
+            zeta,
+            oi_iter,
+            n_em,
+            tol,
+            gen,
+            RULES.index(rule),
         )
     out = reassemble(values, subs)
     if not full_output:
         return out
     resid = float(np.linalg.norm(out - V) / np.sqrt(n))
-    return CoarseResult(out, sig2, sizes, noise, n_sub, visits, all_conv, resid)
+    return CoarseResult(out, sig2, sizes, noise, maxs, n_sub, visits, all_conv, resid)
 
 
-def _coarse_loop(V, C, subs, frac0, sig2, dirs, max_keep, method, zeta, oi_iter, n_em, tol, gen):
-    """Algorithm 1 on every submesh basis; returns ``(values, sizes, noise, visits, all_conv)``."""
+def _coarse_loop(
+    V, C, subs, frac0, sig2, dirs, max_keep, method, zeta, oi_iter, n_em, tol, gen, rule_code
+):
+    """Algorithm 1 on every submesh basis; returns
+    ``(values, sizes, noise, max_sizes, visits, all_conv)``."""
     n_sub = len(subs.parts)
     sizes = np.zeros((n_sub, 3), dtype=np.int64)
+    maxs = np.zeros(n_sub, dtype=np.int64)
     noise = np.zeros((n_sub, 3))
     values: list[np.ndarray] = [None] * n_sub  # type: ignore[list-item]
     visits = 0
@@ -299,6 +331,7 @@ def _coarse_loop(V, C, subs, frac0, sig2, dirs, max_keep, method, zeta, oi_iter,
         X = V[part]
         k = part.size
         n_max = U.shape[1]
+        maxs[i] = n_max
         coef = U.T @ X  # (n_max, 3)
         ref = sig2 * np.mean(dirs[part] ** 2, axis=0)
         n0 = np.clip(np.rint(n_max * frac0[i]).astype(np.int64), 1, n_max)
@@ -314,6 +347,7 @@ def _coarse_loop(V, C, subs, frac0, sig2, dirs, max_keep, method, zeta, oi_iter,
                 int(n_em),
                 float(tol),
                 1,
+                rule_code,
             )
             sizes[i, j] = nl
             noise[i, j] = s_hat
@@ -321,7 +355,7 @@ def _coarse_loop(V, C, subs, frac0, sig2, dirs, max_keep, method, zeta, oi_iter,
             all_conv &= bool(conv)
             Y[:, j] = U[:, :nl] @ H
         values[i] = Y
-    return values, sizes, noise, visits, all_conv
+    return values, sizes, noise, maxs, visits, all_conv
 
 
 # =========================================================================== fine step
@@ -362,7 +396,10 @@ def select_neighborhoods(
     A flat face keeps its own patch ``P_i``. A feature face ``i`` considers every patch ``P_j`` that
     contains it (``i`` among the ``k`` nearest faces of ``j``) and keeps the one maximising
     ``psi_j xi_ij / omega_ij`` with ``psi_j = |lambda_j1 - lambda_j3| / lambda_j3`` (Eq. 5.17, ascending
-    eigenvalues of ``N_j^T N_j``: close to 1 on a flat patch, small across a crease),
+    eigenvalues of ``N_j^T N_j``): ``psi_j = 1 - lambda_j1 / lambda_j3`` equals 1 whenever the
+    normals of the patch span at most a plane (a flat patch, or a crease between two flat
+    parts: ``lambda_j1 = 0``) and is smaller on patches whose normals spread in three
+    directions (corners, noise); the crease is told apart by ``omega_ij``,
     ``xi_ij = <n_i, mean normal of P_j>`` (Eq. 5.18) and ``omega_ij = max_g ||n_i - n_g||`` over the
     patch (Eq. 5.19; ``1e-12`` is added). Ties go to the lowest centre index. Compiled loop over
     the (face, candidate) pairs, O(m k^2).
@@ -915,16 +952,17 @@ def tsgsp(
         neighbourhoods and weights taken from the coarse mesh (``source`` of :func:`fine`,
         reading choice (e)). ``0`` filters the coarse normals (Algorithm 2 as written).
     trust : float or None
-        Do-no-harm bound, in units of the estimated noise standard deviation ``sigma_z`` of
-        Eq. (5.15) (the coarse step's estimate, or ``sqrt(noise_var)`` when given): no vertex
-        moves farther than ``trust * sigma_z`` (longer displacements are shortened, keeping
-        their direction), and a mesh in which the estimate finds no noise (``sigma_z = 0``: every
-        patch is planar, as on clean CAD tessellations) is returned unchanged. This is not in
-        the thesis; Algorithm 2's filters, given a clean CAD tessellation with long thin
+        Do-no-harm bound, in units of the estimated noise standard deviation ``sigma_z``
+        (the curvature-robust quadric-residual estimate of
+        :func:`spectrageo.denoise._guard.noise_sigma`, or ``sqrt(noise_var)`` when given in
+        ``coarse_options``): no vertex moves farther than ``trust * sigma_z`` (longer
+        displacements are shortened, keeping their direction), and a mesh in which the estimate
+        finds no noise (every patch a plane, cylinder or sphere) is returned unchanged. This is
+        not in the thesis; Algorithm 2's filters, given a clean CAD tessellation with long thin
         triangles, blend normals across features and move vertices by up to 30 % of the
-        bounding-box diagonal. ``6`` is the smallest of {3, 4, 6} that left the mean theta of
-        every shared denoising pair (the tuning split) unchanged to 0.001 degrees; ``None``
-        disables the bound.
+        bounding-box diagonal. ``6`` was chosen on the tuning split (the shared denoising
+        pairs); ``None`` disables the bound. :func:`spectrageo.denoise.denoise` also returns
+        meshes whose relative noise level is below ``min_noise`` unchanged.
     rng : seed or Generator
         Seeds METIS and the subspace starts; results are deterministic for a seed.
     **fine_options
@@ -961,21 +999,16 @@ def tsgsp(
     copts = {k: v for k, v in (coarse_options or {}).items() if k != "full_output"}
     cr = coarse(V, F, rng=rng, full_output=True, **copts)
     Vc = cr.vertices
-    if trust is not None and not cr.noise_var > 0:
-        return V.copy()  # no noise found: nothing to remove
+    if trust is not None:
+        given = coarse_options is not None and "noise_var" in coarse_options
+        sigma = float(np.sqrt(cr.noise_var)) if given else noise_sigma(V)[0]
+        if not (cr.noise_var > 0 and sigma > 0):
+            return V.copy()  # no noise found: nothing to remove
     source = Vc + float(input_weight) * (V - Vc) if input_weight > 0 else None
     out = fine(Vc, F, preset=preset, source=source, **fine_options)
     if trust is None:
         return out
-    return _trust_region(V, out, float(trust) * float(np.sqrt(cr.noise_var)))
-
-
-def _trust_region(V: np.ndarray, X: np.ndarray, radius: float) -> np.ndarray:
-    """``X`` with every displacement from ``V`` longer than ``radius`` shortened to it."""
-    D = X - V
-    length = np.linalg.norm(D, axis=1, keepdims=True)
-    scale = np.minimum(1.0, radius / np.maximum(length, np.finfo(np.float64).tiny))
-    return V + D * scale
+    return apply_trust(V, out, float(trust) * sigma)
 
 
 __all__ = [

@@ -144,3 +144,90 @@ def patch_min_variance(P, idx, lam, dirs):  # pragma: no cover - jitted
         dirs[i, 0] = x
         dirs[i, 1] = y
         dirs[i, 2] = z
+
+
+@numba.njit(cache=True, parallel=True)
+def patch_quadric_residual(P, idx, dirs, res, spread):  # pragma: no cover - jitted
+    """Residual variance ``res[i]`` of the least-squares quadric height field
+    ``h = a x^2 + b xy + c y^2 + d x + e y + f`` fitted to the points ``P[idx[i]]`` in the frame
+    whose height axis is the patch's minimum-variance direction ``dirs[i]``:
+    ``res[i] = RSS / (k - 6)``. Rows with fewer than 7 points, or a singular design (points
+    on a line), get ``res[i] = inf`` so that quantiles skip them. ``spread[i]`` is the ratio of
+    the smaller to the larger eigenvalue of the patch's 2x2 second-moment matrix in the tangent
+    plane (0: the points lie on a line, 1: isotropic); near-collinear patches (long thin
+    triangles) let the quadric fit the noise, so callers should skip low-spread rows."""
+    k = idx.shape[1]
+    for i in numba.prange(idx.shape[0]):
+        if k < 7:
+            res[i] = np.inf
+            spread[i] = 0.0
+            continue
+        nx, ny, nz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
+        # tangent frame: t1 orthogonal to n, t2 = n x t1
+        if abs(nx) < 0.9:
+            ax, ay, az = 1.0, 0.0, 0.0
+        else:
+            ax, ay, az = 0.0, 1.0, 0.0
+        d = ax * nx + ay * ny + az * nz
+        t1x, t1y, t1z = ax - d * nx, ay - d * ny, az - d * nz
+        s = np.sqrt(t1x * t1x + t1y * t1y + t1z * t1z)
+        t1x /= s
+        t1y /= s
+        t1z /= s
+        t2x = ny * t1z - nz * t1y
+        t2y = nz * t1x - nx * t1z
+        t2z = nx * t1y - ny * t1x
+        o = idx[i, 0]
+        X = np.empty(k)
+        Y = np.empty(k)
+        Z = np.empty(k)
+        scale = 0.0
+        for q in range(k):
+            j = idx[i, q]
+            dx = P[j, 0] - P[o, 0]
+            dy = P[j, 1] - P[o, 1]
+            dz = P[j, 2] - P[o, 2]
+            X[q] = dx * t1x + dy * t1y + dz * t1z
+            Y[q] = dx * t2x + dy * t2y + dz * t2z
+            Z[q] = dx * nx + dy * ny + dz * nz
+            scale += X[q] * X[q] + Y[q] * Y[q]
+        scale = np.sqrt(scale / k)
+        if not scale > 0.0:
+            res[i] = np.inf
+            spread[i] = 0.0
+            continue
+        sxx = 0.0
+        syy = 0.0
+        sxy = 0.0
+        for q in range(k):
+            sxx += X[q] * X[q]
+            syy += Y[q] * Y[q]
+            sxy += X[q] * Y[q]
+        half_tr = 0.5 * (sxx + syy)
+        disc = np.sqrt(max(half_tr * half_tr - (sxx * syy - sxy * sxy), 0.0))
+        spread[i] = (half_tr - disc) / (half_tr + disc) if half_tr + disc > 0 else 0.0
+        A = np.empty((k, 6))
+        for q in range(k):
+            x = X[q] / scale
+            y = Y[q] / scale
+            A[q, 0] = x * x
+            A[q, 1] = x * y
+            A[q, 2] = y * y
+            A[q, 3] = x
+            A[q, 4] = y
+            A[q, 5] = 1.0
+        M = A.T @ A
+        b = A.T @ Z
+        tr = 0.0
+        for r in range(6):
+            tr += M[r, r]
+        for r in range(6):
+            M[r, r] += 1e-10 * tr
+        coef = np.linalg.solve(M, b)
+        rss = 0.0
+        for q in range(k):
+            e = Z[q]
+            for r in range(6):
+                e -= A[q, r] * coef[r]
+            rss += e * e
+        res[i] = rss / (k - 6)
