@@ -88,13 +88,6 @@ def noise_level(V, *, patch: int = 16, quantile: float = 0.25) -> float:
     return noise_sigma(V, patch=patch, quantile=quantile)[1]
 
 
-def is_clean(V, *, min_noise: float | None = MIN_NOISE) -> bool:
-    """True when :func:`noise_level` is below ``min_noise`` (None: never)."""
-    if min_noise is None:
-        return False
-    return noise_level(V) < float(min_noise)
-
-
 def apply_trust(V: np.ndarray, X: np.ndarray, radius: float) -> np.ndarray:
     """``X`` with every displacement from ``V`` longer than ``radius`` shortened to it (direction
     kept)."""
@@ -102,8 +95,3 @@ def apply_trust(V: np.ndarray, X: np.ndarray, radius: float) -> np.ndarray:
     length = np.linalg.norm(D, axis=1, keepdims=True)
     scale = np.minimum(1.0, radius / np.maximum(length, np.finfo(np.float64).tiny))
     return V + D * scale
-
-
-def trust_radius(V, trust: float) -> float:
-    """``trust`` noise standard deviations of :func:`noise_sigma`."""
-    return float(trust) * noise_sigma(V)[0]

@@ -10,7 +10,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
-from ._guard import MIN_NOISE, TRUST, apply_trust, is_clean, trust_radius
+from ._guard import MIN_NOISE, TRUST, apply_trust, noise_sigma
 
 
 @dataclass(frozen=True)
@@ -127,35 +127,6 @@ def denoise(
         min_noise = MIN_NOISE
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
-    trust = options.pop("trust", TRUST) if method in _TRUSTED else options.get("trust")
-    if trust is not None:
-        check_positive(trust, "trust")
-    # the gate runs on the input as given (so a clean input comes back bit for bit), except on
-    # a triangle soup, which is gated after welding (or refused by the method if welding
-    # leaves isolated triangles)
-    from ..geometry.repair import is_soup
-
-    gate_here = min_noise > 0 and not is_soup(F, V.shape[0])
-    if gate_here and is_clean(V, min_noise=min_noise):
-        return V.copy()  # no noise found: nothing to remove
-    if method in _TRUSTED:
-        options["trust"] = trust  # handed to the welded call below, popped again there
-    if weld:
-        from ..geometry.repair import weld as weld_mesh
-
-        w = weld_mesh(V, F)
-        if w.n_merged:
-            out = denoise(
-                w.vertices,
-                w.faces,
-                method=method,
-                preset=preset,
-                pre=pre,
-                weld=False,
-                min_noise=0 if gate_here else min_noise,
-                **options,
-            )
-            return w.expand(out)
     if pre is not None and pre != "coarse":
         raise InvalidInputError(f"`pre` must be None or 'coarse'; got {pre!r}.")
     if preset is not None:
@@ -166,20 +137,49 @@ def denoise(
                 f"`preset` must be one of {', '.join(info.presets)} for {method!r}; got {preset!r}."
             )
         options["preset"] = preset
-    if method in _TRUSTED:
-        options.pop("trust", None)
+    trust = options.pop("trust", TRUST) if method in _TRUSTED else options.get("trust")
+    if trust is not None:
+        check_positive(trust, "trust")
+    from ..geometry.repair import is_soup
+    from ..geometry.repair import weld as weld_mesh
+
+    # the gate runs on the input as given (so a clean input comes back bit for bit), except on
+    # a triangle soup, which is gated after welding (or refused by the method if welding
+    # leaves isolated triangles)
+    sigma = None
+    if min_noise > 0 and not is_soup(F, V.shape[0]):
+        sigma, level = noise_sigma(V)
+        if level < min_noise:
+            return V.copy()  # no noise found: nothing to remove
+    w = weld_mesh(V, F) if weld else None
+    if w is not None and w.n_merged:
+        Vw, Fw = w.vertices, w.faces
+        if sigma is None and min_noise > 0:
+            sigma, level = noise_sigma(Vw)
+            if level < min_noise:
+                return V.copy()
     else:
-        trust = None  # tsgsp bounds its own displacements; the smoothers are not bounded
+        Vw, Fw = V, F
+    out = _run(info, Vw, Fw, pre=pre, trust=trust, sigma=sigma, options=options)
+    return w.expand(out) if w is not None and w.n_merged else out
+
+
+def _run(info, V, F, *, pre, trust, sigma, options) -> np.ndarray:
+    """The method itself, with the coarse pre-step and the trust region of :func:`denoise`.
+    ``sigma`` is the noise estimate already computed by the gate (None: estimate here)."""
+    if info.name == "tsgsp" and sigma is not None:
+        options = {**options, "sigma_z": sigma}
     V0 = V
-    if pre == "coarse" and method != "tsgsp":
+    if pre == "coarse" and info.name != "tsgsp":
         from .tsgsp import coarse
 
         V = coarse(V, F, rng=options.get("rng", 0))
     out = info.func(V, F, **options)
-    if trust is None:
+    if info.name not in _TRUSTED or trust is None:
         return out
-    V0 = np.asarray(V0, dtype=np.float64)
-    return apply_trust(V0, out, trust_radius(V0, trust))
+    if sigma is None:
+        sigma = noise_sigma(V0)[0]
+    return apply_trust(V0, out, float(trust) * sigma)
 
 
 def warm_up(methods, V, F, *, n_faces: int = 2000) -> None:

@@ -930,6 +930,7 @@ def tsgsp(
     coarse_options: dict | None = None,
     input_weight: float = 0.7,
     trust: float | None = 6.0,
+    sigma_z: float | None = None,
     rng=0,
     **fine_options,
 ) -> np.ndarray:
@@ -963,6 +964,9 @@ def tsgsp(
         bounding-box diagonal. ``6`` was chosen on the tuning split (the shared denoising
         pairs); ``None`` disables the bound. :func:`spectrageo.denoise.denoise` also returns
         meshes whose relative noise level is below ``min_noise`` unchanged.
+    sigma_z : float, optional
+        The noise standard deviation of the trust bound when already estimated (by
+        :func:`spectrageo.denoise.denoise`'s gate); default estimated here.
     rng : seed or Generator
         Seeds METIS and the subspace starts; results are deterministic for a seed.
     **fine_options
@@ -1001,7 +1005,12 @@ def tsgsp(
     Vc = cr.vertices
     if trust is not None:
         given = coarse_options is not None and "noise_var" in coarse_options
-        sigma = float(np.sqrt(cr.noise_var)) if given else noise_sigma(V)[0]
+        if given:
+            sigma = float(np.sqrt(cr.noise_var))
+        elif sigma_z is not None:
+            sigma = float(check_positive(sigma_z, "sigma_z", allow_zero=True))
+        else:
+            sigma = noise_sigma(V)[0]
         if not (cr.noise_var > 0 and sigma > 0):
             return V.copy()  # no noise found: nothing to remove
     source = Vc + float(input_weight) * (V - Vc) if input_weight > 0 else None
