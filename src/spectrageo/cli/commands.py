@@ -148,6 +148,10 @@ def describe(obj) -> dict:
 
 
 def cmd_info(args) -> int:
+    if str(args.file).lower().endswith(".sgc"):  # compressed mesh: header summary
+        from .compress_cmds import cmd_info_sgc
+
+        return cmd_info_sgc(args)
     from .. import io
     from ..geometry import Mesh, MeshAnimation
 
@@ -419,7 +423,7 @@ def _save_npy(path, arr) -> None:
 
 
 # --------------------------------------------------------------------------- evaluate
-EVALUATIONS = ("denoise", "denoise-dynamic", "outliers", "saliency")
+EVALUATIONS = ("denoise", "denoise-dynamic", "outliers", "saliency", "compress")
 
 
 def cmd_evaluate(args) -> int:
@@ -711,4 +715,4 @@ def register_all(sub) -> None:
 
 # Further command groups live in their own modules, each exposing ``register(sub)``:
 # saliency/features/curves/simplify/inspect, the viewer.
-_COMMAND_MODULES = ("saliency_cmds", "view_cmd")
+_COMMAND_MODULES = ("saliency_cmds", "view_cmd", "compress_cmds")

@@ -1,0 +1,191 @@
+"""The ``.sgc`` container: magic, version, header, checksummed chunks.
+
+Layout (little endian)::
+
+    magic    b"SGC\\x1a"                                  4 bytes
+    version  u8  (FORMAT_VERSION)
+    method   u8  (0 spectral, 1 feature, 2 saliency)
+    flags    u8  (bit 0: vertices/faces were reordered by the codec)
+    n_chunks u8
+    n_vertices u32, n_faces u32
+    origin   3 x f64, scale f64                            (normalisation of the coordinates)
+    params   u16 length + bytes                            (method parameters, see each codec)
+    crc32    u32 of everything above
+    chunks   n_chunks x (tag u8, length u32, crc32 u32, payload)
+
+Chunk 0 is the connectivity; the following chunks hold the geometry, coarse to fine. Every
+length and checksum is verified before a byte of a payload is interpreted, so a truncated,
+corrupted or foreign file raises :class:`~spectrageo.InvalidInputError` and never reaches the
+numerical code with garbage. A prefix of a file can still be decoded with ``partial=True``: the
+complete chunks are used, the missing geometry layers are taken as zero (a coarser level).
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass, field
+
+from .._errors import InvalidInputError
+
+MAGIC = b"SGC\x1a"
+FORMAT_VERSION = 1
+METHOD_IDS = {"spectral": 0, "feature": 1, "saliency": 2}
+METHOD_NAMES = {v: k for k, v in METHOD_IDS.items()}
+FLAG_REORDERED = 1
+#: largest vertex / face count a file may declare (guards allocations against hostile headers)
+MAX_COUNT = 1 << 28
+
+_FIXED = struct.Struct("<4sBBBBII4d")
+_CHUNK = struct.Struct("<BII")
+
+
+@dataclass
+class Container:
+    method: str
+    n_vertices: int
+    n_faces: int
+    origin: tuple[float, float, float]
+    scale: float
+    params: bytes
+    reordered: bool = False
+    chunks: list[tuple[int, bytes]] = field(default_factory=list)
+    complete: bool = True  # False when a prefix was read with partial=True
+
+    def to_bytes(self) -> bytes:
+        if len(self.chunks) > 255:
+            raise InvalidInputError("too many chunks for the container (at most 255).")
+        head = _FIXED.pack(
+            MAGIC,
+            FORMAT_VERSION,
+            METHOD_IDS[self.method],
+            FLAG_REORDERED if self.reordered else 0,
+            len(self.chunks),
+            self.n_vertices,
+            self.n_faces,
+            *self.origin,
+            self.scale,
+        )
+        head += struct.pack("<H", len(self.params)) + self.params
+        out = [head, struct.pack("<I", zlib.crc32(head))]
+        for tag, payload in self.chunks:
+            out.append(_CHUNK.pack(tag, len(payload), zlib.crc32(payload)))
+            out.append(payload)
+        return b"".join(out)
+
+
+def parse(data, *, partial: bool = False) -> Container:
+    """Parse and verify a container; ``partial`` accepts a prefix (missing chunks are dropped)."""
+    if isinstance(data, memoryview | bytearray):
+        data = bytes(data)
+    if not isinstance(data, bytes):
+        raise InvalidInputError(f"`data` must be bytes; got {type(data).__name__}.")
+    if len(data) < 4 or data[:4] != MAGIC:
+        raise InvalidInputError("not a spectrageo compressed mesh (.sgc): wrong magic bytes.")
+    if len(data) < _FIXED.size + 2:
+        raise InvalidInputError(".sgc data is truncated inside the header.")
+    magic, version, method, flags, n_chunks, n, m, ox, oy, oz, scale = _FIXED.unpack_from(data)
+    if version != FORMAT_VERSION:
+        raise InvalidInputError(
+            f".sgc format version {version} is not supported (this spectrageo reads version "
+            f"{FORMAT_VERSION})."
+        )
+    (plen,) = struct.unpack_from("<H", data, _FIXED.size)
+    end = _FIXED.size + 2 + plen
+    if len(data) < end + 4:
+        raise InvalidInputError(".sgc data is truncated inside the header.")
+    (crc,) = struct.unpack_from("<I", data, end)
+    if zlib.crc32(data[:end]) != crc:
+        raise InvalidInputError(".sgc header is corrupted (checksum mismatch).")
+    if method not in METHOD_NAMES:
+        raise InvalidInputError(f".sgc header names an unknown method id {method}.")
+    if not (0 < n <= MAX_COUNT and 0 < m <= MAX_COUNT) or n_chunks < 1:
+        raise InvalidInputError(
+            f".sgc header has invalid counts (n={n}, m={m}, chunks={n_chunks})."
+        )
+    c = Container(
+        METHOD_NAMES[method],
+        n,
+        m,
+        (ox, oy, oz),
+        scale,
+        data[_FIXED.size + 2 : end],
+        bool(flags & FLAG_REORDERED),
+    )
+    pos = end + 4
+    for i in range(n_chunks):
+        if len(data) < pos + _CHUNK.size:
+            if partial and i > 0:
+                c.complete = False
+                return c
+            raise InvalidInputError(f".sgc data is truncated (chunk {i} of {n_chunks} missing).")
+        tag, length, ccrc = _CHUNK.unpack_from(data, pos)
+        pos += _CHUNK.size
+        payload = data[pos : pos + length]
+        if len(payload) != length:
+            if partial and i > 0:
+                c.complete = False
+                return c
+            raise InvalidInputError(
+                f".sgc data is truncated (chunk {i} of {n_chunks} holds {len(payload)} of "
+                f"{length} bytes)."
+            )
+        if zlib.crc32(payload) != ccrc:
+            raise InvalidInputError(f".sgc chunk {i} is corrupted (checksum mismatch).")
+        c.chunks.append((tag, payload))
+        pos += length
+    if pos != len(data):
+        raise InvalidInputError(f".sgc data has {len(data) - pos} unexpected trailing bytes.")
+    return c
+
+
+# ----------------------------------------------------------------------------- small codecs
+class Reader:
+    """Bounds-checked reader over a payload (every overrun is an InvalidInputError)."""
+
+    def __init__(self, buf: bytes, what: str) -> None:
+        self.buf = buf
+        self.pos = 0
+        self.what = what
+
+    def take(self, k: int) -> bytes:
+        if k < 0 or self.pos + k > len(self.buf):
+            raise InvalidInputError(f".sgc {self.what} is malformed (read past its end).")
+        out = self.buf[self.pos : self.pos + k]
+        self.pos += k
+        return out
+
+    def unpack(self, fmt: str):
+        s = struct.Struct(fmt)
+        return s.unpack(self.take(s.size))
+
+    def varint(self) -> int:
+        shift = out = 0
+        while True:
+            (b,) = self.take(1)
+            out |= (b & 0x7F) << shift
+            if not b & 0x80:
+                return out
+            shift += 7
+            if shift > 63:
+                raise InvalidInputError(f".sgc {self.what} is malformed (bad varint).")
+
+    def rest(self) -> bytes:
+        out = self.buf[self.pos :]
+        self.pos = len(self.buf)
+        return out
+
+
+def varint(x: int) -> bytes:
+    x = int(x)
+    if x < 0:
+        raise ValueError("varint of a negative number")
+    out = bytearray()
+    while True:
+        b = x & 0x7F
+        x >>= 7
+        if x:
+            out.append(b | 0x80)
+        else:
+            out.append(b)
+            return bytes(out)

@@ -1,0 +1,274 @@
+"""Feature-aware high-pass quantisation (Section 5.2.3, Algorithm 9, Eq. 5.53-5.54) and its
+saliency-driven multiscale variant (Algorithm 10).
+
+Encoder:
+
+1. the delta coordinates ``delta = L v`` with the binary Laplacian ``L = D - C`` (Eq. 4.13);
+2. a per-vertex mask of the deltas that are sent finely: ``feature`` takes the
+   ``feature_fraction`` most salient vertices of the RPCA geometric saliency of the guided normals
+   (Algorithm 9 steps 1-2, :func:`spectrageo.saliency.geometric_saliency`); ``saliency`` splits the
+   vertices into ``n_classes`` classes of the combined saliency map and keeps the fractions
+   ``class_keep`` of each class, most salient first (Algorithm 10 steps 2-5);
+3. anchors ``v_a``: one vertex per METIS part, ``anchor_fraction`` of the vertices (1 % in
+   Algorithm 9, 10 % in Algorithm 10), plus one per connected component; they are chosen from the
+   connectivity alone, so their indices are not sent;
+4. uniform quantisation (Eq. 5.53) of the anchors and the masked deltas with ``step``; the other
+   deltas are quantised with ``ratio * step`` (``ratio = 0``: set to zero, as in Eq. 5.53), and
+   sent in a second layer (the progressive refinement of Algorithm 9, step 5).
+
+Decoder: the sparse least-squares system ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54) through its
+normal equations ``(L^T L + I_a^T I_a) v = L^T delta + I_a^T v_a``, factorised once.
+
+The uniform (feature-unaware) baseline of Fig. 5.69-5.70 is ``feature_fraction=1``.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import scipy.sparse as sp
+
+from .._errors import InvalidInputError
+from ._entropy import decode_groups, encode_groups, zstd_compress, zstd_decompress
+
+TAG_MASK = 4
+TAG_ANCHORS = 5
+TAG_DELTA_FINE = 6
+TAG_DELTA_COARSE = 7
+
+_P = struct.Struct("<ffdI")
+_MIN_FACES = 8  # below this the saliency patches are meaningless
+
+_DEFAULTS = {
+    "feature": {"anchor_fraction": 0.01, "feature_fraction": 0.15, "ratio": 4.0},
+    "saliency": {"anchor_fraction": 0.10, "ratio": 0.0},
+}
+_OPTIONS = {
+    "feature": ("anchor_fraction", "feature_fraction", "ratio", "seed", "mask"),
+    "saliency": ("anchor_fraction", "ratio", "seed", "n_classes", "class_keep", "mask"),
+}
+
+
+def _laplacian(F: np.ndarray, n: int) -> sp.csr_matrix:
+    from ..graph import adjacency_matrix, laplacian_from_adjacency
+
+    C = adjacency_matrix(F, n)
+    C.data[:] = 1.0
+    return laplacian_from_adjacency(C).tocsr()
+
+
+def anchors(F: np.ndarray, n: int, fraction: float, seed: int) -> np.ndarray:
+    """Anchor vertices from the connectivity: the smallest index of each METIS part, plus the
+    smallest index of every connected component without one (sorted, unique)."""
+    from scipy.sparse.csgraph import connected_components
+
+    from ..graph import adjacency_matrix
+    from ..spectral.partition import _metis, _split
+
+    C = adjacency_matrix(F, n).tocsr()
+    C.data[:] = 1.0
+    n_a = max(1, int(np.ceil(fraction * n)))
+    if n_a >= 2 and n > n_a:
+        membership = _metis(C, n_a, int(seed))
+        picks = [int(p.min()) for p in _split(membership, n_a)]
+    else:
+        picks = [0] if n_a < n else list(range(n))
+    ncomp, lab = connected_components(C, directed=False)
+    first = np.full(ncomp, n, dtype=np.int64)
+    np.minimum.at(first, lab, np.arange(n))
+    have = np.zeros(ncomp, dtype=bool)
+    have[lab[np.asarray(picks, dtype=np.int64)]] = True
+    return np.unique(np.r_[np.asarray(picks, dtype=np.int64), first[~have]])
+
+
+class _Solver:
+    """Factorised normal equations of ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54)."""
+
+    def __init__(self, L: sp.csr_matrix, a: np.ndarray) -> None:
+        import scipy.sparse.linalg as spla
+
+        n = L.shape[0]
+        P = sp.csr_matrix((np.ones(a.size), (np.arange(a.size), a)), shape=(a.size, n))
+        self.L, self.P = L, P
+        M = (L.T @ L + P.T @ P).tocsc()
+        self.lu = spla.splu(M, permc_spec="MMD_AT_PLUS_A")
+
+    def solve(self, delta: np.ndarray, va: np.ndarray) -> np.ndarray:
+        return self.lu.solve(np.asarray(self.L.T @ delta + self.P.T @ va))
+
+
+def _mask_feature(V, F, fraction: float, seed: int) -> np.ndarray:
+    n = V.shape[0]
+    if fraction >= 1.0 or F.shape[0] < _MIN_FACES:  # too small for patches: every delta is sent
+        return np.ones(n, dtype=bool)
+    from ..saliency import geometric_saliency
+
+    s = geometric_saliency(V, F, k=min(25, F.shape[0] - 1), rng=seed)
+    k = int(round(fraction * n))
+    mask = np.zeros(n, dtype=bool)
+    mask[np.argsort(-s, kind="stable")[:k]] = True
+    return mask
+
+
+def _mask_saliency(V, F, n_classes: int, keep, seed: int) -> np.ndarray:
+    from ..saliency import saliency, saliency_classes
+
+    if F.shape[0] < _MIN_FACES:
+        return np.ones(V.shape[0], dtype=bool)
+    s = saliency(V, F, k=min(25, F.shape[0] - 1), rng=seed)
+    cls = saliency_classes(s, n_classes, class_edges="quantile")
+    mask = np.zeros(V.shape[0], dtype=bool)
+    for c in range(n_classes):
+        idx = np.flatnonzero(cls == c)
+        k = int(round(keep[c] * idx.size))
+        mask[idx[np.argsort(-s[idx], kind="stable")[:k]]] = True
+    return mask
+
+
+class FeaturePlan:
+    def __init__(self, X, F, method: str, o: dict) -> None:
+        self.n = n = X.shape[0]
+        self.method = method
+        self.anchor_fraction = float(np.float32(o["anchor_fraction"]))
+        self.ratio = float(np.float32(o["ratio"]))
+        self.seed = int(o.get("seed", 0))
+        self.a = anchors(F, n, self.anchor_fraction, self.seed)
+        self.L = _laplacian(F, n)
+        self.delta = np.asarray(self.L @ X)
+        self.va = X[self.a]
+        if "mask" in o and o["mask"] is not None:
+            mask = np.asarray(o["mask"])
+            if mask.dtype != bool or mask.shape != (n,):
+                raise InvalidInputError(f"`mask` must be a boolean array of shape ({n},).")
+            self.mask = mask.copy()
+        elif method == "feature":
+            self.mask = _mask_feature(X, F, float(o["feature_fraction"]), self.seed)
+        else:
+            self.mask = _mask_saliency(X, F, int(o["n_classes"]), o["class_keep"], self.seed)
+        self.solver = _Solver(self.L, self.a)
+
+    def params(self, step: float) -> bytes:
+        return _P.pack(self.anchor_fraction, self.ratio, float(step), self.seed)
+
+    def _quant(self, step: float):
+        qa = np.rint(self.va / step).astype(np.int64)
+        qf = np.rint(self.delta[self.mask] / step).astype(np.int64)
+        if self.ratio > 0:
+            qc = np.rint(self.delta[~self.mask] / (self.ratio * step)).astype(np.int64)
+        else:
+            qc = np.zeros((0, 3), dtype=np.int64)
+        return qa, qf, qc
+
+    def chunks(self, step: float):
+        qa, qf, qc = self._quant(step)
+        out = [
+            (TAG_MASK, zstd_compress(np.packbits(self.mask).tobytes())),
+            (TAG_ANCHORS, _enc3(qa)),
+            (TAG_DELTA_FINE, _enc3(qf)),
+        ]
+        if self.ratio > 0:
+            out.append((TAG_DELTA_COARSE, _enc3(qc)))
+        return out
+
+    def reconstruct(self, step: float | None) -> np.ndarray:
+        if step is None:  # the floor: exact anchors, exact masked deltas
+            d = self.delta.copy()
+            if self.ratio == 0:
+                d[~self.mask] = 0.0
+            return self.solver.solve(d, self.va)
+        qa, qf, qc = self._quant(step)
+        d = np.zeros_like(self.delta)
+        d[self.mask] = qf * step
+        if self.ratio > 0:
+            d[~self.mask] = qc * (self.ratio * step)
+        return self.solver.solve(d, qa * step)
+
+
+def _enc3(q: np.ndarray) -> bytes:
+    g = np.tile(np.arange(3), q.shape[0])
+    return encode_groups(q.ravel(), g, 3)
+
+
+def _dec3(buf: bytes, rows: int, what: str) -> np.ndarray:
+    g = np.tile(np.arange(3), rows)
+    return decode_groups(buf, g, 3, what).reshape(rows, 3)
+
+
+def _check_fraction(v, name: str, *, lo_open: bool = True) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
+        raise InvalidInputError(f"`{name}` must be a number in (0, 1]; got {v!r}.")
+    if not 0 < float(v) <= 1:
+        raise InvalidInputError(f"`{name}` must be in (0, 1]; got {v!r}.")
+    return float(v)
+
+
+def make_plan(X, F, method: str, options: dict) -> FeaturePlan:
+    bad = sorted(set(options) - set(_OPTIONS[method]))
+    if bad:
+        raise InvalidInputError(
+            f"unknown option(s) {bad} for method {method!r}; choose from {list(_OPTIONS[method])}."
+        )
+    o = {**_DEFAULTS[method], **options}
+    _check_fraction(o["anchor_fraction"], "anchor_fraction")
+    r = o["ratio"]
+    if isinstance(r, bool) or not isinstance(r, int | float) or not (r == 0 or 1 <= r <= 1e4):
+        raise InvalidInputError(f"`ratio` must be 0 or in [1, 10000]; got {r!r}.")
+    seed = o.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise InvalidInputError(f"`seed` must be an integer in [0, 2**32); got {seed!r}.")
+    if method == "feature":
+        _check_fraction(o["feature_fraction"], "feature_fraction")
+    else:
+        nc = o.get("n_classes", 4)
+        if isinstance(nc, bool) or not isinstance(nc, int) or not 1 <= nc <= 64:
+            raise InvalidInputError(f"`n_classes` must be an integer in 1..64; got {nc!r}.")
+        keep = o.get("class_keep")
+        if keep is None:  # least salient class first
+            keep = np.linspace(0.1, 1.0, nc) if nc > 1 else np.ones(1)
+        keep = np.asarray(keep, dtype=np.float64)
+        if keep.shape != (nc,) or not ((keep >= 0) & (keep <= 1)).all():
+            raise InvalidInputError(f"`class_keep` must hold {nc} fractions in [0, 1].")
+        o["n_classes"], o["class_keep"] = nc, keep
+    return FeaturePlan(X, F, method, o)
+
+
+def describe(params: bytes, method: str) -> dict:
+    af, ratio, step, _seed = _unpack(params)
+    return {"anchor_fraction": round(af, 6), "ratio": round(ratio, 6), "step": step}
+
+
+def _unpack(params: bytes):
+    if len(params) != _P.size:
+        raise InvalidInputError(f".sgc {_P.size}-byte parameters expected; got {len(params)}.")
+    af, ratio, step, seed = _P.unpack(params)
+    if not (0 < af <= 1 and (ratio == 0 or 1 <= ratio <= 1e4) and np.isfinite(step) and step > 0):
+        raise InvalidInputError(".sgc feature parameters are out of range.")
+    return af, ratio, step, seed
+
+
+def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str) -> np.ndarray:
+    af, ratio, step, seed = _unpack(params)
+    tags = [t for t, _ in chunks]
+    need = [TAG_MASK, TAG_ANCHORS]
+    allowed = {TAG_MASK, TAG_ANCHORS, TAG_DELTA_FINE, TAG_DELTA_COARSE}
+    if any(t not in allowed for t in tags) or len(set(tags)) != len(tags):
+        raise InvalidInputError(".sgc feature stream has unexpected chunks.")
+    if tags[:2] != need:
+        raise InvalidInputError(".sgc feature stream lacks its mask or anchors.")
+    body = dict(chunks)
+    raw = zstd_decompress(body[TAG_MASK], (n + 7) // 8, "feature mask")
+    if len(raw) != (n + 7) // 8:
+        raise InvalidInputError(".sgc feature mask has the wrong size.")
+    mask = np.unpackbits(np.frombuffer(raw, dtype=np.uint8))[:n].astype(bool)
+    a = anchors(F, n, af, seed)
+    va = _dec3(body[TAG_ANCHORS], a.size, "anchors") * step
+    L = _laplacian(F, n)
+    d = np.zeros((n, 3))
+    if TAG_DELTA_FINE in body:
+        d[mask] = _dec3(body[TAG_DELTA_FINE], int(mask.sum()), "feature deltas") * step
+    if TAG_DELTA_COARSE in body:
+        if ratio == 0:
+            raise InvalidInputError(".sgc feature stream has an unexpected chunk.")
+        d[~mask] = _dec3(body[TAG_DELTA_COARSE], int((~mask).sum()), "deltas") * (ratio * step)
+    return _Solver(L, a).solve(d, va)

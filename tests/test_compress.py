@@ -1,0 +1,291 @@
+"""spectrageo.compress: .sgc round trips, rate control, progressive prefixes, hostile input, CLI."""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+
+import numpy as np
+import pytest
+
+from spectrageo import InvalidInputError, compress, datasets, io
+from spectrageo.cli.main import main
+from spectrageo.compress import _container
+
+from conftest import grid, icosphere
+
+
+def _rms(V, W):
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    return float(np.sqrt(np.mean(np.sum((V - W) ** 2, axis=1))) / diag)
+
+
+@pytest.fixture(scope="module")
+def fandisk():
+    m = datasets.fandisk()
+    return m.vertices, m.faces
+
+
+@pytest.fixture(scope="module")
+def fandisk_sgc(fandisk):
+    V, F = fandisk
+    return compress.encode(V, F)
+
+
+# ----------------------------------------------------------------------------- round trips
+@pytest.mark.parametrize("method", compress.METHODS)
+def test_round_trip_keeps_order_and_connectivity(method):
+    V, F = icosphere(3)
+    rng = np.random.default_rng(0)
+    perm = rng.permutation(V.shape[0])  # a scrambled order must survive too
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.size)
+    V, F = V[perm], inv[F][rng.permutation(F.shape[0])]
+    data = compress.encode(V, F, method=method, step=1e-4)
+    V2, F2 = compress.decode(data)
+    assert F2.dtype == np.int64 and np.array_equal(F2, F)
+    assert V2.shape == V.shape
+    # vertex i decodes near vertex i (order kept)
+    assert _rms(V, V2) < 0.01
+    d = compress.info(data)
+    assert d["method"] == method and d["n_vertices"] == V.shape[0] and not d["reordered"]
+
+
+def test_fandisk_round_trip_exact_faces(fandisk, fandisk_sgc):
+    V, F = fandisk
+    V2, F2 = compress.decode(fandisk_sgc)
+    assert np.array_equal(F2, F)
+    assert _rms(V, V2) < 1e-3
+    # same bytes decode to the same mesh (the decoder is deterministic)
+    V3, _ = compress.decode(fandisk_sgc)
+    assert np.array_equal(V2, V3)
+
+
+def test_reorder_is_reported_and_same_surface(fandisk):
+    V, F = fandisk
+    data = compress.encode(V, F, reorder=True, step=1e-4)
+    assert compress.info(data)["reordered"] is True
+    V2, F2 = compress.decode(data)
+    assert F2.shape == F.shape and V2.shape == V.shape
+    # same faces up to renumbering: match vertices by position
+    from scipy.spatial import cKDTree
+
+    d, idx = cKDTree(V).query(V2)
+    assert d.max() < 1e-3 * np.linalg.norm(np.ptp(V, axis=0))
+    a = np.sort(np.sort(idx[F2], axis=1), axis=0)
+    b = np.sort(np.sort(F, axis=1), axis=0)
+    assert np.array_equal(np.unique(a, axis=0), np.unique(b, axis=0))
+
+
+def test_unreferenced_vertices_and_tiny_meshes():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5.0]])
+    F = np.array([[0, 1, 2]])
+    for method in ("spectral", "feature"):
+        V2, F2 = compress.decode(compress.encode(V, F, method=method, step=1e-5))
+        assert np.array_equal(F2, F)
+        assert np.abs(V2 - V).max() < 1e-3
+
+
+def test_flat_and_degenerate_geometry():
+    V, F = grid(6, 6)  # z = 0 everywhere
+    V2, F2 = compress.decode(compress.encode(V, F, step=1e-5))
+    assert np.array_equal(F2, F) and np.abs(V2 - V).max() < 1e-3
+    Vp = np.zeros_like(V)  # all vertices at one point: zero bounding box
+    V3, _ = compress.decode(compress.encode(Vp, F))
+    assert np.allclose(V3, 0.0)
+
+
+# ----------------------------------------------------------------------------- rate
+def test_error_decreases_with_rate(fandisk):
+    V, F = fandisk
+    sizes, errs = [], []
+    for step in (3e-3, 1e-3, 3e-4, 1e-4):
+        data = compress.encode(V, F, step=step)
+        sizes.append(len(data))
+        errs.append(_rms(V, compress.decode(data)[0]))
+    assert np.all(np.diff(sizes) > 0)
+    assert np.all(np.diff(errs) < 0)
+
+
+@pytest.mark.parametrize("bpv", [12.0, 20.0])
+def test_rate_control_bpv_within_5_percent(fandisk, bpv):
+    V, F = fandisk
+    data = compress.encode(V, F, bpv=bpv)
+    got = 8 * len(data) / V.shape[0]
+    assert abs(got - bpv) <= 0.05 * bpv
+    assert compress.info(data)["bpv"] == pytest.approx(got)
+
+
+@pytest.mark.parametrize(
+    "method,error", [("spectral", 1e-3), ("spectral", 2e-4), ("feature", 2e-3)]
+)
+def test_rate_control_error_within_5_percent(fandisk, method, error):
+    V, F = fandisk
+    V2, _ = compress.decode(compress.encode(V, F, method=method, error=error))
+    assert abs(_rms(V, V2) - error) <= 0.05 * error
+
+
+def test_rate_control_on_shared_mesh(shared_data):
+    m = io.read_mesh(shared_data / "cad" / "partLp.obj")
+    V, F = m.vertices, m.faces
+    data = compress.encode(V, F, error=5e-4)
+    V2, F2 = compress.decode(data)
+    assert np.array_equal(F2, F)
+    assert abs(_rms(V, V2) - 5e-4) <= 0.05 * 5e-4
+    data = compress.encode(V, F, bpv=1.3 * compress.info(data)["connectivity_bpv"] + 8)
+    assert abs(8 * len(data) / V.shape[0] - (1.3 * compress.info(data)["connectivity_bpv"] + 8)) < (
+        0.05 * (1.3 * compress.info(data)["connectivity_bpv"] + 8)
+    )
+
+
+def test_unreachable_rate_is_a_clear_error(fandisk):
+    V, F = fandisk
+    with pytest.raises(InvalidInputError, match="connectivity and header alone"):
+        compress.encode(V, F, bpv=1.0)
+    with pytest.raises(InvalidInputError, match="below what method"):
+        compress.encode(V, F, error=1e-3, k=20)
+
+
+def test_feature_mask_beats_zero_deltas(fandisk):
+    """Algorithm 9: sending the feature deltas improves on anchors alone (Eq. 5.53)."""
+    V, F = fandisk
+    a = compress.decode(compress.encode(V, F, method="feature", step=1e-3, ratio=0.0))[0]
+    b = compress.decode(compress.encode(V, F, method="feature", step=1e-3))[0]
+    assert _rms(V, b) < _rms(V, a)
+
+
+# ----------------------------------------------------------------------------- progressive
+def test_prefix_decodes_to_coarser_level(fandisk, fandisk_sgc):
+    V, F = fandisk
+    data = fandisk_sgc
+    c = _container.parse(data)
+    assert len(c.chunks) == 4  # connectivity + 3 frequency layers
+    errs = []
+    # cut right after the k-th chunk
+    pos = len(data)
+    ends = []
+    for _tag, payload in reversed(c.chunks):
+        ends.append(pos)
+        pos -= len(payload) + 9
+    ends = ends[::-1]
+    for end in ends[1:]:
+        V2, F2 = compress.decode(data[:end], partial=True)
+        assert np.array_equal(F2, F)
+        errs.append(_rms(V, V2))
+    assert errs[0] > errs[1] > errs[2]
+    with pytest.raises(InvalidInputError, match="truncated"):
+        compress.decode(data[: ends[1]])
+
+
+# ----------------------------------------------------------------------------- hostile input
+def test_truncated_and_corrupted_streams(fandisk_sgc):
+    data = fandisk_sgc
+    for cut in (0, 3, 10, 40, 60, len(data) // 2, len(data) - 1):
+        with pytest.raises(InvalidInputError):
+            compress.decode(data[:cut])
+    rng = np.random.default_rng(1)
+    for _ in range(40):
+        b = bytearray(data)
+        i = int(rng.integers(0, len(b)))
+        b[i] ^= 1 << int(rng.integers(0, 8))
+        with pytest.raises(InvalidInputError):
+            compress.decode(bytes(b))
+    with pytest.raises(InvalidInputError, match="trailing"):
+        compress.decode(data + b"\0")
+
+
+def test_foreign_and_wrong_version():
+    with pytest.raises(InvalidInputError, match="magic"):
+        compress.decode(b"ply\nformat binary_little_endian 1.0\n")
+    with pytest.raises(InvalidInputError, match="bytes"):
+        compress.decode("SGC")
+    V, F = icosphere(1)
+    data = bytearray(compress.encode(V, F))
+    data[4] = 99
+    (plen,) = struct.unpack_from("<H", data, 48)
+    end = 50 + plen
+    data[end : end + 4] = struct.pack("<I", zlib.crc32(bytes(data[:end])))
+    with pytest.raises(InvalidInputError, match="version 99"):
+        compress.decode(bytes(data))
+
+
+def test_fuzz_decoder_never_crashes():
+    """Random payloads behind a valid header and checksums: only InvalidInputError."""
+    V, F = icosphere(2)
+    for method in compress.METHODS:
+        c = _container.parse(compress.encode(V, F, method=method))
+        rng = np.random.default_rng(2)
+        for _ in range(25):
+            j = int(rng.integers(0, len(c.chunks)))
+            chunks = list(c.chunks)
+            tag, payload = chunks[j]
+            junk = rng.integers(0, 256, size=int(rng.integers(0, 2 * len(payload) + 8)))
+            chunks[j] = (tag, bytes(junk.astype(np.uint8)))
+            c2 = _container.Container(
+                c.method, c.n_vertices, c.n_faces, c.origin, c.scale, c.params, False, chunks
+            )
+            try:
+                V2, F2 = compress.decode(c2.to_bytes())
+            except InvalidInputError:
+                continue
+            assert np.isfinite(V2).all() and F2.min() >= 0 and F2.max() < c.n_vertices
+
+
+def test_bad_arguments():
+    V, F = icosphere(1)
+    with pytest.raises(InvalidInputError, match="method"):
+        compress.encode(V, F, method="draco")
+    with pytest.raises(InvalidInputError, match="at most one"):
+        compress.encode(V, F, bpv=10, error=0.01)
+    with pytest.raises(InvalidInputError, match="`bpv` must be a positive"):
+        compress.encode(V, F, bpv=-1)
+    with pytest.raises(InvalidInputError, match="`error` must be a positive"):
+        compress.encode(V, F, error=float("nan"))
+    with pytest.raises(InvalidInputError, match="unknown option"):
+        compress.encode(V, F, submeshes=3)
+    with pytest.raises(InvalidInputError, match="`k` must be at most"):
+        compress.encode(V, F, k=400, submesh_size=300)
+    with pytest.raises(InvalidInputError, match="`F` is empty"):
+        compress.encode(V, np.zeros((0, 3), int))
+    with pytest.raises(InvalidInputError, match="`V` is empty"):
+        compress.encode(np.zeros((0, 3)), F)
+    with pytest.raises(InvalidInputError, match="NaN"):
+        compress.encode(np.full_like(V, np.nan), F)
+    with pytest.raises(InvalidInputError, match="out of range"):
+        compress.encode(V, F + V.shape[0])
+
+
+# ----------------------------------------------------------------------------- CLI
+def test_cli_round_trip(tmp_path, capsys):
+    src = datasets.fandisk_path()
+    out = tmp_path / "f.sgc"
+    assert main(["compress", str(src), str(out), "--bpv", "16"]) == 0
+    assert "order kept" in capsys.readouterr().err
+    assert main(["info", str(out), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["method"] == "spectral" and d["n_vertices"] == 6475
+    assert abs(d["bpv"] - 16) <= 0.8
+    ply = tmp_path / "f.ply"
+    assert main(["decompress", str(out), str(ply)]) == 0
+    m, ref = io.read_mesh(ply), datasets.fandisk()
+    assert np.array_equal(m.faces, ref.faces)
+    assert _rms(ref.vertices, m.vertices) < 2e-3
+    # --reorder says so
+    assert main(["compress", str(src), str(tmp_path / "r.sgc"), "--reorder", "-q"]) == 0
+    assert main(["info", str(tmp_path / "r.sgc"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["reordered"] is True
+
+
+def test_cli_errors(tmp_path, capsys):
+    bad = tmp_path / "bad.sgc"
+    bad.write_bytes(b"SGC\x1a" + b"\0" * 20)
+    assert main(["decompress", str(bad), str(tmp_path / "x.ply")]) == 2
+    assert "truncated" in capsys.readouterr().err
+    assert not (tmp_path / "x.ply").exists()
+    src = datasets.fandisk_path()
+    assert main(["compress", str(src), str(tmp_path / "f.bin")]) == 2
+    assert ".sgc" in capsys.readouterr().err
+    assert main(["compress", str(src), str(tmp_path / "f.sgc"), "--bpv", "1"]) == 2
+    assert "cannot be reached" in capsys.readouterr().err
+    assert not (tmp_path / "f.sgc").exists()
