@@ -34,11 +34,22 @@ SECTIONS = [
     ("rpca_large", _script("rpca_large")),
     ("denoise", _evaluate("denoise", "denoise")),
     ("denoise_generality", _script("denoise_generality")),
+    (
+        "clean_inputs",
+        [
+            *_script("clean_inputs"),
+            "--max-vertices",
+            "40000",
+            "--out",
+            str(HERE / "_out" / "clean_inputs.md"),
+        ],
+    ),
     ("denoise_large", _script("denoise_large")),
     ("denoise_dynamic", [*_script("denoise_dynamic"), "--max-frames", "40"]),
     ("outliers", _evaluate("outliers", "outliers")),
     ("outliers_large", _script("outliers_large")),
     ("saliency", _script("saliency")),
+    ("compress", _evaluate("compress", "compress")),
     ("viewer", _script("viewer")),
 ]
 
