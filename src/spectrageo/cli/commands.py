@@ -148,7 +148,7 @@ def describe(obj) -> dict:
 
 
 def cmd_info(args) -> int:
-    if str(args.file).lower().endswith(".sgc"):  # compressed mesh: header summary
+    if str(args.file).lower().endswith((".sgc", ".sga")):  # compressed file: header summary
         from .compress_cmds import cmd_info_sgc
 
         return cmd_info_sgc(args)
@@ -343,6 +343,10 @@ def cmd_outliers(args) -> int:
     from ..geometry import Mesh, PointCloud, PointCloudSequence
 
     _check_outputs([args.input], [args.output, args.mask, args.scores])
+    if getattr(args, "tile", None) is not None:  # out-of-core on Dask (issue 21)
+        from .batch_cmds import cmd_outliers_tiled
+
+        return cmd_outliers_tiled(args)
     obj, rep = _read(args.input, nan_points="drop")
     opts = {"method": args.method, "k": args.k}
     if args.threshold is not None:
@@ -423,7 +427,15 @@ def _save_npy(path, arr) -> None:
 
 
 # --------------------------------------------------------------------------- evaluate
-EVALUATIONS = ("denoise", "denoise-dynamic", "outliers", "saliency", "compress")
+EVALUATIONS = (
+    "denoise",
+    "denoise-dynamic",
+    "outliers",
+    "saliency",
+    "compress",
+    "complete",
+    "compress-animation",
+)
 
 
 def cmd_evaluate(args) -> int:
@@ -433,6 +445,15 @@ def cmd_evaluate(args) -> int:
     if not data.is_dir():
         raise _err(f"`--data` must be a folder; got {data}.")
     methods = args.methods.split(",") if args.methods else None
+    protocol = _generality_options(args)
+    if args.what == "denoise" and protocol is not None:
+        from ..evaluate import denoise as ev
+
+        res = ev.evaluate_generality(
+            data, **protocol, **({"methods": methods} if methods else {}), out=args.out
+        )
+        print(ev.format_generality(res))
+        return 0
     if args.what == "denoise":
         from ..evaluate import denoise as ev
 
@@ -447,12 +468,42 @@ def cmd_evaluate(args) -> int:
         import importlib
 
         try:
-            ev = importlib.import_module(f"spectrageo.evaluate.{args.what.replace('-', '_')}")
+            mod = {"complete": "completion"}.get(args.what, args.what.replace("-", "_"))
+            ev = importlib.import_module(f"spectrageo.evaluate.{mod}")
         except ModuleNotFoundError as exc:
             raise _err(f"no evaluation named {args.what!r}.") from exc
         rows = ev.evaluate(data, methods=methods, out=args.out)
     print(ev.format_markdown(rows))
     return 0
+
+
+def _generality_options(args) -> dict | None:
+    """Keyword arguments of ``evaluate_generality`` from ``evaluate denoise --split ...``; None
+    when no protocol option is given (the pairs evaluation runs as before)."""
+    given = {
+        "--levels": args.levels,
+        "--max-vertices": args.max_vertices,
+        "--models": args.models,
+        "--cli-timing": args.cli_timing or None,
+    }
+    if args.split is None:
+        used = [k for k, v in given.items() if v is not None]
+        if used:
+            raise _err(f"`{used[0]}` needs `--split tuning|validation|both` (evaluate denoise).")
+        return None
+    if args.what != "denoise":
+        raise _err(f"`--split` applies to `evaluate denoise` only; got {args.what!r}.")
+    opts: dict = {"split": args.split, "cli_timing": bool(args.cli_timing)}
+    if args.levels:
+        try:
+            opts["levels"] = [float(x) for x in args.levels.split(",")]
+        except ValueError as exc:
+            raise _err(f"`--levels` must be comma-separated numbers; got {args.levels!r}.") from exc
+    if args.max_vertices is not None:
+        opts["max_vertices"] = args.max_vertices
+    if args.models:
+        opts["models"] = args.models.split(",")
+    return opts
 
 
 # --------------------------------------------------------------------------- demo
@@ -681,6 +732,16 @@ def register_all(sub) -> None:
         default=None,
         help="write per-point outlier scores to .npy, one per input row (inf for NaN rows)",
     )
+    p.add_argument(
+        "--tile",
+        type=int,
+        default=None,
+        metavar="N",
+        help="out of core: stream the cloud, process tiles of about N points with halos on Dask "
+        "(needs spectrageo[dist]; see docs/scaling.md)",
+    )
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler")
+    p.add_argument("--workers", type=int, default=None, help="with --tile: local Dask workers")
     p.set_defaults(func=cmd_outliers)
 
     p = sub.add_parser("evaluate", help="run methods on the shared benchmark data and print tables")
@@ -690,6 +751,22 @@ def register_all(sub) -> None:
     )
     p.add_argument("--methods", default=None, help="comma-separated method names")
     p.add_argument("--out", default=None, help="write FILE.md and FILE.csv")
+    g = p.add_argument_group("denoise generality protocol (evaluate denoise only)")
+    g.add_argument(
+        "--split",
+        default=None,
+        choices=("tuning", "validation", "both"),
+        help="run the protocol on this split instead of the shared pairs (also writes "
+        "FILE_grid.csv and FILE.png)",
+    )
+    g.add_argument("--levels", default=None, help="noise levels, e.g. 0.1,0.3,0.5 (the default)")
+    g.add_argument("--max-vertices", type=int, default=None, help="skip models with more vertices")
+    g.add_argument("--models", default=None, help="comma-separated models, e.g. partLp,cad/joint")
+    g.add_argument(
+        "--cli-timing",
+        action="store_true",
+        help="also time `spectrageo denoise` processes for the package's methods",
+    )
     p.set_defaults(func=cmd_evaluate)
 
     p = sub.add_parser("demo", help="noise + every denoiser on the embedded fandisk, with metrics")
@@ -715,4 +792,4 @@ def register_all(sub) -> None:
 
 # Further command groups live in their own modules, each exposing ``register(sub)``:
 # saliency/features/curves/simplify/inspect, the viewer.
-_COMMAND_MODULES = ("saliency_cmds", "view_cmd", "compress_cmds")
+_COMMAND_MODULES = ("saliency_cmds", "view_cmd", "compress_cmds", "complete_cmds", "batch_cmds")

@@ -1,7 +1,10 @@
-"""``spectrageo compress | decompress`` and ``spectrageo info FILE.sgc`` (thesis Sections 5.2.1, 5.2.3).
+"""``spectrageo compress | decompress`` and ``spectrageo info FILE.sgc`` (thesis Section 5.2).
 
 Thin layer over :func:`spectrageo.compress.encode`, :func:`~spectrageo.compress.decode` and
-:func:`~spectrageo.compress.info`; every output is written atomically.
+:func:`~spectrageo.compress.info` for meshes (``.sgc``), and over
+:func:`~spectrageo.compress.encode_animation` / :func:`~spectrageo.compress.decode_animation`
+for animations (``.sga``: input ``.npz`` or a folder of frames, Section 5.2.2); every output is
+written atomically.
 """
 
 from __future__ import annotations
@@ -18,14 +21,20 @@ HELP = {
         "overlapped submeshes, Sec. 5.2.1, progressive), feature (feature-aware delta\n"
         "coordinates, Algorithm 9) or saliency (Algorithm 10). Vertex and face order are kept\n"
         "unless --reorder. --bpv counts the whole file; --error is the RMS vertex error as a\n"
-        "fraction of the bounding-box diagonal; both are met within 5 %.",
+        "fraction of the bounding-box diagonal; both are met within 5 %.\n"
+        "Animations (.npz or a folder of frames) go to a .sga file: eigen-trajectory coding of\n"
+        "delta coordinates (Sec. 5.2.2: pca, pca-q, pca-qs, pca-qp, blocks [default]); --bpvf\n"
+        "is the whole file in bits per vertex per frame, --error the KG error in percent.",
         "spectrageo compress fandisk.off fandisk.sgc --bpv 20\n"
-        "spectrageo compress part.obj part.sgc --method feature --error 0.002",
+        "spectrageo compress part.obj part.sgc --method feature --error 0.002\n"
+        "spectrageo compress crane.npz crane.sga --method pca-qp --bpvf 4\n"
+        "spectrageo compress frames/ anim.sga --error 0.1   # KG error in percent",
     ),
     "decompress": (
         "Decompress a .sgc file into any mesh format (.ply, .obj, .off, .stl). --partial decodes\n"
-        "a file that was cut short (a progressive prefix) to a coarser mesh.",
-        "spectrageo decompress fandisk.sgc fandisk.ply",
+        "a file that was cut short (a progressive prefix) to a coarser mesh. A .sga animation\n"
+        "decompresses into a .npz or a folder of frames; --partial keeps every complete block.",
+        "spectrageo decompress fandisk.sgc fandisk.ply\nspectrageo decompress crane.sga crane.npz",
     ),
 }
 
@@ -53,20 +62,82 @@ def _read_sgc(path: str) -> bytes:
     return p.read_bytes()
 
 
+def _is_animation_input(path: str) -> bool:
+    p = Path(path)
+    return p.is_dir() or p.suffix.lower() == ".npz"
+
+
+def cmd_compress_animation(args) -> int:
+    from .. import compress
+    from ..geometry import MeshAnimation
+    from ..io import atomic_write
+    from .commands import _read
+
+    method = args.method or "blocks"
+    if method not in compress.ANIMATION_METHODS:
+        raise InvalidInputError(
+            f"--method {method!r} is a mesh codec; animations take one of "
+            f"{list(compress.ANIMATION_METHODS)}."
+        )
+    if args.bpv is not None:
+        raise InvalidInputError("animations take --bpvf (bits per vertex per frame), not --bpv.")
+    if args.reorder:
+        raise InvalidInputError("--reorder is for meshes; animations always keep vertex order.")
+    anim, _rep = _read(args.input, kind="animation", weld=False)
+    if not isinstance(anim, MeshAnimation):
+        raise InvalidInputError(f"{args.input!r} is not a mesh animation.")
+    t0 = time.perf_counter()
+    data = compress.encode_animation(
+        anim.frames,
+        anim.faces,
+        method=method,
+        bpvf=args.bpvf,
+        error=args.error,
+        step=args.step,
+    )
+    dt = time.perf_counter() - t0
+    with atomic_write(args.output) as tmp:
+        Path(tmp).write_bytes(data)
+    d = compress.info_animation(data)
+    _status(
+        f"wrote {args.output}: {d['bytes']} bytes, {d['bpvf']:.3f} bpvf, {method}, "
+        f"{d['n_frames']} frames in {d['n_blocks']} block(s), vertex and face order kept, "
+        f"{dt:.2f} s ({1e3 * dt / d['n_frames']:.1f} ms/frame)"
+    )
+    return 0
+
+
 def cmd_compress(args) -> int:
     from .. import compress
     from ..io import atomic_write
     from .commands import _check_outputs
 
-    if not str(args.output).lower().endswith(".sgc"):
-        raise InvalidInputError(f"the output must end with .sgc; got {args.output!r}.")
+    out = str(args.output).lower()
+    if not out.endswith((".sgc", ".sga")):
+        raise InvalidInputError(
+            f"the output must end with .sgc (mesh) or .sga (animation); got {args.output!r}."
+        )
     _check_outputs([args.input], [args.output])
+    if out.endswith(".sga") or _is_animation_input(args.input):
+        if not out.endswith(".sga"):
+            raise InvalidInputError(
+                f"{args.input!r} is an animation; its output must end with .sga."
+            )
+        return cmd_compress_animation(args)
+    if args.bpvf is not None:
+        raise InvalidInputError("meshes take --bpv (bits per vertex), not --bpvf.")
+    method = args.method or "spectral"
+    if method not in compress.METHODS:
+        raise InvalidInputError(
+            f"--method {method!r} is an animation codec; meshes take one of "
+            f"{list(compress.METHODS)}."
+        )
     mesh = _read_mesh(args.input)
     t0 = time.perf_counter()
     data = compress.encode(
         mesh.vertices,
         mesh.faces,
-        method=args.method,
+        method=method,
         bpv=args.bpv,
         error=args.error,
         reorder=args.reorder,
@@ -83,7 +154,7 @@ def cmd_compress(args) -> int:
     )
     _status(
         f"wrote {args.output}: {d['bytes']} bytes, {d['bpv']:.2f} bpv "
-        f"(connectivity {d['connectivity_bpv']:.2f}), {args.method}, {order}, {dt:.2f} s"
+        f"(connectivity {d['connectivity_bpv']:.2f}), {method}, {order}, {dt:.2f} s"
     )
     return 0
 
@@ -95,6 +166,8 @@ def cmd_decompress(args) -> int:
 
     _check_outputs([args.input], [args.output])
     data = _read_sgc(args.input)
+    if compress._animation.is_animation(data):
+        return _decompress_animation(args, data)
     t0 = time.perf_counter()
     V, F = compress.decode(data, partial=args.partial)
     dt = time.perf_counter() - t0
@@ -103,11 +176,34 @@ def cmd_decompress(args) -> int:
     return 0
 
 
+def _decompress_animation(args, data: bytes) -> int:
+    from .. import compress, io
+    from ..geometry import MeshAnimation
+
+    t0 = time.perf_counter()
+    frames, F = compress.decode_animation(data, partial=args.partial)
+    dt = time.perf_counter() - t0
+    io.write(args.output, MeshAnimation(frames, F))
+    msg = f"wrote {args.output}: {frames.shape[0]} frames of {frames.shape[1]} vertices"
+    if args.partial:
+        dec = compress.StreamDecoder()
+        dec.feed(data)
+        total = dec.state.params.n_frames if dec.state is not None else 0
+        if total and total > frames.shape[0]:
+            msg += f" ({total - frames.shape[0]} of {total} frames missing: the file is cut short)"
+    _status(f"{msg}, {dt:.2f} s ({1e3 * dt / frames.shape[0]:.1f} ms/frame)")
+    return 0
+
+
 def cmd_info_sgc(args) -> int:
     """``spectrageo info FILE.sgc [--json]`` (called by ``info`` for .sgc files)."""
     from .. import compress
 
-    d = {"file": str(args.file), **compress.info(_read_sgc(args.file))}
+    data = _read_sgc(args.file)
+    try:
+        d = {"file": str(args.file), **compress.info(data)}
+    except InvalidInputError:  # an animation file (.sga): its own header
+        d = {"file": str(args.file), **compress.info_animation(data)}
     if args.json:
         print(json.dumps(d, indent=2))
     else:
@@ -123,18 +219,33 @@ def cmd_info_sgc(args) -> int:
 def register(sub) -> None:
     from .. import compress
 
-    p = sub.add_parser("compress", help="compress a mesh into a .sgc file (Sec. 5.2.1, 5.2.3)")
-    p.add_argument("input", help="mesh file")
-    p.add_argument("output", help="OUT.sgc")
-    p.add_argument("--method", choices=list(compress.METHODS), default="spectral")
+    p = sub.add_parser(
+        "compress", help="compress a mesh (.sgc) or an animation (.sga) (Sec. 5.2.1-5.2.3)"
+    )
+    p.add_argument("input", help="mesh file, or animation (.npz or a folder of frames)")
+    p.add_argument("output", help="OUT.sgc (mesh) or OUT.sga (animation)")
+    p.add_argument(
+        "--method",
+        choices=list(compress.METHODS) + list(compress.ANIMATION_METHODS),
+        default=None,
+        help="default: spectral (meshes), blocks (animations)",
+    )
     g = p.add_mutually_exclusive_group()
     g.add_argument("--bpv", type=float, default=None, metavar="X", help="target bits per vertex")
+    g.add_argument(
+        "--bpvf",
+        type=float,
+        default=None,
+        metavar="X",
+        help="animations: target bits per vertex per frame (whole file)",
+    )
     g.add_argument(
         "--error",
         type=float,
         default=None,
         metavar="E",
-        help="target RMS vertex error as a fraction of the bounding-box diagonal",
+        help="target RMS vertex error as a fraction of the bounding-box diagonal; "
+        "animations: KG error in percent",
     )
     g.add_argument(
         "--step",
@@ -150,9 +261,15 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_compress)
 
     p = sub.add_parser("decompress", help="decompress a .sgc file into a mesh file")
-    p.add_argument("input", help="IN.sgc")
-    p.add_argument("output", help="mesh file (.ply, .obj, .off, .stl)")
-    p.add_argument("--partial", action="store_true", help="decode a truncated (progressive) file")
+    p.add_argument("input", help="IN.sgc or IN.sga")
+    p.add_argument(
+        "output", help="mesh file (.ply, .obj, .off, .stl); animations: .npz or a folder"
+    )
+    p.add_argument(
+        "--partial",
+        action="store_true",
+        help="decode a truncated file (progressive prefix; complete animation blocks)",
+    )
     p.set_defaults(func=cmd_decompress)
 
     for name, (desc, example) in HELP.items():

@@ -32,9 +32,20 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_choice
-from . import _connectivity, _container
+from . import _animation, _connectivity, _container
 
-__all__ = ["METHODS", "decode", "encode", "info"]
+__all__ = [
+    "ANIMATION_METHODS",
+    "METHODS",
+    "StreamDecoder",
+    "StreamEncoder",
+    "decode",
+    "decode_animation",
+    "encode",
+    "encode_animation",
+    "info",
+    "info_animation",
+]
 
 METHODS = ("spectral", "feature", "saliency")
 TAG_CONNECTIVITY = 1
@@ -221,6 +232,10 @@ def _bisect(measure, target: float, *, increasing: bool, what: str):
 
 
 def _parse(data, partial: bool):
+    if _animation.is_animation(data):
+        raise InvalidInputError(
+            "this is a compressed animation (.sga); use spectrageo.compress.decode_animation."
+        )
     c = _container.parse(data, partial=partial)
     if not c.chunks or c.chunks[0][0] != TAG_CONNECTIVITY:
         raise InvalidInputError(".sgc data lacks its connectivity chunk.")
@@ -271,3 +286,90 @@ def info(data) -> dict:
         "n_layers": len(c.chunks) - 1,
         "parameters": mod.describe(c.params, c.method),
     }
+
+
+# ----------------------------------------------------------------------------- animations (.sga)
+#: animation methods (thesis Section 5.2.2); see :mod:`spectrageo.compress._animation`
+ANIMATION_METHODS = _animation.METHODS
+
+
+def encode_animation(
+    frames,
+    F,
+    *,
+    method: str = "blocks",
+    bpvf: float | None = None,
+    error: float | None = None,
+    step: float | None = None,
+    **options: Any,
+) -> bytes:
+    """Compress a mesh animation with fixed connectivity into ``.sga`` bytes (Section 5.2.2).
+
+    Delta coordinates projected on eigen-trajectories (Eq. 5.46-5.52); see
+    :mod:`spectrageo.compress._animation` for the methods and the file layout.
+
+    Parameters
+    ----------
+    frames : (T, n, 3) float or MeshAnimation
+    F : (m, 3) int
+        Shared faces; vertex order and faces are kept exactly.
+    method : {"pca", "pca-q", "pca-qs", "pca-qp", "blocks"}
+    bpvf : float, optional
+        Target size of the whole file in bits per vertex per frame (met within 5 %).
+    error : float, optional
+        Target KG error (Karni & Gotsman, in percent, :func:`spectrageo.metrics.kg_error`), met
+        within 5 %.
+    step : float, optional
+        Quantisation step of the delta-coordinate projections (fraction of the bounding-box
+        diagonal; default 2e-4) when no target is given; for ``pca`` the number of kept
+        coefficients per coordinate.
+    **options
+        ``block`` (frames per block of ``blocks``, 16), ``anchors`` (fraction of anchor vertices
+        of pca-qs / pca-qp / blocks, 0.01), ``anchor_ratio`` (anchor step / step, 0.5),
+        ``weight`` (anchor weight in Eq. 5.51, 1), ``basis`` ("oi" orthogonal iterations started
+        from the previous block, or "exact"), ``n_iter`` (2), ``rd`` (row-dropping strength, 1).
+
+    Returns
+    -------
+    bytes
+        The ``.sga`` file content (stream header, one segment per block, frame index).
+    """
+    return _animation.encode_animation(
+        frames, F, method=method, bpvf=bpvf, error=error, step=step, **options
+    )
+
+
+def decode_animation(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Decompress ``.sga`` bytes into ``(frames, F)``: (T, n, 3) float64 and (m, 3) int64.
+
+    ``partial=True`` accepts a truncated file and returns the frames of every complete block
+    (compare ``frames.shape[0]`` with :func:`info_animation` of the full file, or use
+    :class:`StreamDecoder`, to know what is missing). Damaged data raise
+    :class:`~spectrageo.InvalidInputError`.
+    """
+    return _animation.decode_animation(data, partial=partial)
+
+
+def info_animation(data) -> dict:
+    """Header summary of ``.sga`` bytes: method, frames, counts, bpvf, blocks, parameters."""
+    return _animation.info_animation(data)
+
+
+class StreamEncoder(_animation.StreamEncoder):
+    """Streaming ``blocks`` encoder: :meth:`push` one frame at a time, :meth:`close` at the end.
+
+    ``StreamEncoder(F, *, method="blocks", step=None, bpvf=None, **options)``. Every call returns
+    the bytes ready to send: the stream header with the first frame, one block segment whenever
+    ``block`` frames have arrived, and from :meth:`close` the last short block and the frame
+    index. The concatenation of all returned bytes is a valid ``.sga`` file. With ``bpvf`` every
+    block is coded at the step that meets the rate on its own (per-block rate adaptation).
+    Memory is bounded by one block.
+    """
+
+
+class StreamDecoder(_animation.StreamDecoder):
+    """Streaming decoder: :meth:`feed` bytes as they arrive; it returns the completed frames.
+
+    ``n_frames`` counts the decoded frames, ``pending_bytes`` what is buffered of an incomplete
+    segment (the undecodable rest when a stream is cut).
+    """

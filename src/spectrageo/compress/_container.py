@@ -30,7 +30,18 @@ from .._errors import InvalidInputError
 
 MAGIC = b"SGC\x1a"
 FORMAT_VERSION = 1
-METHOD_IDS = {"spectral": 0, "feature": 1, "saliency": 2}
+METHOD_IDS = {
+    "spectral": 0,
+    "feature": 1,
+    "saliency": 2,
+    # mesh animations (.sga, :mod:`spectrageo.compress._animation`)
+    "pca": 16,
+    "pca-q": 17,
+    "pca-qs": 18,
+    "pca-qp": 19,
+    "blocks": 20,
+    "layered": 21,
+}
 METHOD_NAMES = {v: k for k, v in METHOD_IDS.items()}
 FLAG_REORDERED = 1
 #: largest vertex / face count a file may declare (guards allocations against hostile headers)

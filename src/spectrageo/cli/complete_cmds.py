@@ -1,0 +1,180 @@
+"""``spectrageo complete``: missing vertices of meshes, animations and point-cloud sequences, and
+hole filling (thesis Section 5.3).
+
+- ``spectrageo complete IN OUT --known KNOWN.npy [--method mc|li|lsm]`` (meshes; the unknown rows
+  of IN may hold anything, NaN included);
+- ``spectrageo complete IN OUT --fill-holes [--method li|lsm|mc]`` (meshes with holes);
+- ``spectrageo complete IN.npz OUT.npz --known KNOWN.npy [--method motion|li|lia|mc]``
+  (animations with ``vertices`` + ``faces``; point-cloud sequences with ``points`` (T, n, 3), where
+  ``motion`` is Algorithm 13's WRLI).
+
+``KNOWN.npy``: a boolean mask (n,) -- or (T, n) for animations -- or an integer index list.
+OUT keeps the vertex order; known vertices are written unchanged. Writes are atomic.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import InvalidInputError
+
+MESH_METHODS = ("mc", "li", "lsm")
+ANIM_METHODS = ("motion", "li", "lia", "mc")
+
+
+def _status(msg: str) -> None:
+    from . import commands
+
+    if not commands.QUIET:
+        print(msg, file=sys.stderr, flush=True)
+
+
+def _load_known(path: str) -> np.ndarray:
+    p = Path(path)
+    if not p.is_file():
+        raise InvalidInputError(f"`--known`: file not found: {path}")
+    try:
+        arr = np.load(p, allow_pickle=False)
+    except (ValueError, OSError) as exc:
+        raise InvalidInputError(f"`--known`: {p.name} is not a .npy array ({exc}).") from exc
+    if not isinstance(arr, np.ndarray):
+        raise InvalidInputError(f"`--known`: {p.name} must hold one array, not an archive.")
+    return arr
+
+
+def _read_partial_mesh(path: str):
+    """Vertices (NaN rows allowed) and faces of a mesh file; the regular reader refuses NaN."""
+    from .. import io
+    from ..io._api import _format_suffix, _read_raw
+
+    p = Path(path)
+    if not p.is_file():
+        raise InvalidInputError(f"file not found: {path}")
+    suffix, gz = _format_suffix(p, None)
+    if suffix in (".ply", ".obj", ".off"):
+        rg = _read_raw(p, suffix, gz)
+        if not rg.has_faces or rg.faces is None or not len(rg.faces):
+            raise InvalidInputError(f"{p.name}: has no faces; `complete` needs a triangle mesh.")
+        return np.asarray(rg.vertices, dtype=np.float64), np.asarray(rg.faces, dtype=np.int64)
+    m = io.read_mesh(p)
+    return m.vertices, m.faces
+
+
+def _read_partial_frames(path: str):
+    """``(frames, faces or None)`` of an ``.npz`` animation/sequence, NaN entries allowed."""
+    p = Path(path)
+    if not p.is_file():
+        raise InvalidInputError(f"file not found: {path}")
+    try:
+        with np.load(p, allow_pickle=False) as d:
+            keys = set(d.files)
+            if "vertices" in keys:
+                A = np.asarray(d["vertices"], dtype=np.float64)
+                F = np.asarray(d["faces"], dtype=np.int64) if "faces" in keys else None
+                if F is None:
+                    raise InvalidInputError(f"{p.name}: has `vertices` but no `faces`.")
+            elif "points" in keys:
+                if "counts" in keys:
+                    raise InvalidInputError(
+                        f"{p.name}: frames of different sizes have no point correspondence; "
+                        "completion needs (T, n, 3) `points`."
+                    )
+                A, F = np.asarray(d["points"], dtype=np.float64), None
+            else:
+                raise InvalidInputError(
+                    f"{p.name}: expected arrays `vertices` + `faces` (animation) or `points` "
+                    f"(sequence); got {', '.join(sorted(keys)) or 'none'}."
+                )
+    except (ValueError, OSError) as exc:
+        raise InvalidInputError(f"{p.name}: not a readable .npz archive ({exc}).") from exc
+    if A.ndim != 3 or A.shape[2] != 3:
+        raise InvalidInputError(f"{p.name}: frames must have shape (T, n, 3); got {A.shape}.")
+    return A, F
+
+
+def cmd_complete(args) -> int:
+    from .. import complete, io
+    from ..geometry import Mesh, MeshAnimation, PointCloudSequence
+
+    src = str(args.input)
+    is_npz = src.lower().endswith((".npz", ".npz.gz"))
+    t0 = time.perf_counter()
+    if args.fill_holes:
+        if is_npz:
+            raise InvalidInputError("`--fill-holes` works on a mesh file, not an .npz archive.")
+        method = args.method or "li"
+        if method not in MESH_METHODS:
+            raise InvalidInputError(
+                f"`--method` must be one of {', '.join(MESH_METHODS)} with --fill-holes."
+            )
+        m = io.read_mesh(src)
+        V, F = complete.fill_holes(m.vertices, m.faces, method=method, max_hole=args.max_hole)
+        io.write(args.output, Mesh(V, F))
+        _status(
+            f"wrote {args.output}: {V.shape[0] - m.n_vertices} implanted vertices, "
+            f"{F.shape[0] - m.n_faces} faces added ({method}, {time.perf_counter() - t0:.2f} s)"
+        )
+        return 0
+    if args.known is None:
+        raise InvalidInputError("`--known` KNOWN.npy is required (or pass --fill-holes).")
+    known = _load_known(args.known)
+    if is_npz:
+        method = args.method or "motion"
+        if method not in ANIM_METHODS:
+            raise InvalidInputError(
+                f"`--method` must be one of {', '.join(ANIM_METHODS)} for animations; got {method!r}."
+            )
+        A, F = _read_partial_frames(src)
+        if F is not None:
+            X = complete.complete_animation(A, F, known, method=method)
+            io.write(args.output, MeshAnimation(X, F))
+        else:
+            X = complete.complete_sequence(
+                A, known, method="wrli" if method == "motion" else method
+            )
+            io.write(args.output, PointCloudSequence(list(X)))
+        _status(
+            f"wrote {args.output}: {X.shape[0]} frames of {X.shape[1]} vertices completed "
+            f"({method}, {time.perf_counter() - t0:.2f} s)"
+        )
+        return 0
+    method = args.method or "mc"
+    if method not in MESH_METHODS:
+        raise InvalidInputError(
+            f"`--method` must be one of {', '.join(MESH_METHODS)} for meshes; got {method!r}."
+        )
+    V, F = _read_partial_mesh(src)
+    X = complete.inpaint(V, F, known, method=method)
+    io.write(args.output, Mesh(X, F))
+    _status(
+        f"wrote {args.output}: {X.shape[0]} vertices ({method}, {time.perf_counter() - t0:.2f} s)"
+    )
+    return 0
+
+
+def register(sub) -> None:
+    """Add ``complete`` to the ``spectrageo`` sub-parsers."""
+    p = sub.add_parser(
+        "complete", help="recover missing vertices or fill holes (meshes, animations; Sec. 5.3)"
+    )
+    p.add_argument("input", help="mesh file, or .npz animation / point-cloud sequence")
+    p.add_argument("output")
+    p.add_argument(
+        "--known", default=None, help="KNOWN.npy: bool mask (n,) or (T, n), or int vertex indices"
+    )
+    p.add_argument(
+        "--method",
+        default=None,
+        choices=sorted(set(MESH_METHODS + ANIM_METHODS)),
+        help="meshes: mc (default) | li | lsm; animations: motion (default) | li | lia | mc",
+    )
+    p.add_argument("--fill-holes", dest="fill_holes", action="store_true", help="close every hole")
+    p.add_argument(
+        "--max-hole", dest="max_hole", type=int, default=None,
+        help="with --fill-holes: leave loops with more edges open",
+    )  # fmt: skip
+    p.set_defaults(func=cmd_complete)

@@ -1,0 +1,89 @@
+"""Input checks shared by the completion functions (known sets, positions with unknown rows)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from .._errors import InvalidInputError
+from .._validation import MAX_COORDINATE, _shape_str
+
+
+def as_known(known: Any, n: int, name: str = "known") -> np.ndarray:
+    """Return the known set as a boolean mask of length ``n``.
+
+    A boolean array of shape ``(n,)`` is a mask; an integer array is a list of distinct vertex
+    indices (so ``[0, 1]`` means "vertices 0 and 1", never a 0/1 mask). At least one vertex must be
+    known.
+    """
+    arr = np.asarray(known)
+    if arr.dtype == bool:
+        if arr.shape != (n,):
+            raise InvalidInputError(
+                f"`{name}` as a boolean mask must have shape ({n},); got {_shape_str(arr)}."
+            )
+        mask = arr.copy()
+    else:
+        if arr.ndim != 1 or (arr.size and arr.dtype.kind not in "iu"):
+            raise InvalidInputError(
+                f"`{name}` must be a boolean mask of shape ({n},) or a 1-D array of integer vertex "
+                f"indices; got shape {_shape_str(arr)}, dtype {arr.dtype}."
+            )
+        idx = arr.astype(np.int64)
+        if idx.size and (idx.min() < 0 or idx.max() >= n):
+            raise InvalidInputError(
+                f"`{name}` has indices out of range: expected 0..{n - 1}; got {idx.min()}..{idx.max()}."
+            )
+        if np.unique(idx).size != idx.size:
+            raise InvalidInputError(f"`{name}` contains repeated indices.")
+        mask = np.zeros(n, dtype=bool)
+        mask[idx] = True
+    if not mask.any():
+        raise InvalidInputError(f"`{name}` selects no vertex; at least one must be known.")
+    return mask
+
+
+def as_partial_points(V: Any, known: np.ndarray | None = None, name: str = "V") -> np.ndarray:
+    """``V`` as float64 (n, 3); the rows in ``known`` (all rows when None) must be finite, the
+    others may hold anything (NaN included) and are ignored."""
+    try:
+        arr = np.array(V, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(
+            f"`{name}` must be a numeric array of shape (n, 3); got {type(V).__name__}."
+        ) from exc
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise InvalidInputError(f"`{name}` must have shape (n, 3); got {_shape_str(arr)}.")
+    if arr.shape[0] == 0:
+        raise InvalidInputError(f"`{name}` is empty; at least one vertex is required.")
+    if known is not None:
+        rows = arr[known]
+        bad = ~np.isfinite(rows).all(axis=1) | (np.abs(np.nan_to_num(rows)) > MAX_COORDINATE).any(
+            axis=1
+        )
+        if bad.any():
+            first = int(np.flatnonzero(known)[np.flatnonzero(bad)[0]])
+            raise InvalidInputError(
+                f"`{name}` has NaN, inf or huge coordinates at {int(bad.sum())} known vertex row(s), "
+                f"first at index {first}; known vertices must have finite coordinates."
+            )
+    return arr
+
+
+def check_components(C: sp.spmatrix, known: np.ndarray, what: str = "mesh") -> None:
+    """Every connected component of the graph ``C`` must hold a known vertex (else its positions
+    are undetermined: an error, never a silent NaN or zero)."""
+    n_comp, labels = connected_components(C, directed=False)
+    has = np.zeros(n_comp, dtype=bool)
+    has[labels[known]] = True
+    if not has.all():
+        bad = np.flatnonzero(~has)
+        first = int(np.flatnonzero(labels == bad[0])[0])
+        raise InvalidInputError(
+            f"{bad.size} connected component(s) of the {what} hold no known vertex (e.g. vertex "
+            f"{first}; isolated vertices count as components); their positions are undetermined. "
+            "Mark at least one vertex of each component as known."
+        )

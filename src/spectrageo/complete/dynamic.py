@@ -1,0 +1,409 @@
+"""Completion of mesh animations and point-cloud sequences (thesis Sections 5.3.2-5.3.3).
+
+Online methods (frame ``t`` uses frames ``<= t`` only): ``"motion"`` (Algorithm 12, anchors and
+satellites), ``"wrli"`` (Algorithm 13, weighted regularised Laplacian interpolation of the motion),
+and the baselines ``"li"`` (static Laplacian interpolation frame by frame) and ``"lia"``
+(Laplacian interpolation of the motion vectors, the thesis's LIA). Offline baseline: ``"mc"``,
+matrix completion of the whole animation matrix (Eq. 5.90, MC of the thesis's [359]).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from .._errors import InvalidInputError
+from .._validation import _shape_str, as_faces, check_choice, check_positive
+from ..graph import adjacency_matrix, knn_graph, laplacian_from_adjacency
+from ..linalg import complete_matrix, laplacian_interpolation, lasso
+from ._common import as_known
+from .static import inpaint
+
+__all__ = ["ANIMATION_METHODS", "SEQUENCE_METHODS", "complete_animation", "complete_sequence"]
+
+ANIMATION_METHODS = ("motion", "li", "lia", "mc")
+SEQUENCE_METHODS = ("wrli", "li", "lia", "mc")
+
+
+# --------------------------------------------------------------------------------- validation
+def _as_partial_frames(frames: Any, name: str = "frames") -> np.ndarray:
+    try:
+        A = np.array(getattr(frames, "frames", frames), dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(
+            f"`{name}` must be a numeric array of shape (T, n, 3); got {type(frames).__name__}."
+        ) from exc
+    if A.ndim != 3 or A.shape[2] != 3:
+        raise InvalidInputError(f"`{name}` must have shape (T, n, 3); got {_shape_str(A)}.")
+    if A.shape[0] == 0 or A.shape[1] == 0:
+        raise InvalidInputError(f"`{name}` is empty; got shape {A.shape}.")
+    return A
+
+
+def _as_known_frames(known: Any, T: int, n: int) -> np.ndarray:
+    """``known`` as a (T, n) bool mask: a (n,) mask / index list applies to every frame."""
+    arr = np.asarray(known)
+    if arr.dtype == bool and arr.ndim == 2:
+        if arr.shape != (T, n):
+            raise InvalidInputError(
+                f"`known` must have shape ({n},) or ({T}, {n}); got {arr.shape}."
+            )
+        return arr.copy()
+    if arr.dtype == bool and arr.shape != (n,):
+        raise InvalidInputError(f"`known` must have shape ({n},) or ({T}, {n}); got {arr.shape}.")
+    return np.broadcast_to(as_known(arr, n), (T, n)).copy()
+
+
+def _check_known_rows(A: np.ndarray, K: np.ndarray) -> None:
+    vals = A[K]
+    if vals.size and not np.isfinite(vals).all():
+        t, i = np.argwhere(K & ~np.isfinite(A).all(axis=2))[0]
+        raise InvalidInputError(
+            f"`frames` has NaN or inf coordinates at a known vertex (frame {t}, vertex {i}); "
+            "known vertices must have finite coordinates."
+        )
+
+
+# ----------------------------------------------------------------------- Algorithm 12 (motion)
+def _satellites(
+    C: sp.csr_matrix, prev: np.ndarray, motion: np.ndarray, known: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Anchors-and-satellites propagation of the motion vectors (Eq. 5.91-5.92).
+
+    Returns the motion of every vertex and the mask of vertices reached (a component without an
+    anchor is not reached).
+    """
+    n = C.shape[0]
+    Cc = C.tocoo()
+    d2 = np.sum((prev[Cc.row] - prev[Cc.col]) ** 2, axis=1)
+    tiny = np.finfo(np.float64).tiny
+    wd = 1.0 / np.maximum(d2, tiny)  # w_d = 1 / ||v_i - v_j||^2 (on the previous, complete frame)
+    W = sp.csr_matrix((wd, (Cc.row, Cc.col)), shape=(n, n))
+    m = np.where(known[:, None], motion, 0.0)
+    cur = known.copy()
+    wp = cur.astype(np.float64)  # prioritisation: known vertices gain 1 per iteration
+    while not cur.all():
+        den = W @ wp
+        sat = ~cur & (den > 0)
+        if not sat.any():
+            break
+        num = W @ (wp[:, None] * m)
+        m[sat] = num[sat] / den[sat][:, None]
+        wp[cur] += 1.0
+        cur |= sat
+        wp[sat] = 1.0
+    return m, cur
+
+
+def _lia_motion(L: sp.csr_matrix, motion: np.ndarray, known: np.ndarray) -> np.ndarray:
+    idx = np.flatnonzero(known)
+    return laplacian_interpolation(L, idx, motion[idx])
+
+
+def _mc_offline(A: np.ndarray, K: np.ndarray, *, tol: float, max_iter: int, rng: Any) -> np.ndarray:
+    """Matrix completion of the (3n, T) animation matrix (Eq. 5.90); rows centred on the mean of
+    their known entries, scaled by the bounding-box diagonal of the known data."""
+    T, n, _ = A.shape
+    M = A.transpose(1, 2, 0).reshape(3 * n, T)
+    obs = np.repeat(K.T, 3, axis=0)
+    X = np.where(obs, M, 0.0)
+    cnt = obs.sum(axis=1)
+    mu = np.divide(X.sum(axis=1), cnt, out=np.zeros(3 * n), where=cnt > 0)
+    pts = A[K]
+    scale = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) or 1.0
+    Xc = np.where(obs, (X - mu[:, None]) / scale, 0.0)
+    res = complete_matrix(Xc, obs, tol=tol, max_iter=max_iter, on_nonconvergence="ignore", rng=rng)
+    out = res.completed * scale + mu[:, None]
+    return out.reshape(n, 3, T).transpose(2, 0, 1)
+
+
+def _first_frame(A0, K0, C, F, name):
+    """Frame 0 must be complete for the online methods (the thesis assumes it); a partial frame 0
+    is completed statically (Laplacian interpolation)."""
+    if K0.all():
+        return A0.copy()
+    if not K0.any():
+        raise InvalidInputError(
+            f"frame 0 of `{name}` has no known vertex; the online methods need a (partly) known "
+            "first frame."
+        )
+    idx = np.flatnonzero(K0)
+    return laplacian_interpolation(laplacian_from_adjacency(C), idx, A0[idx])
+
+
+def _run_online(A, K, C, method, step):
+    """Shared frame loop: ``step(prev, cur, known_t) -> frame``; frame 0 completed statically."""
+    T = A.shape[0]
+    out = np.empty_like(A)
+    out[0] = _first_frame(A[0], K[0], C, None, "frames")
+    out[0][K[0]] = A[0][K[0]]
+    for t in range(1, T):
+        kt = K[t]
+        if not kt.any():  # all-unknown frame: documented fallback, zero motion
+            out[t] = out[t - 1]
+            continue
+        out[t] = step(out[t - 1], A[t], kt)
+        out[t][kt] = A[t][kt]
+    return out
+
+
+def complete_animation(
+    frames: Any,
+    F: Any,
+    known: Any,
+    *,
+    method: str = "motion",
+    tol: float = 1e-4,
+    max_iter: int = 200,
+    rng: Any = None,
+) -> np.ndarray:
+    r"""Recover missing vertices of a mesh animation with fixed connectivity (Sec. 5.3.2).
+
+    ``method="motion"`` (Algorithm 12, online: frame ``t`` uses frames ``<= t`` only): the known
+    vertices of frame ``t`` are anchors with motion ``m_j = v_t,j - v_t-1,j``; the unknown vertices
+    in the first ring of an anchor are first-generation satellites, those in the first ring of a
+    satellite the next generation, and so on; a satellite moves by the weighted mean of the
+    motions of its already known neighbours (Eq. 5.91-5.92),
+    ``m_i = sum_j w_dij w_pj m_j / sum_j |w_dij w_pj|``, ``v_t,i = v_t-1,i + m_i``, with
+    ``w_dij = 1 / ||v_i - v_j||^2`` on the previous (complete) frame and the prioritisation weight
+    ``w_p`` (1 for a new satellite, +1 per iteration for every known vertex, so anchors weigh
+    most). Reading: Eq. 5.92 prints ``w_{p_i}`` (of the satellite itself), which would cancel out
+    of the ratio; the weight of the neighbour ``j`` is used, as the text describes ("more emphasis
+    on the anchor points instead of the satellites").
+
+    Baselines: ``"li"`` Laplacian interpolation of every frame on its own (binary ``L = D - C``,
+    Eq. 4.24-4.27), ``"lia"`` Laplacian interpolation of the motion vectors from the previous
+    completed frame (online), ``"mc"`` matrix completion of the whole ``(3n, T)`` animation matrix
+    (Eq. 5.90 with the ALM of Eq. 5.80-5.89; offline, every frame is used).
+
+    Policies: frame 0 is assumed complete (the thesis); a partly known frame 0 is completed by
+    Laplacian interpolation first. A frame without any known vertex repeats the previous
+    completed frame (zero motion); a connected component without anchor in frame ``t`` keeps its
+    previous positions (``"motion"``, ``"lia"``) -- never NaN. ``"li"`` and ``"mc"`` raise
+    :class:`~spectrageo.InvalidInputError` where their problem is undetermined.
+
+    Parameters
+    ----------
+    frames : (T, n, 3) array_like or MeshAnimation
+        Unknown entries may hold anything (NaN included).
+    F : (m, 3) array_like of int
+    known : (n,) or (T, n) bool array, or (n_k,) int array
+        Known vertices, the same in every frame or per frame.
+    method : {"motion", "li", "lia", "mc"}
+    tol, max_iter : float, int
+        ALM stopping rule of ``"mc"``.
+    rng : int, Generator or None
+
+    Returns
+    -------
+    (T, n, 3) float64 ndarray
+        Known entries exactly the input ones, vertex order kept.
+    """
+    check_choice(method, "method", ANIMATION_METHODS)
+    A = _as_partial_frames(frames)
+    T, n, _ = A.shape
+    F = as_faces(F, n, "F")
+    K = _as_known_frames(known, T, n)
+    _check_known_rows(A, K)
+    C = adjacency_matrix(F, n)
+    return _complete_frames(A, K, C, method, tol=tol, max_iter=max_iter, rng=rng, F=F)
+
+
+def _complete_frames(A, K, C, method, *, tol, max_iter, rng, F=None, wrli=None):
+    T, n, _ = A.shape
+    if method == "mc":
+        if not K.any(axis=0).all():
+            bad = int(np.flatnonzero(~K.any(axis=0))[0])
+            raise InvalidInputError(
+                f"vertex {bad} is unknown in every frame; matrix completion cannot recover it."
+            )
+        out = _mc_offline(A, K, tol=tol, max_iter=max_iter, rng=rng)
+        out[K] = A[K]
+        return out
+    L = laplacian_from_adjacency(C)
+    if method == "li":
+        out = np.empty_like(A)
+        for t in range(T):
+            if F is not None:
+                out[t] = inpaint(A[t], F, K[t], method="li")
+            else:
+                idx = np.flatnonzero(K[t])
+                if idx.size == 0:
+                    raise InvalidInputError(f"frame {t} has no known point.")
+                out[t] = laplacian_interpolation(L, idx, A[t][idx])
+        return out
+
+    def step_motion(prev, cur, kt):
+        m, reached = _satellites(C, prev, cur - np.where(kt[:, None], prev, 0.0), kt)
+        m[~reached] = 0.0
+        return prev + m
+
+    def step_lia(prev, cur, kt):
+        motion = np.where(kt[:, None], cur - prev, 0.0)
+        m, reached = _satellites(C, prev, motion, kt)  # components without anchor: zero motion
+        sub = reached
+        if sub.all():
+            mv = _lia_motion(L, motion, kt)
+        else:
+            mv = np.zeros_like(prev)
+            idx = np.flatnonzero(sub)
+            Ls = laplacian_from_adjacency(C[idx][:, idx])
+            mv[idx] = _lia_motion(Ls, motion[idx], kt[idx])
+        return prev + mv
+
+    step = {"motion": step_motion, "lia": step_lia, "wrli": wrli}[method]
+    return _run_online(A, K, C, method, step)
+
+
+# ------------------------------------------------------------------- Algorithm 13 (WRLI)
+def _wrli_step(C: sp.csr_matrix, sigma: float, gamma: float, max_iter: int):
+    """One frame of Algorithm 13 (Eq. 5.94-5.97) as a closure over the fixed graph ``C``."""
+    Cc = C.tocoo()
+    n = C.shape[0]
+
+    def step(prev, cur, kt):
+        motion = np.where(kt[:, None], cur - prev, 0.0)
+        # prioritisation (Sec. 5.3.3): N for known points, N - 1 for their neighbours, ..., 1
+        gen = np.full(n, -1, dtype=np.int64)
+        gen[kt] = 0
+        reach = kt.copy()
+        g = 0
+        while True:
+            nb = (C @ reach.astype(np.float64) > 0) & ~reach
+            if not nb.any():
+                break
+            g += 1
+            gen[nb] = g
+            reach |= nb
+        N = g + 1
+        wp = np.where(gen >= 0, N - gen, 0).astype(np.float64)  # unreached components: 0
+        # Eq. 5.94-5.95: C_w,ij = w_p,i exp(-||v_i - v_j||^2 / (2 sigma^2)) c_ij (previous frame)
+        d2 = np.sum((prev[Cc.row] - prev[Cc.col]) ** 2, axis=1)
+        w = wp[Cc.row] * np.exp(-d2 / (2.0 * sigma * sigma))
+        Cw = sp.csr_matrix((w, (Cc.row, Cc.col)), shape=(n, n))
+        Lw = (sp.diags(np.asarray(Cw.sum(axis=1)).ravel()) - Cw).tocsc()
+        # B-hat: mean motion of the first ring, propagated generation by generation
+        Bh, reached = _satellites_mean(C, motion, kt)
+        u = np.flatnonzero(~kt & reached)
+        k = np.flatnonzero(kt)
+        if u.size == 0:
+            return prev + np.where(reached[:, None], Bh, 0.0)
+        R = Lw[:, u]
+        Q = Lw[:, k]
+        P = -(Q @ motion[k]) - R @ Bh[u]  # Eq. 5.96 (sign: L B = Q B_k + R B_u, Eq. 4.26)
+        n_s = R.shape[0]
+        amax = float(np.abs(R.T @ P).max()) / n_s
+        if amax > 0 and gamma > 0:
+            res = lasso(R, P, alpha=gamma * amax, max_iter=max_iter, on_nonconvergence="ignore")
+            z = res.coef
+        else:
+            z = np.zeros((u.size, 3))
+        B = np.where(reached[:, None], Bh, 0.0)
+        B[u] = Bh[u] + z
+        return prev + B  # Eq. 5.97
+
+    return step
+
+
+def _satellites_mean(C: sp.csr_matrix, motion: np.ndarray, known: np.ndarray):
+    """``B-hat``: unweighted first-ring mean motion, generation by generation from the known
+    points (the ``sum_{Psi_1} d`` of Eq. 5.96)."""
+    m = np.where(known[:, None], motion, 0.0)
+    cur = known.copy()
+    while not cur.all():
+        f = cur.astype(np.float64)
+        den = C @ f
+        sat = ~cur & (den > 0)
+        if not sat.any():
+            break
+        num = C @ (f[:, None] * m)
+        m[sat] = num[sat] / den[sat][:, None]
+        cur |= sat
+    return m, cur
+
+
+def complete_sequence(
+    clouds: Any,
+    known: Any,
+    *,
+    method: str = "wrli",
+    n_neighbors: int = 8,
+    gamma: float = 0.01,
+    max_iter: int = 500,
+    tol: float = 1e-4,
+    rng: Any = None,
+) -> np.ndarray:
+    r"""Recover missing points of a point-cloud sequence with point correspondence (Sec. 5.3.3).
+
+    ``method="wrli"`` (Algorithm 13, online): the binary kNN graph ``C`` (Eq. 5.93,
+    ``n_neighbors``, symmetrised) is built once on frame 0 and kept for every frame. For frame
+    ``t``: prioritisation ``w_p`` (``N`` for known points, ``N - 1`` for their neighbours, ..., 1
+    for the most remote), Gaussian weights on the previous frame ``C_w,ij = w_p,i
+    exp(-||v_i - v_j||^2 / (2 sigma^2)) c_ij`` (Eq. 5.94; reading: the thesis's kernel has no
+    width, ``sigma`` is the mean graph edge length of frame 0 so that it is scale-free),
+    ``L_w = D - C_w`` (Eq. 5.95), the known motions ``B_k``, the first-ring mean motion
+    ``B-hat`` (propagated generation by generation from the known points), then the LASSO of
+    Eq. 5.96 ``min_z 0.5 ||P - R z||^2 + gamma' ||z||_1`` with ``R = L_w[:, u]``,
+    ``P = -L_w[:, k] B_k - R B-hat_u`` (:func:`spectrageo.linalg.lasso`, ADMM), and
+    ``v_u(t) = v_u(t-1) + B-hat_u + z`` (Eq. 5.97 with the corrected motion). ``gamma`` is
+    relative: ``gamma' = gamma * alpha_max`` where ``alpha_max = ||R^T P||_inf / n`` is the
+    smallest weight giving ``z = 0`` (so ``gamma >= 1`` returns ``B-hat`` and ``gamma = 0``
+    plain weighted Laplacian interpolation of the motion).
+
+    Baselines as in :func:`complete_animation` (``"li"``, ``"lia"``, ``"mc"``), on the kNN
+    graph. Same policies for frame 0, empty frames and unreached components.
+
+    Parameters
+    ----------
+    clouds : (T, n, 3) array_like or a list of T (n, 3) arrays
+        The same ``n`` in every frame (point ``i`` is the same point over time).
+    known : (n,) or (T, n) bool array, or (n_k,) int array
+    method : {"wrli", "li", "lia", "mc"}
+    n_neighbors : int
+    gamma : float
+        Relative LASSO weight (see above).
+    max_iter, tol : int, float
+        ADMM iterations of ``"wrli"``; ``tol`` and ``max_iter`` also drive ``"mc"``.
+    rng : int, Generator or None
+
+    Returns
+    -------
+    (T, n, 3) float64 ndarray
+    """
+    check_choice(method, "method", SEQUENCE_METHODS)
+    check_positive(n_neighbors, "n_neighbors", integer=True)
+    check_positive(gamma, "gamma", allow_zero=True)
+    if isinstance(clouds, list | tuple):
+        sizes = {np.shape(c) for c in clouds}
+        if len(sizes) > 1:
+            raise InvalidInputError(
+                "`clouds` must all have the same number of points (point i is the same point in "
+                f"every frame); got shapes {sorted(sizes)[:3]}."
+            )
+    A = _as_partial_frames(
+        np.asarray(clouds, dtype=np.float64) if isinstance(clouds, list | tuple) else clouds,
+        "clouds",
+    )
+    T, n, _ = A.shape
+    K = _as_known_frames(known, T, n)
+    _check_known_rows(A, K)
+    if n <= n_neighbors:
+        raise InvalidInputError(
+            f"`n_neighbors` must be < the number of points {n}; got {n_neighbors}."
+        )
+    A0 = A[0]
+    if not K[0].all():
+        # graph on the known points of frame 0 only would leave the unknown ones out: the
+        # online methods need frame 0 complete to build the graph (Algorithm 13, line 1)
+        raise InvalidInputError(
+            "frame 0 of `clouds` must be complete: the graph of Algorithm 13 is built on it."
+        )
+    C = knn_graph(A0, n_neighbors)
+    C = sp.csr_matrix(C, dtype=np.float64)
+    C.data[:] = 1.0
+    Cc = C.tocoo()
+    sigma = float(np.sqrt(np.sum((A0[Cc.row] - A0[Cc.col]) ** 2, axis=1)).mean()) or 1.0
+    step = _wrli_step(C, sigma, gamma, max_iter) if method == "wrli" else None
+    return _complete_frames(A, K, C, method, tol=tol, max_iter=max_iter, rng=rng, wrli=step)

@@ -1,0 +1,331 @@
+"""Hole filling with unknown connectivity (thesis Section 5.3.1, last scenario).
+
+"Firstly, we need to implant a set of points ... inside the hole, and then to use a triangulation
+algorithm ... before using our method for the final refinement." Every boundary loop is closed by
+a patch with implanted interior points, then the positions of the implanted points are completed
+by :func:`spectrageo.complete.inpaint` with every original vertex known.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+from .._errors import InvalidInputError
+from .._validation import as_faces, as_points, check_choice, check_positive
+from ..geometry import boundary_loops, weld
+from .static import INPAINT_METHODS, inpaint
+
+__all__ = ["fill_holes"]
+
+
+# ------------------------------------------------------------------ planar patch (scipy Delaunay)
+def _segments_cross(Q: np.ndarray) -> bool:
+    """True when the closed polygon ``Q`` (L, 2) has two non-adjacent edges that intersect."""
+    L = Q.shape[0]
+    a, b = Q, np.roll(Q, -1, axis=0)
+    i, j = np.triu_indices(L, 2)
+    keep = ~((i == 0) & (j == L - 1))
+    i, j = i[keep], j[keep]
+
+    def orient(p, q, r):
+        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+
+    d1 = orient(a[i], b[i], a[j])
+    d2 = orient(a[i], b[i], b[j])
+    d3 = orient(a[j], b[j], a[i])
+    d4 = orient(a[j], b[j], b[i])
+    return bool(np.any((d1 * d2 <= 0) & (d3 * d4 <= 0)))
+
+
+def _inside(Q: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Even-odd point-in-polygon test of ``pts`` (p, 2) against the closed polygon ``Q``."""
+    a, b = Q[None, :, :], np.roll(Q, -1, axis=0)[None, :, :]
+    x, y = pts[:, None, 0], pts[:, None, 1]
+    cond = (a[..., 1] > y) != (b[..., 1] > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xs = a[..., 0] + (y - a[..., 1]) * (b[..., 0] - a[..., 0]) / (b[..., 1] - a[..., 1])
+    return (np.count_nonzero(cond & (x < xs), axis=1) % 2) == 1
+
+
+def _seg_dist(Q: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Distance of ``pts`` to the closed polygon ``Q`` (minimum over its edges)."""
+    a, b = Q, np.roll(Q, -1, axis=0)
+    ab = b - a
+    t = np.clip(
+        ((pts[:, None, :] - a[None]) * ab[None]).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300),
+        0.0,
+        1.0,
+    )
+    proj = a[None] + t[..., None] * ab[None]
+    return np.sqrt(((pts[:, None, :] - proj) ** 2).sum(-1)).min(axis=1)
+
+
+def _planar_patch(P: np.ndarray, h: float):
+    """Triangulate a boundary loop ``P`` (L, 3) projected on its best-fit plane with implanted
+    lattice points (spacing ``h``) by :class:`scipy.spatial.Delaunay`.
+
+    Returns ``(tri, new_points)`` with ``tri`` (t, 3) indices into ``[loop | new_points]``, or None
+    when the projection is not a simple polygon or the Delaunay triangulation misses a loop edge
+    (the caller then falls back to :func:`_dp_patch`).
+    """
+    L = P.shape[0]
+    c = P.mean(axis=0)
+    _, _, Vt = np.linalg.svd(P - c, full_matrices=False)
+    Q = (P - c) @ Vt[:2].T
+    if _segments_cross(Q):
+        return None
+    lo, hi = Q.min(axis=0), Q.max(axis=0)
+    dy = h * np.sqrt(3.0) / 2.0
+    ys = np.arange(lo[1] + dy / 2, hi[1], dy)
+    pts = []
+    for r, y in enumerate(ys):  # hexagonal lattice, rows offset by h/2
+        xs = np.arange(lo[0] + (h / 2 if r % 2 else 0.0), hi[0], h)
+        pts.append(np.column_stack([xs, np.full(xs.size, y)]))
+    G = np.concatenate(pts) if pts else np.zeros((0, 2))
+    if G.shape[0]:
+        G = G[_inside(Q, G)]
+    if G.shape[0]:
+        G = G[_seg_dist(Q, G) > 0.6 * h]
+    allp = np.concatenate([Q, G])
+    try:
+        tri = Delaunay(allp).simplices
+    except Exception:  # noqa: BLE001 - qhull errors (degenerate input) mean "use the fallback"
+        return None
+    cen = allp[tri].mean(axis=1)
+    tri = tri[_inside(Q, cen)]
+    # every loop edge must be an edge of the patch, used once; inner edges twice
+    e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    key, cnt = np.unique(e[:, 0] * allp.shape[0] + e[:, 1], return_counts=True)
+    once = set(key[cnt == 1].tolist())
+    li = np.arange(L)
+    loop = np.sort(np.column_stack([li, (li + 1) % L]), axis=1)
+    want = set((loop[:, 0] * allp.shape[0] + loop[:, 1]).tolist())
+    if once != want or np.any(cnt > 2):
+        return None
+    new3 = c + G @ Vt[:2]
+    return tri, new3
+
+
+# ------------------------------------------------------------ fallback: minimum-area + refinement
+def _dp_patch(P: np.ndarray, h: float, forbid: np.ndarray | None = None, max_splits: int = 6):
+    """Minimum-area triangulation of the loop (dynamic programming, Barequet & Sharir 1995; the
+    initial patch of Liepa 2003), then implanted centroids: every triangle larger than the
+    equilateral triangle of side ``h`` is split 1-to-3 (``max_splits`` rounds). ``forbid`` (L, L)
+    bool marks chords that are mesh edges already; returns None when no triangulation avoids them.
+    """
+    L = P.shape[0]
+    W = np.zeros((L, L))
+    O = np.full((L, L), -1, dtype=np.int64)
+    for gap in range(2, L):
+        for i in range(0, L - gap):
+            j = i + gap
+            m = np.arange(i + 1, j)
+            area = 0.5 * np.linalg.norm(np.cross(P[m] - P[i], P[j] - P[i]), axis=1)
+            cost = W[i, m] + W[m, j] + area
+            if forbid is not None:
+                cost = np.where(forbid[i, m] | forbid[m, j], np.inf, cost)
+            b = int(np.argmin(cost))
+            W[i, j] = cost[b]
+            O[i, j] = m[b]
+    if not np.isfinite(W[0, L - 1]):
+        return None
+    tris = []
+    stack = [(0, L - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        m = int(O[i, j])
+        tris.append((i, m, j))
+        stack.append((i, m))
+        stack.append((m, j))
+    tri = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    pts = [p for p in P]
+    target = np.sqrt(3.0) / 4.0 * h * h
+    for _ in range(max_splits):
+        X = np.asarray(pts)
+        area = 0.5 * np.linalg.norm(
+            np.cross(X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]]), axis=1
+        )
+        big = area > 2.0 * target
+        if not big.any():
+            break
+        cen = X[tri[big]].mean(axis=1)
+        ids = np.arange(len(pts), len(pts) + cen.shape[0])
+        pts.extend(cen)
+        a, b, c = tri[big, 0], tri[big, 1], tri[big, 2]
+        tri = np.concatenate(
+            [tri[~big], np.column_stack([a, b, ids]), np.column_stack([b, c, ids]),
+             np.column_stack([c, a, ids])]
+        )  # fmt: skip
+    new3 = np.asarray(pts[L:]).reshape(-1, 3)
+    return tri, new3
+
+
+def _simple_loops(loop: np.ndarray) -> list[np.ndarray]:
+    """Split a boundary loop that passes a vertex twice (a pinch) into simple cycles."""
+    out, stack, pos = [], [], {}
+    for v in loop.tolist():
+        if v in pos:
+            p = pos[v]
+            cyc = stack[p:]
+            for u in cyc[1:]:
+                del pos[u]
+            del stack[p + 1 :]
+            if len(cyc) >= 3:
+                out.append(np.asarray(cyc, dtype=np.int64))
+        else:
+            pos[v] = len(stack)
+            stack.append(v)
+    if len(stack) >= 3:
+        out.append(np.asarray(stack, dtype=np.int64))
+    return out
+
+
+def _chords_ok(tri: np.ndarray, loop: np.ndarray, edge_keys: np.ndarray, n: int) -> bool:
+    """No patch edge between two loop vertices may be an edge of the mesh already (it would be
+    shared by three faces): loop edges themselves excepted."""
+    L = loop.size
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    e = e[(e < L).all(axis=1)]
+    d = np.abs(e[:, 0] - e[:, 1])
+    e = e[(d != 1) & (d != L - 1)]
+    if e.size == 0:
+        return True
+    g = np.sort(loop[e], axis=1)
+    return not np.isin(g[:, 0] * n + g[:, 1], edge_keys).any()
+
+
+def _fan_patch(P: np.ndarray):
+    """Last resort: a fan around the loop's centroid (always a manifold disc)."""
+    L = P.shape[0]
+    i = np.arange(L)
+    return np.column_stack([i, (i + 1) % L, np.full(L, L)]), P.mean(axis=0)[None]
+
+
+def _orient_patch(tri_global: np.ndarray, loop: np.ndarray) -> np.ndarray:
+    """Flip the patch so that it traverses the loop edge ``loop[0] -> loop[1]`` backwards (the
+    mesh's boundary edges run forwards in their faces, see :func:`boundary_loops`)."""
+    a, b = int(loop[0]), int(loop[1])
+    for f in tri_global:
+        for s in range(3):
+            if f[s] == a and f[(s + 1) % 3] == b:
+                return tri_global[:, ::-1].copy()
+            if f[s] == b and f[(s + 1) % 3] == a:
+                return tri_global
+    return tri_global  # pragma: no cover - every loop edge is in the patch
+
+
+def fill_holes(
+    V: Any,
+    F: Any,
+    *,
+    method: str = "li",
+    max_hole: int | None = None,
+    weld_seams: bool = True,
+    density: float = 1.0,
+    rng: Any = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Close every hole (boundary loop) of a mesh: implant points, triangulate, complete positions.
+
+    For each loop of :func:`spectrageo.geometry.boundary_loops`:
+
+    1. the loop is projected on its best-fit plane; if that is a simple polygon, points on a
+       hexagonal lattice of spacing ``h / density`` (``h`` the loop's mean edge length) are
+       implanted inside it, away from its edges, and the loop and the points are triangulated by
+       :class:`scipy.spatial.Delaunay` (Qhull), keeping the triangles inside the polygon; the
+       patch is accepted when it contains every loop edge exactly once;
+    2. otherwise (a curved loop whose projection folds, or a loop edge Delaunay misses) the loop is
+       triangulated by minimum total area (dynamic programming) and triangles larger than the
+       target size are split at their centroids;
+    3. the patch is oriented against the loop (consistent with the mesh), and the implanted
+       points are completed by :func:`spectrageo.complete.inpaint` with every original vertex
+       known (Sec. 5.3.1: "triangulation ... before using our method for the final
+       refinement"). ``method="li"`` (default) is the fairing ``min ||L V||`` of Eq. 4.24-4.27,
+       which on the shared ``holes/`` meshes lies closer to the clean elephant than ``"mc"``
+       (whose patches inside a hole hold no known vertex); ``"mc"`` and ``"lsm"`` are available.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like
+    F : (m, 3) array_like of int
+    method : {"li", "mc", "lsm"}
+        Completion of the implanted points (see above).
+    max_hole : int, optional
+        Leave loops with more than ``max_hole`` edges open (e.g. the open border of a scan).
+        Default: close every loop.
+    weld_seams : bool
+        Coincident vertices (within :data:`spectrageo.geometry.WELD_TOL` of the diagonal) are
+        one vertex for the faces (their duplicate rows stay in ``V``, unreferenced), so that a
+        seam of duplicated vertices is not mistaken for a hole. False: take ``F`` as it is.
+    density : float
+        Implanted points per loop edge length (1: spacing equal to the mean loop edge).
+    rng : int, Generator or None
+        Passed to :func:`inpaint`.
+
+    Returns
+    -------
+    V_out : (n + p, 3) ndarray
+        The input rows unchanged and in order, then the ``p`` implanted points.
+    F_out : (m' + q, 3) int64 ndarray
+        The input faces (re-indexed to the first copy of welded vertices, faces collapsed by
+        welding dropped, when ``weld_seams``), then the ``q`` new faces.
+    """
+    V = as_points(V, "V")
+    n = V.shape[0]
+    F = as_faces(F, n, "F")
+    check_choice(method, "method", INPAINT_METHODS)
+    check_positive(density, "density")
+    if max_hole is not None:
+        check_positive(max_hole, "max_hole", integer=True)
+    if weld_seams:
+        w = weld(V, F)
+        rep = np.full(w.vertices.shape[0], -1, dtype=np.int64)
+        order = np.arange(n)[::-1]
+        rep[w.index_map[order]] = order  # first original vertex of each group
+        F = rep[w.index_map[F]][w.face_kept]
+        if F.shape[0] == 0:
+            raise InvalidInputError("`F` has no face left after welding coincident vertices.")
+    loops = [s for lp in boundary_loops(F, n) for s in _simple_loops(lp)]
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    edge_keys = np.unique(E[:, 0] * n + E[:, 1])
+    new_pts: list[np.ndarray] = []
+    new_faces: list[np.ndarray] = []
+    n_next = n
+    for loop in loops:
+        L = loop.size
+        if L < 3 or (max_hole is not None and L > max_hole):
+            continue
+        P = V[loop]
+        h = float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).mean()) / density
+        if L == 3:
+            tri, new3 = np.array([[0, 1, 2]]), np.zeros((0, 3))
+        else:
+            got = _planar_patch(P, h) if h > 0 else None
+            if got is not None and not _chords_ok(got[0], loop, edge_keys, n):
+                got = None
+            if got is None:
+                g = np.sort(np.stack(np.meshgrid(loop, loop, indexing="ij"), axis=-1), axis=-1)
+                forbid = np.isin(g[..., 0] * n + g[..., 1], edge_keys)
+                idx = np.arange(L)
+                forbid[idx, (idx + 1) % L] = forbid[(idx + 1) % L, idx] = False
+                got = _dp_patch(P, h, forbid)
+            tri, new3 = got if got is not None else _fan_patch(P)
+        ids = np.concatenate([loop, np.arange(n_next, n_next + new3.shape[0])])
+        tg = _orient_patch(ids[tri], loop)
+        new_pts.append(new3)
+        new_faces.append(tg)
+        n_next += new3.shape[0]
+    if not new_faces:
+        return V.copy(), F.copy()
+    V_all = np.concatenate([V, *new_pts])
+    F_all = np.concatenate([F, *new_faces]).astype(np.int64)
+    if V_all.shape[0] > n:
+        known = np.zeros(V_all.shape[0], dtype=bool)
+        known[:n] = True
+        # unreferenced original rows (welded duplicates) are known: they stay as they are
+        V_all = inpaint(V_all, F_all, known, method=method, rng=rng)
+    return V_all, F_all
