@@ -740,7 +740,9 @@ def register_all(sub) -> None:
         help="out of core: stream the cloud, process tiles of about N points with halos on Dask "
         "(needs spectrageo[dist]; see docs/scaling.md)",
     )
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler")
+    p.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler"
+    )
     p.add_argument("--workers", type=int, default=None, help="with --tile: local Dask workers")
     p.set_defaults(func=cmd_outliers)
 

@@ -9,6 +9,9 @@ NoiseResult). Every random choice takes ``rng`` (seed or Generator; None = seed 
 modified.
 
 Levels are relative to the mean edge length (Eq. 4.36): ``sigma = level * l``.
+
+:func:`generate` is the corruption generator of the denoising generality protocol (five kinds,
+:data:`GENERATOR_KINDS`, at the levels :data:`GENERATOR_LEVELS`).
 """
 
 from ._core import NoiseResult
@@ -21,19 +24,33 @@ from .corruption import (
     make_holes,
     remove_vertices,
 )
-from .static import KINDS, apply, gaussian, impulsive, quantize, region_varying, uniform
+from .generator import GENERATOR_KINDS, GENERATOR_LEVELS, generate
+from .static import (
+    KINDS,
+    anisotropic,
+    apply,
+    gaussian,
+    impulsive,
+    quantize,
+    region_varying,
+    uniform,
+)
 
 __all__ = [
     "ANIMATION_KINDS",
+    "GENERATOR_KINDS",
+    "GENERATOR_LEVELS",
     "KINDS",
     "OUTLIER_PATTERNS",
     "CorruptionResult",
     "NoiseResult",
     "add_outliers",
     "animation_noise",
+    "anisotropic",
     "apply",
     "corrupt_outliers",
     "gaussian",
+    "generate",
     "impulsive",
     "make_holes",
     "quantize",

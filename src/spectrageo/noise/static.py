@@ -190,6 +190,80 @@ def region_varying(
     return NoiseResult(V + D, D, np.ones(n, dtype=bool), sigma, labels, "region_varying")
 
 
+def anisotropic(
+    V,
+    F=None,
+    *,
+    level: float,
+    ratio: float = 0.25,
+    frame: str = "axis",
+    axis=None,
+    rng=None,
+    normals=None,
+) -> NoiseResult:
+    """Anisotropic Gaussian noise: standard deviation ``sigma = level * l`` (Eq. 4.36) along one
+    principal direction and ``ratio * sigma`` across it.
+
+    ``frame="axis"``: the principal direction is one unit vector ``u`` for the whole object
+    (``axis``, else drawn at random from ``rng``), like the depth noise of a range scanner along its
+    viewing direction; the displacement covariance is ``sigma^2 (u u^T + ratio^2 (I - u u^T))``.
+    ``frame="normal"``: the principal direction is the unit vertex normal (Eq. 3.3) and the
+    tangential components get ``ratio * sigma`` (vertices without a normal are not moved).
+
+    Parameters
+    ----------
+    V : (n, 3) array_like
+    F : (m, 3) array_like of int or None
+        None for a point cloud (``l`` is then the mean nearest-neighbour distance).
+    level : float
+        ``sigma_E`` of Eq. (4.36) along the principal direction, >= 0.
+    ratio : float
+        Standard deviation across the principal direction relative to ``sigma``, >= 0.
+    frame : {"axis", "normal"}
+    axis : (3,) array_like, optional
+        The principal direction for ``frame="axis"`` (normalised here).
+    rng : int, Generator or None
+    normals : (n, 3) array_like, optional
+        Directions to use instead of the computed normals for ``frame="normal"``.
+
+    Returns
+    -------
+    NoiseResult
+        ``scale`` is ``sigma`` (the principal standard deviation) for every vertex.
+    """
+    level = check_level(level)
+    ratio = check_level(ratio, "ratio")
+    check_choice(frame, "frame", ("axis", "normal"))
+    if axis is not None and frame != "axis":
+        raise InvalidInputError(f"`axis` applies to frame='axis' only; got frame={frame!r}.")
+    V, F, N = prepare(V, F, normals, "normal" if frame == "normal" else "random")
+    rng = as_rng(rng)
+    n = V.shape[0]
+    sigma = level * mean_spacing(V, F)
+    if frame == "axis":
+        if axis is None:
+            u = rng.standard_normal(3)
+        else:
+            u = np.asarray(axis, dtype=np.float64).reshape(-1)
+            if u.shape != (3,) or not np.isfinite(u).all() or not np.linalg.norm(u) > 0:
+                raise InvalidInputError(
+                    f"`axis` must be a finite non-zero 3-vector; got {np.asarray(axis)!r}."
+                )
+        u = u / np.linalg.norm(u)
+        A = (np.eye(3) - np.outer(u, u)) * ratio + np.outer(u, u)  # symmetric square root
+        D = rng.standard_normal((n, 3)) @ A * sigma
+    else:
+        # per-vertex tangent frame (T1, T2) orthogonal to N; zero where N is zero
+        ref = np.where(np.abs(N[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        T1 = np.cross(N, ref)
+        nt = np.linalg.norm(T1, axis=1, keepdims=True)
+        T1 = np.divide(T1, nt, out=np.zeros_like(T1), where=nt > 0)
+        T2 = np.cross(N, T1)
+        z = rng.standard_normal((n, 3)) * sigma
+        D = z[:, :1] * N + ratio * (z[:, 1:2] * T1 + z[:, 2:] * T2)
+    return NoiseResult(V + D, D, np.ones(n, dtype=bool), np.full(n, sigma), None, "anisotropic")
+
+
 def quantize(V, F=None, *, level: float) -> NoiseResult:
     """Quantisation noise: coordinates rounded to a grid of step ``q = level * l`` anchored at the
     origin (``q * round(v / q)``), e.g. to mimic a coarse coordinate encoding. Deterministic.
