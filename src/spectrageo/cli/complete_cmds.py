@@ -142,7 +142,7 @@ def cmd_complete(args) -> int:
             f"({method}, {time.perf_counter() - t0:.2f} s)"
         )
         return 0
-    method = args.method or "mc"
+    method = args.method or "li"
     if method not in MESH_METHODS:
         raise InvalidInputError(
             f"`--method` must be one of {', '.join(MESH_METHODS)} for meshes; got {method!r}."
@@ -170,7 +170,7 @@ def register(sub) -> None:
         "--method",
         default=None,
         choices=sorted(set(MESH_METHODS + ANIM_METHODS)),
-        help="meshes: mc (default) | li | lsm; animations: motion (default) | li | lia | mc",
+        help="meshes: li (default) | lsm | mc; animations: motion (default) | li | lia | mc",
     )
     p.add_argument("--fill-holes", dest="fill_holes", action="store_true", help="close every hole")
     p.add_argument(
@@ -178,3 +178,14 @@ def register(sub) -> None:
         help="with --fill-holes: leave loops with more edges open",
     )  # fmt: skip
     p.set_defaults(func=cmd_complete)
+    p.description = (
+        "Recover missing vertices of a mesh with known connectivity (rows of IN not marked in\n"
+        "--known may hold anything, NaN included), close the holes of a mesh (--fill-holes), or\n"
+        "recover missing vertices of an animation / point-cloud sequence frame by frame (online:\n"
+        "frame t uses frames <= t). Known vertices are returned unchanged, vertex order is kept."
+    )
+    p.epilog = (
+        "example:\n  spectrageo complete scan.ply filled.ply --known known.npy --method li\n"
+        "  spectrageo complete part_with_holes.off closed.off --fill-holes\n"
+        "  spectrageo complete crane.npz crane_full.npz --known known.npy --method motion"
+    )
