@@ -202,3 +202,21 @@ def test_cli_round_trip(tmp_path, anim):
     # mismatches are one clear error, no traceback
     assert main(["compress", str(src), str(tmp_path / "x.sgc")]) != 0
     assert main(["compress", str(src), str(out), "--method", "spectral"]) != 0
+
+
+def test_evaluate_compress_animation_tuning(shared_data, tmp_path):
+    """`spectrageo evaluate compress-animation` on the tuning animation: more bits, less KG
+    error for pca-qp; the zstd baseline keeps the order; md/csv/png written."""
+    from spectrageo.evaluate import compress_animation as ev
+
+    rows = ev.evaluate(
+        shared_data,
+        methods=("pca-qp", "quant-delta-zstd"),
+        out=tmp_path / "ra",
+        splits=("tuning",),
+    )
+    ours = sorted((r["bpvf"], r["kg"]) for r in rows if r["method"] == "pca-qp")
+    assert len(ours) == len(ev.STEPS["pca-qp"])
+    assert all(b[1] < a[1] for a, b in zip(ours, ours[1:]))
+    assert all(r["order_kept"] for r in rows if r["method"] == "quant-delta-zstd")
+    assert (tmp_path / "ra.md").exists() and (tmp_path / "ra.csv").exists()

@@ -35,3 +35,59 @@ def write_md_csv(out, markdown: str, csv_text: str) -> tuple[Path, Path]:
     with atomic_write(cs) as tmp:
         Path(tmp).write_text(csv_text, encoding="utf-8")
     return md, cs
+
+
+def have(module: str) -> bool:
+    """True when ``module`` imports (optional peers and plotting)."""
+    try:
+        __import__(module)
+    except Exception:  # noqa: BLE001 - any import failure means "not available"
+        return False
+    return True
+
+
+def fmt_cell(v) -> str:
+    """A table cell: yes/no for booleans, 3 significant digits for floats, '-' for NaN/inf."""
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        if v != v or v in (float("inf"), float("-inf")):
+            return "-"
+        return f"{v:.3g}" if abs(v) < 1e4 else f"{v:.0f}"
+    return str(v)
+
+
+def plot_rate_curves(rows: list[dict], png, *, x: str, y: str, xlabel: str, ylabel: str):
+    """Log-log ``y`` vs ``x`` per model, one curve per method, written atomically to ``png``;
+    returns the path, or None without matplotlib or rows."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except Exception:  # noqa: BLE001 - plotting is optional
+        return None
+    from ..io import atomic_write
+
+    models = list(dict.fromkeys(r["model"] for r in rows))
+    if not models:
+        return None
+    cols = min(3, len(models))
+    nrows = -(-len(models) // cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(5 * cols, 4 * nrows), squeeze=False)
+    for ax, model in zip(axes.ravel(), models):
+        for m in dict.fromkeys(r["method"] for r in rows if r["model"] == model):
+            pts = sorted((r[x], r[y]) for r in rows if r["model"] == model and r["method"] == m)
+            ax.loglog(*zip(*pts), marker="o", label=m)
+        ax.set_title(model)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax in axes.ravel()[len(models) :]:
+        ax.axis("off")
+    fig.tight_layout()
+    with atomic_write(png) as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    return Path(png)

@@ -28,7 +28,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._progress import progress
-from ._tables import rows_to_csv, write_md_csv
+from ._tables import fmt_cell, have, plot_rate_curves, rows_to_csv, write_md_csv
 
 TUNING_SPLIT = ("meshes/fandisk.off", "cad/partLp.obj")
 VALIDATION_SPLIT = (
@@ -66,14 +66,6 @@ COLUMNS = (
     "encode_s",
     "decode_s",
 )
-
-
-def _have(mod: str) -> bool:
-    try:
-        __import__(mod)
-    except Exception:  # noqa: BLE001 - any import failure means "not available"
-        return False
-    return True
 
 
 def _metrics(V, F, V2, F2, ordered: bool) -> dict:
@@ -189,7 +181,7 @@ def evaluate(
                 continue
             if m in METHODS:
                 jobs += [(m, f"step={s:g}", _ours, (m, V, F, s)) for s in STEPS[m]]
-            elif m.startswith("draco") and peers and _have("DracoPy"):
+            elif m.startswith("draco") and peers and have("DracoPy"):
                 o = m == "draco-ordered"
                 jobs += [(m, f"q={b}", _draco, (V, F, b, o)) for b in DRACO_BITS]
             elif m == "quant-zstd" and peers:
@@ -212,18 +204,15 @@ def evaluate(
             rows.append(row)
     if out is not None:
         md, _ = write_md_csv(out, format_markdown(rows), rows_to_csv(rows, COLUMNS))
-        _plot(rows, md.with_suffix(".png"))
+        plot_rate_curves(
+            rows,
+            md.with_suffix(".png"),
+            x="bpv",
+            y="hausdorff",
+            xlabel="bits per vertex (whole file)",
+            ylabel="symmetric Hausdorff / diagonal",
+        )
     return rows
-
-
-def _fmt(v) -> str:
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, float):
-        if not np.isfinite(v):
-            return "-"
-        return f"{v:.3g}" if abs(v) < 1e4 else f"{v:.0f}"
-    return str(v)
 
 
 def format_markdown(rows: list[dict]) -> str:
@@ -256,42 +245,5 @@ def format_markdown(rows: list[dict]) -> str:
         "|" + "---|" * (len(cols) + 1),
     ]
     for r in rows:
-        lines.append("| " + " | ".join(_fmt(r.get(c)) for c in ("split", *cols)) + " |")
+        lines.append("| " + " | ".join(fmt_cell(r.get(c)) for c in ("split", *cols)) + " |")
     return "\n".join(lines)
-
-
-def _plot(rows: list[dict], png: Path) -> Path | None:
-    """Hausdorff vs bpv per model (log-log), one curve per method; needs matplotlib."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except Exception:  # noqa: BLE001 - plotting is optional
-        return None
-    from ..io import atomic_write
-
-    models = list(dict.fromkeys(r["model"] for r in rows))
-    if not models:
-        return None
-    cols = min(3, len(models))
-    nrows = -(-len(models) // cols)
-    fig, axes = plt.subplots(nrows, cols, figsize=(5 * cols, 4 * nrows), squeeze=False)
-    for ax, model in zip(axes.ravel(), models):
-        for m in dict.fromkeys(r["method"] for r in rows if r["model"] == model):
-            pts = sorted(
-                (r["bpv"], r["hausdorff"]) for r in rows if r["model"] == model and r["method"] == m
-            )
-            ax.loglog(*zip(*pts), marker="o", label=m)
-        ax.set_title(model)
-        ax.set_xlabel("bits per vertex (whole file)")
-        ax.set_ylabel("symmetric Hausdorff / diagonal")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
-    for ax in axes.ravel()[len(models) :]:
-        ax.axis("off")
-    fig.tight_layout()
-    with atomic_write(png) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    return png
