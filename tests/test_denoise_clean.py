@@ -163,3 +163,15 @@ def test_learned_subspace_sizes_settle_inside_the_band(shared_data):
     assert np.median(r.subspace_sizes / r.max_sizes[:, None]) < 0.95
     em = coarse(m.vertices, m.faces, full_output=True, rule="em")
     assert (em.subspace_sizes == em.max_sizes[:, None]).mean() > 0.6
+
+
+def test_evaluation_reports_learned_sizes(shared_data, tmp_path):
+    from spectrageo.evaluate import denoise as ev
+
+    rows = ev.evaluate_denoise(
+        shared_data, methods=["tsgsp"], pairs=["Fandisk0.3"], out=tmp_path / "d",
+        hausdorff_distance=False,
+    )  # fmt: skip
+    r = next(r for r in rows if r["method"] == "tsgsp")
+    assert 0 < r["mbl_median_frac"] < 0.95 and r["mbl_at_bound_pct"] < 40 and r["mbl_n"] > 0
+    assert "at the bound" in (tmp_path / "d.md").read_text()

@@ -180,9 +180,48 @@ def evaluate_denoise(
                 X = denoise.denoise(V, F, method=base, pre="coarse" if pre else None)
             dt = time.perf_counter() - t0
             rows.append(_row(name, m, X, V0, F, dt, hausdorff_distance))
+            if m == "tsgsp":
+                rows[-1].update(learned_sizes(V, F))
     if out is not None:
         write_tables(rows, out)
     return rows
+
+
+def learned_sizes(V, F) -> dict:
+    """Distribution of the subspace sizes learned by Algorithm 1 in TSGSP's coarse step (issue
+    14): median ``n_l / n_max``, percentage of signals at the ``max_keep`` bound, number of
+    submesh x coordinate signals. Extra keys of the ``tsgsp`` rows (not CSV columns)."""
+    from ..denoise.tsgsp import coarse
+
+    r = coarse(V, F, full_output=True)
+    if r.subspace_sizes.size == 0 or not r.max_sizes.any():
+        return {"mbl_median_frac": float("nan"), "mbl_at_bound_pct": float("nan"), "mbl_n": 0}
+    frac = r.subspace_sizes / np.maximum(r.max_sizes[:, None], 1)
+    return {
+        "mbl_median_frac": float(np.median(frac)),
+        "mbl_at_bound_pct": 100.0 * float(np.mean(r.subspace_sizes == r.max_sizes[:, None])),
+        "mbl_n": int(frac.size),
+    }
+
+
+def format_learned_sizes(rows: list[dict]) -> str:
+    """Markdown table of :func:`learned_sizes` per pair (empty without tsgsp rows)."""
+    got = [r for r in rows if r.get("method") == "tsgsp" and "mbl_n" in r]
+    if not got:
+        return ""
+    lines = [
+        "Subspace sizes learned by Algorithm 1 (TSGSP coarse step, residual rule): median "
+        "`n_l / n_max` and the share of submesh x coordinate signals at the `max_keep` bound.",
+        "",
+        "| pair | signals | median n_l / n_max | at the bound |",
+        "|---|---:|---:|---:|",
+    ]
+    for r in got:
+        lines.append(
+            f"| {r['pair']} | {r['mbl_n']} | {r['mbl_median_frac']:.2f} | "
+            f"{r['mbl_at_bound_pct']:.0f} % |"
+        )
+    return "\n".join(lines) + "\n\n"
 
 
 def _fmt(key: str, v) -> str:
@@ -262,6 +301,7 @@ def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
         "## Static mesh denoising\n\n"
         "Produced by `spectrageo evaluate denoise`; every method with its default settings.\n\n"
         + _summary_block(rows)
+        + format_learned_sizes(rows)
         + format_markdown(rows)
         + "\n",
         format_csv(rows),
