@@ -61,6 +61,8 @@ def register(sub) -> None:
         help="run denoise/outliers/saliency/compress/complete/convert over many files on Dask",
         description="Run a single-file command over files, globs or folders, one Dask task per "
         "file, outputs named after the inputs in --out, a JSON summary per file.",
+        epilog="example:\n  spectrageo batch denoise 'scans/*.ply' --out denoised --workers 4\n"
+        "  spectrageo batch outliers clouds/ --out clean --resume --method sor",
     )
     bsub = p.add_subparsers(dest="batch_command", metavar="COMMAND", parser_class=type(p))
     bsub.required = True
