@@ -35,6 +35,18 @@ SECTIONS = [
     ("denoise", _evaluate("denoise", "denoise")),
     ("denoise_generality", _script("denoise_generality")),
     (
+        "denoise_validation",
+        [
+            *_evaluate("denoise", "denoise_validation"),
+            "--split",
+            "validation",
+            "--levels",
+            "0.3",
+            "--max-vertices",
+            "30000",
+        ],
+    ),
+    (
         "clean_inputs",
         [
             *_script("clean_inputs"),
