@@ -41,6 +41,10 @@ def _sphere(n=3000, seed=0):
     return P / np.linalg.norm(P, axis=1, keepdims=True)
 
 
+#: The reference path of rpca_scores: float64 state, ALM stopped by the residual only.
+EXACT = dict(dtype="float64", rank_tol=0.0)
+
+
 def _f1(keep, labels):
     pred = ~keep
     tp = np.count_nonzero(pred & labels)
@@ -86,7 +90,15 @@ def test_rpca_scores_match_linalg_rpca():
     P, _ = noise.add_outliers(_sphere(400), fraction=0.05, kind="far", rng=1)
     k = 6
     r = rpca_scores(
-        P, k, rho=1.5, tol=1e-9, max_iter=500, block_size=10**6, refine=False, tangent_weight=1
+        P,
+        k,
+        rho=1.5,
+        tol=1e-9,
+        max_iter=500,
+        block_size=10**6,
+        refine=False,
+        tangent_weight=1,
+        **EXACT,
     )
     # explicit reference on the same normalised coordinates
     M = knn_patch_matrix((P - P.mean(axis=0)) / r.spacing, k)
@@ -105,8 +117,9 @@ def test_rpca_refinement_rebuilds_outlier_patches_and_subtracts_baseline():
     rng = np.random.default_rng(7)
     P = np.concatenate([_plane(25), rng.uniform([-0.5, -0.5, 0.3], [1.5, 1.5, 0.8], (100, 3))])
     k = 6
-    plain = rpca_scores(P, k, refine=False, tangent_weight=1, tol=1e-9, rho=1.5, max_iter=500)
-    r = rpca_scores(P, k, tangent_weight=1, tol=1e-9, rho=1.5, max_iter=500)
+    kw = dict(tangent_weight=1, tol=1e-9, rho=1.5, max_iter=500, **EXACT)
+    plain = rpca_scores(P, k, refine=False, **kw)
+    r = rpca_scores(P, k, **kw)
     assert r.n_refined > 0 and plain.n_refined == 0
     # reference: flag, rebuild the patches made mostly of flagged points, rerun Algorithm 14
     s1 = plain.scores
@@ -152,7 +165,7 @@ def test_tangent_weighted_scores_match_reference(w):
     P, _ = noise.add_outliers(_sphere(400), fraction=0.05, kind="far", rng=3)
     k = 6
     kw = dict(rho=1.5, tol=1e-9, max_iter=500)
-    r = rpca_scores(P, k, refine=False, tangent_weight=w, **kw)
+    r = rpca_scores(P, k, refine=False, tangent_weight=w, **kw, **EXACT)
     M = knn_patch_matrix((P - P.mean(axis=0)) / r.spacing, k)
     S = rpca(M, method="ialm", **kw).sparse[:, 0].reshape(-1, 3)
     nrm = _neighbour_normals(P, knn(P, k)[0])
@@ -161,7 +174,7 @@ def test_tangent_weighted_scores_match_reference(w):
     expect = np.hypot(sn, w * st)
     np.testing.assert_allclose(r.scores, expect, atol=1e-5 * max(1.0, expect.max()))
     if w == 0.0:  # weighting can only shrink the plain norm
-        plain = rpca_scores(P, k, refine=False, tangent_weight=1, **kw).scores
+        plain = rpca_scores(P, k, refine=False, tangent_weight=1, **kw, **EXACT).scores
         assert np.all(r.scores <= plain + 1e-9) and np.any(r.scores < 0.5 * plain)
 
 
@@ -544,6 +557,48 @@ def test_clean_sequence_variable_size_falls_back_per_frame():
     assert [f.n_points for f in r.frames] == [int(k.sum()) for k in r.keep]
     for k_, lab in zip(r.keep, labs, strict=True):
         assert _f1(k_, lab) > 0.8
+
+
+def test_clean_sequence_surfaces_nonconvergence():
+    """Parts whose RPCA stops at max_iter are counted and reported once, by the policy."""
+    from spectrageo._errors import ConvergenceError, ConvergenceWarning
+    from spectrageo.outliers import SequenceResult
+
+    clean, noisy, lab = _moving_sequence(T=12, n_side=20)  # 400 points, 3 parts of 200
+    kw = dict(k=8, max_iter=1, submesh_size=200)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        r = clean_sequence(noisy, **kw)
+    msgs = [str(w.message) for w in rec if issubclass(w.category, ConvergenceWarning)]
+    assert len(msgs) == 1, msgs
+    assert not r.converged and r.n_iter == 1 and r.residual > 0
+    assert f"did not converge on {r.n_unconverged} of " in msgs[0] and r.n_unconverged >= 2
+    with pytest.raises(ConvergenceError, match="did not converge") as exc:
+        clean_sequence(noisy, on_nonconvergence="raise", **kw)
+    assert isinstance(exc.value.partial, SequenceResult)
+    assert exc.value.partial.n_unconverged == r.n_unconverged
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        quiet = clean_sequence(noisy, on_nonconvergence="ignore", **kw)
+        ok = clean_sequence(noisy, k=8, submesh_size=200)  # default iterations: converges
+    assert quiet.n_unconverged == r.n_unconverged and not quiet.converged
+    assert ok.converged and ok.n_unconverged == 0
+    with pytest.raises(InvalidInputError, match="on_nonconvergence"):
+        clean_sequence(noisy, on_nonconvergence="loud")
+
+
+def test_clean_sequence_variable_size_surfaces_nonconvergence():
+    from spectrageo._errors import ConvergenceWarning
+
+    frames = [PointCloud(_sphere(300 + 40 * t, seed=t)) for t in range(3)]
+    with pytest.warns(ConvergenceWarning, match="on 3 of 3 frames") as rec:
+        r = clean_sequence(PointCloudSequence(frames), k=8, max_iter=1)
+    assert sum(issubclass(w.category, ConvergenceWarning) for w in rec) == 1
+    assert r.n_unconverged == 3 and not r.converged and r.n_iter == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ok = clean_sequence(PointCloudSequence(frames), k=8)
+    assert ok.converged and ok.n_unconverged == 0 and ok.n_iter > 1
 
 
 def test_clean_sequence_errors():

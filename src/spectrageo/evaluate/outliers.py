@@ -23,6 +23,13 @@ displaced by 1-5 % of the bounding-box diagonal in random directions; per-frame 
 face normals against the clean frame) and mean point-to-surface distance after consolidation
 (Figs. 5.125-5.128), for :func:`spectrageo.outliers.clean_sequence` and for the RPCA low-rank
 reconstruction (the thesis' comparison).
+
+Sequence patterns (:func:`evaluate_sequence_patterns`, method ``"sequence-patterns"``, opt-in):
+the outlier patterns of :func:`spectrageo.noise.corrupt_outliers` on sequences -- animations
+sampled as point sequences (outlier positions drawn by the generator replace that many vertices
+of every frame, so correspondences hold) and the shared Kinect frames (outliers appended) -- for
+the sequence cleaning of Section 5.4.3 and the robot pipeline of Section 5.4.2 run frame by frame:
+consolidated theta and F1 per pattern.
 """
 
 from __future__ import annotations
@@ -39,11 +46,14 @@ from ._tables import rows_to_csv, write_md_csv
 
 __all__ = [
     "DEFAULT_METHODS",
+    "EXTRA_METHODS",
+    "SEQUENCE_PATTERN_DATA",
     "SCANS",
     "SPLITS",
     "TUNING_SPLIT",
     "VALIDATION_SPLIT",
     "evaluate_outliers",
+    "evaluate_sequence_patterns",
     "evaluate_splits",
     "format_markdown",
 ]
@@ -60,6 +70,17 @@ SCANS = (
 )
 SEQUENCES = (("horse-gallop", "animations/horse-gallop.npz"),)
 DEFAULT_METHODS = ("rpca", "sor", "sor-grid", "radius", "open3d-sor", "sequence")
+#: Methods run only when named (long): the outlier patterns on sequences.
+EXTRA_METHODS = ("sequence-patterns",)
+#: Sequences of :func:`evaluate_sequence_patterns`: (label, path, frame step). Animations carry
+#: faces (theta); the Kinect frames (camera coordinates, sensor at the origin) have no ground-truth
+#: surface (F1 only).
+SEQUENCE_PATTERN_DATA = (
+    ("horse-gallop", "animations/horse-gallop.npz", 1),
+    ("crane (every 4th frame)", "animations/crane.npz", 4),
+    ("Kinect grabber frames", "scans/pcl/grabber_sequence", 1),
+)
+SEQUENCE_PATTERN_FRACTIONS = (0.1, 0.2)
 
 #: Tuning split, fixed: constants of the outlier filters may be chosen on these cases only
 #: (patterns of :func:`spectrageo.noise.corrupt_outliers` x scans).
@@ -128,6 +149,10 @@ def evaluate_outliers(
 ) -> list[dict]:
     """Run the outlier benchmark; return one row per (dataset, kind, fraction, method).
 
+    ``methods`` may also name ``"sequence-patterns"`` (not run by default: several minutes), the
+    pattern benchmark on sequences of :func:`evaluate_sequence_patterns` (rows with ``suite`` =
+    ``"sequence-patterns"``).
+
     ``splits`` (default: both ``("tuning", "validation")`` when ``scans`` is left at its
     default, none otherwise) adds the pattern benchmark of :func:`evaluate_splits`: rows with a
     ``split`` column, ``kind`` = the outlier pattern (or ``"clean"`` for the unmodified scan, with
@@ -145,7 +170,7 @@ def evaluate_outliers(
     if not data.is_dir():
         raise InvalidInputError(f"`data_dir` must be a folder; got {data}.")
     methods = tuple(methods)
-    known = set(DEFAULT_METHODS)
+    known = set(DEFAULT_METHODS) | set(EXTRA_METHODS)
     bad = [m for m in methods if m not in known]
     if bad:
         raise InvalidInputError(f"unknown method(s) {bad}; choose from {sorted(known)}.")
@@ -219,6 +244,8 @@ def evaluate_outliers(
         )
     if "sequence" in methods:
         rows.extend(_evaluate_sequences(data, sequence_fractions, seed))
+    if "sequence-patterns" in methods:
+        rows.extend(evaluate_sequence_patterns(data, seed=seed))
     if out is not None:
         _write(rows, out)
     return rows
@@ -289,6 +316,175 @@ def evaluate_splits(
                         keep = fn(Q, 10, 1.0) if m == "open3d-sor" else fn(Q, 10)
                         dt = time.perf_counter() - t0
                         rows.append(_row(base, m, "defaults (k=10)", ~keep, lab, dt))
+    return rows
+
+
+def evaluate_sequence_patterns(
+    data_dir: Any,
+    *,
+    patterns: tuple[str, ...] | None = None,
+    fractions: tuple[float, ...] = SEQUENCE_PATTERN_FRACTIONS,
+    datasets: tuple[tuple[str, str, int], ...] = SEQUENCE_PATTERN_DATA,
+    seed: int = 0,
+    max_frames: int = 48,
+    max_points: int = 60_000,
+) -> list[dict]:
+    """Outlier patterns on sequences: sequence cleaning (5.4.3) and the robot pipeline (5.4.2).
+
+    Every pattern of :func:`spectrageo.noise.corrupt_outliers` (default all of
+    :data:`spectrageo.noise.OUTLIER_PATTERNS`) at every fraction, on each sequence of
+    ``datasets`` (at most ``max_frames`` frames, every ``step``-th):
+
+    * *Animations* (fixed connectivity): in frame ``t`` the generator draws
+      ``round(fraction * n)`` outlier positions for the clean frame (``rng = seed + t``), and
+      that many random vertices are moved there (labelled), so point ``j`` stays the same
+      surface point in every frame, as :func:`spectrageo.outliers.clean_sequence` requires.
+    * *Kinect frames* (point counts vary; each point kept with probability
+      ``max_points / n_t``, so they still vary): the outliers
+      are appended as the generator returns them, with the sensor at the origin (``viewpoint``
+      of the ``flying`` and ``lidar`` patterns; the clouds are in camera coordinates).
+
+    Methods: ``sequence`` = :func:`spectrageo.outliers.clean_sequence` (defaults: ``k = 10``,
+    ``tau = 1e-4``, refill; on the Kinect frames its per-frame fallback, Algorithm 14), its
+    ``low-rank E``, and ``robot`` = :func:`spectrageo.outliers.robot_pipeline` on each frame
+    (RPCA removal, ``k = 7`` bilateral filter), plus the ``noisy input``. Rows carry precision,
+    recall and F1 of the flagged points over all frames and, on animations, the consolidated
+    ``theta_deg`` (mean over frames of the face-normal angle to the clean frame; for ``robot``
+    over the faces whose three vertices are kept, their share in ``faces_kept``, as it removes
+    points and refills none) and ``p2s_mean`` (mean distance of the kept points to the clean
+    surface). ``suite`` is ``"sequence-patterns"``.
+    """
+    from .. import io, noise
+
+    data = Path(data_dir)
+    patterns = tuple(noise.OUTLIER_PATTERNS) if patterns is None else tuple(patterns)
+    rows: list[dict] = []
+    for label, rel, step in datasets:
+        path = data / rel
+        if not path.exists():
+            continue
+        if path.is_dir():  # a folder of frames
+            rng0 = np.random.default_rng(seed)
+            frames = []
+            for f in sorted(path.iterdir())[: max_frames * step : step]:
+                P = io.read(f, kind="points").points
+                if P.shape[0] > max_points:  # Bernoulli: the frames keep different sizes
+                    P = P[rng0.random(P.shape[0]) < max_points / P.shape[0]]
+                frames.append(P)
+            V, F = None, None
+        else:
+            z = np.load(path)
+            V = np.asarray(z["vertices"], dtype=np.float64)[: max_frames * step : step]
+            F = np.asarray(z["faces"], dtype=np.int64)
+            frames = list(V)
+        for pat in patterns:
+            for frac in fractions:
+                base = {
+                    "suite": "sequence-patterns",
+                    "dataset": label,
+                    "kind": pat,
+                    "fraction": frac,
+                    "n_points": int(sum(f.shape[0] for f in frames)),
+                }
+                rows.extend(_sequence_case(base, frames, V, F, pat, frac, seed))
+    return rows
+
+
+def _sequence_case(base: dict, frames: list, V, F, pat: str, frac: float, seed: int) -> list[dict]:
+    """Rows of one (sequence, pattern, fraction) case of :func:`evaluate_sequence_patterns`."""
+    from .. import noise
+    from ..geometry import PointCloud, PointCloudSequence
+    from ..metrics import point_to_surface, theta_deg
+    from ..outliers import clean_sequence, robot_pipeline
+
+    T = len(frames)
+    fixed = V is not None
+    X, labs = [], []
+    for t, P in enumerate(frames):
+        if fixed:
+            Q, _ = noise.corrupt_outliers(
+                P, pattern=pat, fraction=frac, rng=seed + t, shuffle=False
+            )
+            n = P.shape[0]
+            idx = np.random.default_rng(seed + 1000 + t).choice(n, Q.shape[0] - n, replace=False)
+            Xt = P.copy()
+            Xt[idx] = Q[n:]
+            lab = np.zeros(n, dtype=bool)
+            lab[idx] = True
+        else:
+            Xt, lab = noise.corrupt_outliers(
+                P, pattern=pat, fraction=frac, rng=seed + t, viewpoint=np.zeros(3)
+            )
+        X.append(Xt)
+        labs.append(lab)
+    lab_all = np.concatenate(labs)
+    rows = []
+
+    def theta(W, faces=None):
+        return float(
+            np.mean([theta_deg(W[t], V[t], F if faces is None else faces[t]) for t in range(T)])
+        )
+
+    def p2s(pts):
+        return float(
+            np.mean([point_to_surface(pts[t], V[t], F).distances.mean() for t in range(T)])
+        )
+
+    if fixed:
+        rows.append(
+            {
+                **base,
+                "method": "noisy input",
+                "params": "",
+                "time_s": 0.0,
+                "theta_deg": round(theta(X), 3),
+                "p2s_mean": float(f"{p2s(X):.4g}"),
+            }
+        )
+    # Section 5.4.3: spatio-temporal RPCA + weighted Laplacian refill (per frame if sizes vary)
+    t0 = time.perf_counter()
+    seq = np.stack(X) if fixed else PointCloudSequence([PointCloud(x) for x in X])
+    r = clean_sequence(seq, k=10)
+    dt = time.perf_counter() - t0
+    keep = np.concatenate([np.asarray(k_, bool) for k_ in r.keep])
+    row = _row(
+        base, "sequence", "k=10, tau=1e-4" if fixed else "k=10, per frame", ~keep, lab_all, dt
+    )
+    row["converged"] = r.converged
+    if fixed:
+        Y = np.stack([f.points for f in r.frames])
+        row.update(theta_deg=round(theta(Y), 3), p2s_mean=float(f"{p2s(Y):.4g}"))
+        rows.append(row)
+        rows.append(
+            {
+                **base,
+                "method": "sequence low-rank E",
+                "params": "k=10",
+                "time_s": round(dt, 3),
+                "theta_deg": round(theta(r.low_rank), 3),
+                "p2s_mean": float(f"{p2s(r.low_rank):.4g}"),
+            }
+        )
+    else:
+        rows.append(row)
+    # Section 5.4.2: RPCA removal + k = 7 bilateral filter, frame by frame (no refill)
+    t0 = time.perf_counter()
+    res = [robot_pipeline(x) for x in X]
+    dt = time.perf_counter() - t0
+    keep = np.concatenate([q.keep for q in res])
+    row = _row(base, "robot", "k=7, rpca auto", ~keep, lab_all, dt)
+    if fixed:
+        W, faces, kept_pts = [], [], []
+        for t, q in enumerate(res):
+            Wt = X[t].copy()
+            Wt[q.keep] = q.points.points
+            W.append(Wt)
+            faces.append(F[q.keep[F].all(axis=1)])
+            kept_pts.append(q.points.points)
+        row["theta_deg"] = round(theta(W, faces), 3)
+        row["p2s_mean"] = float(f"{p2s(kept_pts):.4g}")
+        row["faces_kept"] = round(float(np.mean([f.shape[0] / F.shape[0] for f in faces])), 4)
+    rows.append(row)
     return rows
 
 
@@ -405,6 +601,9 @@ _COLS = (
     "p2s_mean",
     "flagged",
     "split",
+    "suite",
+    "faces_kept",
+    "converged",
 )
 
 
@@ -416,7 +615,8 @@ def _uses_labels(method: str) -> bool:
 def format_markdown(rows: list[dict]) -> str:
     """Markdown tables: static F1 per scan/kind/fraction/method, then the sequence results."""
     split_rows = [r for r in rows if r.get("split")]
-    rows = [r for r in rows if not r.get("split")]
+    suite_rows = [r for r in rows if r.get("suite") == "sequence-patterns"]
+    rows = [r for r in rows if not r.get("split") and not r.get("suite")]
     static = [r for r in rows if r.get("kind") != "sequence"]
     seq = [r for r in rows if r.get("kind") == "sequence"]
     out = []
@@ -461,7 +661,58 @@ def format_markdown(rows: list[dict]) -> str:
     if split_rows:
         out.append("")
         out.extend(_split_tables(split_rows))
+    if suite_rows:
+        out.append("")
+        out.extend(_sequence_pattern_tables(suite_rows))
     return "\n".join(out)
+
+
+_SEQ_METHODS = ("sequence", "sequence low-rank E", "robot", "noisy input")
+
+
+def _sequence_pattern_tables(rows: list[dict]) -> list[str]:
+    """Per-pattern summary (means over sequences and fractions), then every case."""
+    out = [
+        "### Outlier patterns on sequences: consolidated theta and F1 (Sections 5.4.2-5.4.3)",
+        "",
+        "Means over the sequences and fractions run; theta (degrees) over the animations only "
+        "(`robot`: over the faces whose three vertices it keeps).",
+        "",
+        "| pattern | sequence F1 | sequence theta | low-rank E theta | robot F1 | robot theta "
+        "| noisy theta |",
+        "|---|---|---|---|---|---|---|",
+    ]
+
+    def mean(pat, method, key):
+        v = [
+            r[key]
+            for r in rows
+            if r["kind"] == pat and r["method"] == method and isinstance(r.get(key), float)
+        ]
+        return f"{np.mean(v):.3f}" if v else "-"
+
+    for pat in dict.fromkeys(r["kind"] for r in rows):
+        out.append(
+            f"| {pat} | {mean(pat, 'sequence', 'f1')} | {mean(pat, 'sequence', 'theta_deg')} | "
+            f"{mean(pat, 'sequence low-rank E', 'theta_deg')} | {mean(pat, 'robot', 'f1')} | "
+            f"{mean(pat, 'robot', 'theta_deg')} | {mean(pat, 'noisy input', 'theta_deg')} |"
+        )
+    out += [
+        "",
+        "| sequence | pattern | outliers | method | precision | recall | F1 | theta (deg) "
+        "| mean point-to-surface | faces kept | time (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        out.append(
+            f"| {r['dataset']} | {r['kind']} | {int(round(100 * r['fraction']))}% | "
+            f"{r['method']} | {_fmt(r.get('precision', ''))} | {_fmt(r.get('recall', ''))} | "
+            f"{_fmt(r.get('f1', ''))} | {_fmt(r.get('theta_deg', ''))} | "
+            f"{_fmt4(r.get('p2s_mean', ''))} | {_fmt(r.get('faces_kept', ''))} | "
+            f"{r['time_s']:.2f} |"
+        )
+    out.append("")
+    return out
 
 
 _SPLIT_METHODS = (
@@ -568,6 +819,10 @@ def _summary(static: list[dict]) -> list[str]:
         )
     lines.append("")
     return lines
+
+
+def _fmt4(v: Any) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
 def _fmt(v: Any) -> str:

@@ -1,8 +1,12 @@
-"""Shared machinery of the outlier filters: input coercion, spatially ordered chunked kNN queries,
-the point spacing used to make scores scale-invariant, and duplicate handling."""
+"""Shared machinery of the outlier filters: input coercion, the Morton-sorted cloud and its exact
+grid/octree kNN queries (:mod:`._grid`), chunked kd-tree kNN queries (the reference, and for
+callers without a sorted cloud), the point spacing used to make scores scale-invariant, and
+duplicate handling."""
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,6 +22,25 @@ KNN_CHUNK = 131_072
 #: Below this many query points the kd-tree is queried on the calling thread (starting the
 #: query threads costs more than it saves).
 KNN_SERIAL_BELOW = 16_384
+
+
+@contextlib.contextmanager
+def numba_threads(workers: int | None) -> Iterator[None]:
+    """Limit the numba kernels called inside to ``workers`` threads (-1 or None: all).
+
+    The limit is numba's thread-local setting, restored on exit.
+    """
+    import numba
+
+    if workers is None or workers < 0:
+        yield
+        return
+    old = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(workers), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)
 
 
 def as_cloud(P: Any, name: str = "P") -> tuple[np.ndarray, PointCloud | None]:
@@ -43,39 +66,39 @@ def check_k(k: Any, n: int, name: str = "k") -> int:
     return k
 
 
+def morton_codes(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(codes, lo, scale)``: Z-order (Morton) codes of ``P`` at 21 bits per axis.
+
+    Each coordinate is quantised as ``floor((P - lo) * scale)`` with ``lo`` the bounding-box
+    corner and ``scale = (2^21 - 1) / extent`` (``extent`` the largest side of the box; 0 when all
+    points coincide), and the three 21-bit integers are interleaved (x in bit 0).
+    """
+    from ._grid import morton_encode
+
+    n = P.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.uint64), np.zeros(3), 0.0
+    lo = P.min(axis=0)
+    ext = float(np.max(P.max(axis=0) - lo))
+    scale = (2**21 - 1) / ext if ext > 0 else 0.0
+    codes = np.empty(n, dtype=np.uint64)
+    step = 1 << 20
+    for s in range(0, n, step):
+        q = ((P[s : s + step] - lo) * scale).astype(np.uint64)
+        np.minimum(q, np.uint64(2**21 - 1), out=q)
+        codes[s : s + step] = morton_encode(q)
+    return codes, lo, scale
+
+
 def morton_order(P: np.ndarray) -> np.ndarray:
     """Permutation sorting ``P`` along a Z-order (Morton) curve of 21 bits per axis.
 
     Visiting points in this order keeps spatial neighbours close in memory, which makes kd-tree
     queries and the gathers of the patch matrix cache-friendly (3-4x faster kNN on shuffled clouds).
     """
-    n = P.shape[0]
-    if n < 2:
-        return np.arange(n)
-    lo = P.min(axis=0)
-    ext = float(np.max(P.max(axis=0) - lo))
-    scale = (2**21 - 1) / ext if ext > 0 else 0.0
-    codes = np.zeros(n, dtype=np.uint64)
-    step = 1 << 20
-    for s in range(0, n, step):
-        q = ((P[s : s + step] - lo) * scale).astype(np.uint64)
-        codes[s : s + step] = (
-            _spread(q[:, 0])
-            | (_spread(q[:, 1]) << np.uint64(1))
-            | (_spread(q[:, 2]) << np.uint64(2))
-        )
-    return np.argsort(codes, kind="stable")
-
-
-def _spread(x: np.ndarray) -> np.ndarray:
-    """Insert two zero bits between the 21 low bits of ``x``."""
-    x = x & np.uint64(0x1FFFFF)
-    x = (x | (x << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-    x = (x | (x << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-    x = (x | (x << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-    x = (x | (x << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-    x = (x | (x << np.uint64(2))) & np.uint64(0x1249249249249249)
-    return x
+    if P.shape[0] < 2:
+        return np.arange(P.shape[0])
+    return np.argsort(morton_codes(P)[0], kind="stable")
 
 
 @dataclass(frozen=True)
@@ -156,3 +179,66 @@ def spacing_from(dmean: np.ndarray) -> float:
     if pos.size == 0:
         raise InvalidInputError("`P` has no spatial extent: all points coincide.")
     return float(pos.mean())
+
+
+@dataclass(frozen=True)
+class SortedCloud:
+    """A cloud sorted along its Morton curve: ``points[i] = P[order[i]]`` with ``codes`` (sorted),
+    and the quantisation ``lo``, ``scale`` of :func:`morton_codes`."""
+
+    points: np.ndarray
+    order: np.ndarray
+    codes: np.ndarray
+    lo: np.ndarray
+    scale: float
+
+    @classmethod
+    def of(cls, P: np.ndarray) -> SortedCloud:
+        codes, lo, scale = morton_codes(P)
+        order = np.argsort(codes, kind="stable")
+        return cls(np.ascontiguousarray(P[order]), order, codes[order], lo, scale)
+
+
+def knn_grid(
+    sc: SortedCloud,
+    k: int,
+    *,
+    subset: np.ndarray | None = None,
+    query: np.ndarray | None = None,
+    self_index: np.ndarray | None = None,
+) -> Neighbours:
+    """Exact kNN on a Morton-sorted cloud (:func:`spectrageo.outliers._grid.knn_sorted`).
+
+    Default: every point of ``sc`` queries the others. ``subset`` (sorted row indices of ``sc``)
+    restricts the *data* to those rows (copied, still sorted, with grid levels of their own;
+    returned indices are rows of ``sc``); ``query`` (sorted row indices of ``sc``) restricts the
+    queries, and ``self_index[i]`` (a position in ``subset``, or in ``sc`` without a subset, or
+    -1) excludes query ``i`` itself. Same result as :func:`knn_chunked` up to the order of
+    exactly equidistant neighbours; runs on numba's threads; memory is the ``n k`` indices plus
+    24 bytes per query (the distances are reduced on the fly to their mean, the ``k``-th and the
+    nearest).
+    """
+    from ._grid import knn_sorted
+
+    X, codes = sc.points, sc.codes
+    if subset is not None:
+        X, codes = np.ascontiguousarray(X[subset]), codes[subset]
+    if query is None and subset is None:
+        idx, dmean, dlast, dzero = knn_sorted(X, codes, k, sc.lo, sc.scale)
+    else:
+        qi = np.arange(sc.points.shape[0]) if query is None else query
+        if query is None and self_index is None:
+            self_index = qi
+        idx, dmean, dlast, dzero = knn_sorted(
+            X,
+            codes,
+            k,
+            sc.lo,
+            sc.scale,
+            query=np.ascontiguousarray(sc.points[qi]),
+            qcodes=sc.codes[qi],
+            self_index=self_index,
+        )
+    if subset is not None:
+        idx = subset.astype(idx.dtype, copy=False)[idx]
+    return Neighbours(idx, dmean, dlast, int(np.count_nonzero(dzero)))

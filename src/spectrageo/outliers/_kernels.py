@@ -2,13 +2,21 @@
 
 The patch matrix ``M`` (``3n x (k+1)``) is never stored: its row ``3r + c`` is gathered from the
 points as ``[P[centers[r], c], P[nbrs[r, 0], c], ..., P[nbrs[r, k-1], c]]``. The solver state is a
-single array ``R = M - E + Y / mu`` of the shape of ``M``; the sparse part and the Lagrange
+single array ``R = M - E + Y / mu`` with the entries of ``M``; the sparse part and the Lagrange
 multiplier follow from it (``S = R - clip(R, lam/mu)``, ``Y / mu = clip(R, lam/mu)``), as in the
 row-chunked engine of :func:`spectrageo.linalg.rpca`. One call of :func:`patch_ialm_pass` is one
 IALM iteration (Eq. 4.22) over the rows of a range of points: it forms the SVT argument, applies
 the low-rank operator ``W`` (``E = X W``), updates ``R``, and returns ``||M - E - S||_F^2`` and the
 Gram matrix of the next SVT argument over that range. The kernels are serial and release the GIL;
 the caller runs disjoint point ranges on threads and sums the partial results.
+
+Layout: rows are processed in tiles of ``TILE`` points (``3 TILE`` rows), each stored *column by
+column* (``K`` contiguous columns of ``3 nt`` entries, ``nt`` the tile's points), in the tile
+buffers and in ``R`` alike (``R`` is a flat array; the tile of the points ``s .. s + nt`` of a
+range occupies ``R[3 K s : 3 K (s + nt)]``). The two small products of an iteration, ``X W`` and
+the Gram matrix ``X^T X``, are then ``K^2`` (or ``2 K r`` for a rank-``r`` ``W``) axpys and
+``K (K + 1) / 2`` dot products over contiguous columns, which vectorise, instead of BLAS calls on
+``3 TILE x K`` operands (two to three times slower for ``K = 11``).
 """
 
 from __future__ import annotations
@@ -24,115 +32,204 @@ TILE = 128
 
 @njit(cache=True, nogil=True)
 def _gather_tile(Pn, centers, nbrs, s, nt, Mt):  # pragma: no cover - compiled
-    """Rows ``3s .. 3(s + nt)`` of the patch matrix ``M`` into the tile buffer ``Mt``."""
+    """Rows ``3s .. 3(s + nt)`` of ``M`` into the column-major tile buffer ``Mt`` (K, >= 3 nt)."""
     K = nbrs.shape[1] + 1
     for p in range(nt):
         r = s + p
         ci = centers[r]
         for c in range(3):
-            Mt[3 * p + c, 0] = Pn[ci, c]
+            Mt[0, 3 * p + c] = Pn[ci, c]
         for j in range(1, K):
             q = nbrs[r, j - 1]
             for c in range(3):
-                Mt[3 * p + c, j] = Pn[q, c]
+                Mt[j, 3 * p + c] = Pn[q, c]
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _gram_add(Xt, nr, G):  # pragma: no cover - compiled
+    """``G += X^T X`` for the column-major tile ``Xt`` (K, >= nr), in float64."""
+    K = Xt.shape[0]
+    for a in range(K):
+        for b in range(a, K):
+            acc = 0.0
+            for i in range(nr):
+                acc += np.float64(Xt[a, i]) * np.float64(Xt[b, i])
+            G[a, b] += acc
+            if b != a:
+                G[b, a] += acc
 
 
 @njit(cache=True, nogil=True)
 def patch_gram(Pn, centers, nbrs, G, lo, hi):  # pragma: no cover - compiled
-    """``G = M^T M`` over the patch rows of the points ``lo .. hi`` (``G`` (K, K) overwritten)."""
+    """``G = M^T M`` over the patch rows of the points ``lo .. hi`` (``G`` (K, K) float64,
+    overwritten; accumulated in float64 whatever the dtype of ``Pn``)."""
     K = nbrs.shape[1] + 1
-    Mt = np.empty((3 * TILE, K))
-    Gt = np.empty((K, K))
+    Mt = np.empty((K, 3 * TILE))
     G[:, :] = 0.0
     for s in range(lo, hi, TILE):
         nt = min(hi, s + TILE) - s
         _gather_tile(Pn, centers, nbrs, s, nt, Mt)
-        if nt == TILE:
-            np.dot(Mt.T, Mt, Gt)
-        else:
-            Gt[:, :] = np.dot(Mt[: 3 * nt].T, Mt[: 3 * nt])
-        G += Gt
+        _gram_add(Mt, 3 * nt, G)
 
 
 @njit(cache=True, nogil=True, fastmath=True)
 def patch_ialm_pass(
-    Pn, centers, nbrs, R, W, tp, fp, t, f, E0, G, lo, hi
+    Pn, centers, nbrs, R, W, A, B, tp, fp, t, f1, E0, S0, V0, G, lo, hi
 ):  # pragma: no cover - compiled
     """One IALM iteration (Eq. 4.22) over the patch rows of the points ``lo .. hi``.
 
     ``W`` (K, K) is the singular value thresholding operator of the current SVT argument ``X``
-    (``D_{1/mu}(X) = X W``). ``tp = lam / mu_prev`` and ``fp = mu_prev / mu`` decode the stored
-    ``R`` into the current ``S`` and ``Y / mu``; ``t = lam / mu`` and ``f = mu / mu_next`` encode
-    the next SVT argument ``M - S + Y_new / mu_next``, whose Gram matrix is written to ``G``.
-    ``E0`` receives the first column of ``E`` (the smoothed point, Eq. 5.99). Returns the partial
-    ``||M - E - S||_F^2``. Rows are processed in tiles of ``TILE`` points: the elementwise steps
-    run over contiguous tile buffers and the two small products (``X W`` and ``X^T X``) go to BLAS.
+    (``D_{1/mu}(X) = X W``); when ``A`` (K, r) has ``r < K / 2`` columns, ``W = A B`` (``B``
+    (r, K)) is applied in that factored form. ``tp = lam / mu_prev`` and ``fp = mu_prev / mu``
+    decode the stored ``R`` into the current ``S`` and ``Y / mu``; ``t = lam / mu`` and
+    ``f1 = 1 + mu / mu_next`` encode the next SVT argument ``M - S + Y_new / mu_next``, whose
+    Gram matrix is written to ``G``. After the update, ``E0`` (m, 3) receives the first column of
+    ``E`` (the smoothed point, Eq. 5.99), ``S0`` (m,) the first-column score
+    ``||S[3r:3r+3, 0]||`` and ``V0`` (m, 3; skipped when it has no rows) the residual vector
+    ``S[3r:3r+3, 0]`` of every point. Returns the partial ``||M - E - S||_F^2``.
+
+    Precision: ``Pn``, ``R``, ``W`` and the scalars share one dtype (float32 or float64) for the
+    state, the elementwise steps and ``X W``; the Gram matrix of the next SVT argument is always
+    accumulated in float64 (its small eigenvalues decide the thresholding), as is the residual.
     """
     K = nbrs.shape[1] + 1
-    Mt = np.empty((3 * TILE, K))
-    Xt = np.empty((3 * TILE, K))
-    Yt = np.empty((3 * TILE, K))
-    Et = np.empty((3 * TILE, K))
-    Gt = np.empty((K, K))
-    Mf = Mt.ravel()
-    Xf = Xt.ravel()
-    Yf = Yt.ravel()
-    Ef = Et.ravel()
-    Rf = R.ravel()
+    r = A.shape[1]
+    low = 2 * r < K
+    dt = R.dtype
+    Mt = np.empty((K, 3 * TILE), dt)
+    Xt = np.empty((K, 3 * TILE), dt)
+    Yt = np.empty((K, 3 * TILE), dt)
+    Et = np.empty((K, 3 * TILE), dt)
+    Tt = np.empty((max(r, 1), 3 * TILE), dt)
+    want_v = V0.shape[0] > 0
     G[:, :] = 0.0
     res = 0.0
-    f1 = 1.0 + f
     for s in range(lo, hi, TILE):
         nt = min(hi, s + TILE) - s
         nr = 3 * nt
-        ne = nr * K
         _gather_tile(Pn, centers, nbrs, s, nt, Mt)
         base = 3 * s * K
-        for i in range(ne):
-            rv = Rf[base + i]
-            cl = min(max(rv, -tp), tp)
-            y = cl * fp
-            Yf[i] = y
-            Xf[i] = Mf[i] - rv + cl + y
-        if nt == TILE:
-            np.dot(Xt, W, Et)
+        for j in range(K):
+            o = base + j * nr
+            for i in range(nr):
+                rv = R[o + i]
+                cl = min(max(rv, -tp), tp)
+                y = cl * fp
+                Yt[j, i] = y
+                Xt[j, i] = Mt[j, i] - rv + cl + y
+        # E = X W, column by column
+        if low:
+            for q in range(r):
+                for i in range(nr):
+                    Tt[q, i] = 0.0
+                for a in range(K):
+                    w = A[a, q]
+                    for i in range(nr):
+                        Tt[q, i] += Xt[a, i] * w
+            for j in range(K):
+                for i in range(nr):
+                    Et[j, i] = 0.0
+                for q in range(r):
+                    w = B[q, j]
+                    for i in range(nr):
+                        Et[j, i] += Tt[q, i] * w
         else:
-            Et[:nr] = np.dot(Xt[:nr], W)
-        for i in range(ne):
-            rn = Mf[i] - Ef[i] + Yf[i]
-            Rf[base + i] = rn
-            cl = min(max(rn, -t), t)
-            z = cl - Yf[i]  # M - E - S = R - Y/mu - S = clip(R) - Y/mu
-            res += z * z
-            Xf[i] = Mf[i] - rn + f1 * cl
+            for j in range(K):
+                for i in range(nr):
+                    Et[j, i] = 0.0
+                for a in range(K):
+                    w = W[a, j]
+                    for i in range(nr):
+                        Et[j, i] += Xt[a, i] * w
+        for j in range(K):
+            o = base + j * nr
+            for i in range(nr):
+                rn = Mt[j, i] - Et[j, i] + Yt[j, i]
+                R[o + i] = rn
+                cl = min(max(rn, -t), t)
+                z = cl - Yt[j, i]  # M - E - S = R - Y/mu - S = clip(R) - Y/mu
+                res += np.float64(z) * np.float64(z)
+                Xt[j, i] = Mt[j, i] - rn + f1 * cl  # the next SVT argument
+        _gram_add(Xt, nr, G)
         for p in range(nt):
+            acc = 0.0
             for c in range(3):
-                E0[s + p, c] = Et[3 * p + c, 0]
-        if nt == TILE:
-            np.dot(Xt.T, Xt, Gt)
-        else:
-            Gt[:, :] = np.dot(Xt[:nr].T, Xt[:nr])
-        G += Gt
+                E0[s + p, c] = Et[0, 3 * p + c]
+                v = R[base + 3 * p + c]
+                sv = v - min(max(v, -t), t)
+                if want_v:
+                    V0[s + p, c] = sv
+                acc += np.float64(sv) * np.float64(sv)
+            S0[s + p] = np.sqrt(acc)
     return res
 
 
-@njit(cache=True, nogil=True)
-def first_column_scores(R, t, out, vec):  # pragma: no cover - compiled
-    """``out[r] = || S[3r:3r+3, 0] ||_2`` with ``S = R - clip(R, t)`` (Eq. 5.99).
+@njit(cache=True)
+def rank_bins(s, floor, inv_width, bins):  # pragma: no cover - compiled
+    """Quantise scores to the bins of the ranking stop rule; return how many bins changed.
 
-    ``vec`` (m, 3) receives the residual vectors ``S[3r:3r+3, 0]`` unless it has no rows.
+    ``bin = floor(log10(s / floor) * inv_width)`` for ``s >= floor``, ``-1`` below (all scores
+    below the floor tie). ``bins`` holds the previous bins and is updated in place.
     """
-    m = out.shape[0]
-    keep = vec.shape[0] == m
-    for r in range(m):
-        acc = 0.0
-        for c in range(3):
-            v = R[3 * r + c, 0]
-            s = v - min(max(v, -t), t)
-            if keep:
-                vec[r, c] = s
-            acc += s * s
-        out[r] = np.sqrt(acc)
+    changed = 0
+    for i in range(s.shape[0]):
+        v = s[i]
+        b = np.int32(-1)
+        if v >= floor:
+            b = np.int32(np.floor(np.log10(v / floor) * inv_width))
+        if b != bins[i]:
+            changed += 1
+            bins[i] = b
+    return changed
+
+
+@njit(cache=True, nogil=True)
+def normal_of(cxx, cyy, czz, cxy, cxz, cyz):  # pragma: no cover - compiled
+    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (a covariance).
+
+    Closed form: the eigenvalues by the trigonometric solution of the characteristic cubic, the
+    eigenvector as the largest cross product of two rows of ``C - lambda_min I``. When the two
+    smallest eigenvalues are within ``1e-4`` of the largest (the vector is then ill-determined
+    and the cross products lose their digits) it falls back to the Jacobi iteration of
+    :func:`spectrageo.geometry._numba_kernels.min_eigvec3`.
+    """
+    q = (cxx + cyy + czz) / 3.0
+    bxx = cxx - q
+    byy = cyy - q
+    bzz = czz - q
+    p2 = (bxx * bxx + byy * byy + bzz * bzz + 2.0 * (cxy * cxy + cxz * cxz + cyz * cyz)) / 6.0
+    if p2 > 0.0:
+        p = np.sqrt(p2)
+        det = (
+            bxx * (byy * bzz - cyz * cyz)
+            - cxy * (cxy * bzz - cyz * cxz)
+            + cxz * (cxy * cyz - byy * cxz)
+        )
+        r = det / (2.0 * p2 * p)
+        r = min(max(r, -1.0), 1.0)
+        phi = np.arccos(r) / 3.0
+        l_max = q + 2.0 * p * np.cos(phi)
+        l_min = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+        l_mid = 3.0 * q - l_max - l_min
+        if l_mid - l_min > 1e-4 * max(abs(l_max), 1e-300):
+            ax, ay, az = cxx - l_min, cxy, cxz
+            bx, by, bz = cxy, cyy - l_min, cyz
+            ex, ey, ez = cxz, cyz, czz - l_min
+            v1x, v1y, v1z = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+            v2x, v2y, v2z = ay * ez - az * ey, az * ex - ax * ez, ax * ey - ay * ex
+            v3x, v3y, v3z = by * ez - bz * ey, bz * ex - bx * ez, bx * ey - by * ex
+            n1 = v1x * v1x + v1y * v1y + v1z * v1z
+            n2 = v2x * v2x + v2y * v2y + v2z * v2z
+            n3 = v3x * v3x + v3y * v3y + v3z * v3z
+            if n2 > n1 and n2 >= n3:
+                v1x, v1y, v1z, n1 = v2x, v2y, v2z, n2
+            elif n3 > n1:
+                v1x, v1y, v1z, n1 = v3x, v3y, v3z, n3
+            if n1 > 0.0:
+                inv = 1.0 / np.sqrt(n1)
+                return v1x * inv, v1y * inv, v1z * inv
+    _, nx, ny, nz = min_eigvec3(cxx, cyy, czz, cxy, cxz, cyz)
+    return nx, ny, nz
 
 
 @njit(cache=True, parallel=True)
@@ -140,12 +237,12 @@ def tangent_weighted_norms(P, nbrs, S1, S2, w2, out1, out2):  # pragma: no cover
     """``out = sqrt(|<s, n>|^2 + w2 |s - <s, n> n|^2)`` for the residuals ``S1`` and ``S2``.
 
     ``n_i`` is the normal of the neighbours ``P[nbrs[i]]`` of point ``i`` (the eigenvector of the
-    smallest eigenvalue of their covariance about their mean; the point itself is left out, so an
-    outlying point does not tilt its own normal).
+    smallest eigenvalue of their covariance about their mean, :func:`normal_of`; the point
+    itself is left out, so an outlying point does not tilt its own normal).
     """
     for i in prange(nbrs.shape[0]):
         cxx, cyy, czz, cxy, cxz, cyz = patch_covariance(P, nbrs[i])
-        _, nx, ny, nz = min_eigvec3(cxx, cyy, czz, cxy, cxz, cyz)
+        nx, ny, nz = normal_of(cxx, cyy, czz, cxy, cxz, cyz)
         out1[i] = _weighted_norm(S1[i, 0], S1[i, 1], S1[i, 2], nx, ny, nz, w2)
         out2[i] = _weighted_norm(S2[i, 0], S2[i, 1], S2[i, 2], nx, ny, nz, w2)
 
@@ -183,3 +280,39 @@ def bilateral_offsets(P, N, nbrs, sigma1, sigma2, out):  # pragma: no cover - co
             num += w * h
             den += w
         out[i] = num / den if den > 0 else 0.0
+
+
+@njit(cache=True, parallel=True)
+def count_flagged(idx, flagged):  # pragma: no cover - compiled
+    """Number of flagged neighbours ``sum_j flagged[idx[i, j]]`` of every point (int64)."""
+    n, k = idx.shape
+    out = np.zeros(n, dtype=np.int64)
+    for i in prange(n):
+        c = 0
+        for j in range(k):
+            if flagged[idx[i, j]]:
+                c += 1
+        out[i] = c
+    return out
+
+
+@njit(cache=True, parallel=True)
+def subtract_patch_median(scores, s1, idx):  # pragma: no cover - compiled
+    """``scores[i] = max(scores[i] - median_j s1[idx[i, j]], 0)`` in place (the median of an even
+    count is the mean of the two middle values, as :func:`numpy.median`)."""
+    n, k = idx.shape
+    n_chunks = min(n, 256)
+    h = k // 2
+    for ch in prange(n_chunks):
+        v = np.empty(k)
+        for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
+            for j in range(k):  # insertion sort of the k values
+                x = s1[idx[i, j]]
+                p = j
+                while p > 0 and v[p - 1] > x:
+                    v[p] = v[p - 1]
+                    p -= 1
+                v[p] = x
+            med = v[h] if k % 2 == 1 else 0.5 * (v[h - 1] + v[h])
+            d = scores[i] - med
+            scores[i] = d if d > 0.0 else 0.0

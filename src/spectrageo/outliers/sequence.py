@@ -8,6 +8,7 @@ previous frame with motion vectors interpolated by a weighted graph Laplacian (E
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -15,8 +16,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from .._errors import InvalidInputError
-from .._validation import as_rng, check_positive
+from .._errors import ConvergenceError, ConvergenceWarning, InvalidInputError
+from .._validation import as_rng, check_choice, check_positive
 from ..geometry import PointCloud, PointCloudSequence
 from ._common import check_k, knn_chunked
 
@@ -45,10 +46,15 @@ class SequenceResult:
     low_rank : (T, n, 3) ndarray or None
         The low-rank reconstruction ``E`` of every frame (fixed-size sequences).
     n_iter : int
-        Largest RPCA iteration count over the parts.
+        Largest RPCA iteration count over the parts (or, for sequences whose point count varies,
+        over the frames).
     converged : bool
+        Whether every part's (every frame's) RPCA met its tolerance before ``max_iter``.
     residual : float
-        Largest final RPCA residual over the parts.
+        Largest final RPCA residual over the parts (frames).
+    n_unconverged : int
+        Number of parts (frames) whose RPCA stopped at ``max_iter``; reported as one
+        :class:`~spectrageo.ConvergenceWarning` per call (``on_nonconvergence="warn"``).
     """
 
     frames: PointCloudSequence = field(repr=False)
@@ -58,6 +64,21 @@ class SequenceResult:
     n_iter: int = 0
     converged: bool = True
     residual: float = 0.0
+    n_unconverged: int = 0
+
+
+def _report(res: SequenceResult, policy: str, n_total: int, what: str) -> None:
+    """One warning (or error) for all the parts or frames whose RPCA did not converge."""
+    if res.converged or policy == "ignore":
+        return
+    msg = (
+        f"RPCA did not converge on {res.n_unconverged} of {n_total} {what} of the sequence "
+        f"(largest residual {res.residual:.3g}); their outlier flags may be unreliable: "
+        "increase `max_iter` or relax `tol`."
+    )
+    if policy == "raise":
+        raise ConvergenceError(msg, partial=res)
+    warnings.warn(msg, ConvergenceWarning, stacklevel=3)
 
 
 def _knn_adjacency(V: np.ndarray, k: int) -> sp.csr_matrix:
@@ -151,6 +172,7 @@ def clean_sequence(
     max_iter: int | None = None,
     refill: bool = True,
     rng: Any = 0,
+    on_nonconvergence: str = "warn",
 ) -> SequenceResult:
     r"""Remove outliers from a point-cloud sequence and consolidate it (Section 5.4.3).
 
@@ -184,6 +206,9 @@ def clean_sequence(
     then cleaned on its own by Algorithm 14 (:func:`remove_outliers` with ``method="rpca"``,
     ``k`` neighbours and the automatic threshold); ``tau`` is not used and nothing is refilled.
 
+    Non-convergence is never silent: the parts (frames) whose RPCA stopped at ``max_iter`` are
+    counted in ``n_unconverged`` and reported by ``on_nonconvergence``, once per call.
+
     Parameters
     ----------
     seq : PointCloudSequence or (T, n, 3) array_like
@@ -199,11 +224,17 @@ def clean_sequence(
         animation trajectories are only approximately low rank, and with the PCP value the
         sparse part also takes the non-low-rank motion of inliers (horse-gallop, 20 % outliers,
         ``tau = 1e-4``: precision 0.34 with the PCP value, 0.94 with twice it, recall >= 0.997;
-        four times it lets most outliers into ``E``).
+        four times it lets most outliers into ``E``). Sequences whose point count varies pass
+        only ``max_iter`` on (to :func:`spectrageo.outliers.rpca_scores`, per frame).
     refill : bool
         Consolidate (refill removed points) or return only the kept points of each frame.
     rng : int or Generator
         Seeds METIS.
+    on_nonconvergence : {"warn", "raise", "ignore"}
+        Policy when the RPCA of some parts (or frames) stops at ``max_iter`` before its
+        tolerance: one :class:`~spectrageo.ConvergenceWarning` per call naming how many (the
+        command line prints it as one line), :class:`~spectrageo.ConvergenceError` carrying the
+        result as ``partial``, or nothing. The count is always in ``n_unconverged``.
 
     Returns
     -------
@@ -233,18 +264,40 @@ def clean_sequence(
     check_positive(submesh_size, "submesh_size", integer=True)
     if not (0 <= overlap < 1):
         raise InvalidInputError(f"`overlap` must be in [0, 1); got {overlap!r}.")
+    check_choice(on_nonconvergence, "on_nonconvergence", ("warn", "raise", "ignore"))
 
     if not pcs.is_fixed_size():
         keeps, scores, frames = [], [], []
+        n_iter, residual, n_bad = 0, 0.0, 0
         for t, f in enumerate(pcs.frames):
             try:
-                r = remove_outliers(f, method="rpca", k=k, on_nonconvergence="ignore")
+                # convergence is collected over the frames and reported once below
+                r = remove_outliers(
+                    f,
+                    method="rpca",
+                    k=k,
+                    on_nonconvergence="ignore",
+                    **({} if max_iter is None else {"max_iter": max_iter}),
+                )
             except InvalidInputError as exc:
                 raise InvalidInputError(f"frame {t}: {exc}") from exc
             keeps.append(r.keep)
             scores.append(r.scores)
             frames.append(r.points)
-        return SequenceResult(PointCloudSequence(frames), keeps, scores)
+            n_iter = max(n_iter, int(r.info["n_iter"]))
+            residual = max(residual, float(r.info["residual"]))
+            n_bad += not r.info["converged"]
+        res = SequenceResult(
+            PointCloudSequence(frames),
+            keeps,
+            scores,
+            n_iter=n_iter,
+            converged=n_bad == 0,
+            residual=residual,
+            n_unconverged=n_bad,
+        )
+        _report(res, on_nonconvergence, len(pcs.frames), "frames")
+        return res
 
     X = pcs.as_array()  # (T, n, 3)
     T, n = X.shape[0], X.shape[1]
@@ -265,15 +318,16 @@ def clean_sequence(
 
     score = np.zeros((T, n))
     low = np.empty((T, n, 3))
-    n_iter, converged, residual = 0, True, 0.0
+    n_iter, residual, n_bad = 0, 0.0, 0
     for part, core in zip(parts, cores, strict=True):
         M = np.ascontiguousarray(Xn[:, part, :].transpose(1, 2, 0).reshape(3 * part.size, T))
         lam_p = LAM_FACTOR / np.sqrt(max(M.shape)) if lam is None else float(lam)
+        # convergence is collected over the parts and reported once below
         r = rpca(
             M, method="ialm", lam=lam_p, tol=tol, max_iter=max_iter, on_nonconvergence="ignore"
         )
         n_iter = max(n_iter, r.n_iter)
-        converged = converged and r.converged
+        n_bad += not r.converged
         residual = max(residual, r.residual)
         at = np.searchsorted(part, core)
         S = r.sparse.reshape(part.size, 3, T)[at]  # (c, 3, T)
@@ -311,15 +365,18 @@ def clean_sequence(
             if not keep[t].any():
                 raise InvalidInputError(f"frame {t}: every point was flagged as an outlier.")
             frames_out.append(pcs.frames[t].select(keep[t]))
-    return SequenceResult(
+    res = SequenceResult(
         frames=PointCloudSequence(frames_out),
         keep=[keep[t] for t in range(T)],
         scores=[score[t] for t in range(T)],
         low_rank=low,
         n_iter=n_iter,
-        converged=converged,
+        converged=n_bad == 0,
         residual=residual,
+        n_unconverged=n_bad,
     )
+    _report(res, on_nonconvergence, len(parts), "parts")
+    return res
 
 
 def _refill(Lw, C, known, Xt, prev, interp) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 from .._errors import InvalidInputError
 from .._validation import check_choice, check_positive
 from ..geometry import PointCloud
-from ._common import check_k, knn_chunked, morton_order
+from ._common import SortedCloud, check_k, knn_grid, numba_threads
 from .rpca import rpca_scores
 
 __all__ = [
@@ -144,10 +144,12 @@ def radius_scores(P: Any, k: int = 10, *, workers: int = -1) -> np.ndarray:
 
 
 def _knn_stat(X: np.ndarray, k: int, what: str, workers: int) -> np.ndarray:
-    order = morton_order(X)
-    nb = knn_chunked(X[order], k, workers=workers)
+    """``dmean`` or ``dlast`` of the exact kNN (grid/octree search on the Morton-sorted cloud)."""
+    with numba_threads(workers):
+        sc = SortedCloud.of(X)
+        nb = knn_grid(sc, k)
     out = np.empty(X.shape[0])
-    out[order] = getattr(nb, what)
+    out[sc.order] = getattr(nb, what)
     return out
 
 
@@ -375,12 +377,13 @@ def remove_outliers(
     return_points : bool
         Build ``result.points`` (the kept points with their attributes).
     workers : int
-        Threads of the kd-tree queries.
+        Threads of the neighbour search and of the RPCA solver (-1: all cores).
     threshold_rule : {"density", "valley", "otsu"}
         RPCA only: automatic threshold rule when ``threshold`` is None (see :func:`auto_threshold`).
     **rpca_options
         Passed to :func:`spectrageo.outliers.rpca_scores` (``lam``, ``rho``, ``tol``,
-        ``max_iter``, ``block_size``, ``on_nonconvergence``, ``refine``, ``tangent_weight``).
+        ``rank_tol``, ``max_iter``, ``block_size``, ``on_nonconvergence``, ``refine``,
+        ``tangent_weight``, ``dtype``).
 
     Returns
     -------
