@@ -153,13 +153,12 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--large", type=int, nargs="?", const=10_000_000, default=0)
     args = ap.parse_args()
-    import spectrageo
 
     rows = same_run(args.sizes, args.repeat) if args.sizes else []
     lines = [
         "## Outlier removal throughput: rpca vs Open3D SOR",
         "",
-        f"Machine: {machine_line()}. Package: `{Path(spectrageo.__file__).parent}`. Dragon "
+        f"Machine: {machine_line()}. Dragon "
         "surface samples + 10 % `mixed` outliers; `rpca` = `remove_outliers(method='rpca')` "
         "defaults, Open3D = `remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)`, "
         f"alternately in one process, best of {args.repeat}. Reproduce: "

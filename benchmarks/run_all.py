@@ -60,6 +60,7 @@ SECTIONS = [
     ("denoise_dynamic", [*_script("denoise_dynamic"), "--max-frames", "40"]),
     ("outliers", _evaluate("outliers", "outliers")),
     ("outliers_large", _script("outliers_large")),
+    ("bench_outliers_speed", [*_script("bench_outliers_speed"), "--repeat", "3", "--large"]),
     ("saliency", _script("saliency")),
     ("compress", _evaluate("compress", "compress")),
     ("viewer", _script("viewer")),
