@@ -151,8 +151,9 @@ def patch_quadric_residual(P, idx, dirs, res, spread):  # pragma: no cover - jit
     """Residual variance ``res[i]`` of the least-squares quadric height field
     ``h = a x^2 + b xy + c y^2 + d x + e y + f`` fitted to the points ``P[idx[i]]`` in the frame
     whose height axis is the patch's minimum-variance direction ``dirs[i]``:
-    ``res[i] = RSS / (k - 6)``. Rows with fewer than 7 points, or a singular design (points
-    on a line), get ``res[i] = inf`` so that quantiles skip them. ``spread[i]`` is the ratio of
+    ``res[i] = RSS / (k - 6)`` (the normal equations carry a 1e-10 relative ridge, so
+    near-singular designs still solve). Rows with fewer than 7 points, or whose points all
+    coincide, get ``res[i] = inf`` so that quantiles skip them. ``spread[i]`` is the ratio of
     the smaller to the larger eigenvalue of the patch's 2x2 second-moment matrix in the tangent
     plane (0: the points lie on a line, 1: isotropic); near-collinear patches (long thin
     triangles) let the quadric fit part of the noise; :func:`spectrageo.denoise._guard.noise_sigma` does
