@@ -24,21 +24,34 @@ def _shape_str(a: Any) -> str:
 MAX_COORDINATE = 1e150
 
 
+def coordinate_array(
+    X: Any, name: str, *, ndim: int = 2, copy: bool = False, allow_empty: bool = False
+) -> np.ndarray:
+    """``X`` as a float64 array of shape (n, 3) (``ndim=2``) or (T, n, 3) (``ndim=3``), checked
+    for type, shape and emptiness only: the values may be anything, NaN included (the callers
+    apply their own policy for rows without coordinates)."""
+    want = "(n, 3)" if ndim == 2 else "(T, n, 3)"
+    try:
+        arr = np.array(X, dtype=np.float64) if copy else np.asarray(X, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(
+            f"`{name}` must be a numeric array of shape {want}; got {type(X).__name__}."
+        ) from exc
+    if arr.ndim != ndim or arr.shape[-1] != 3:
+        raise InvalidInputError(f"`{name}` must have shape {want}; got {_shape_str(arr)}.")
+    if arr.size == 0 and not allow_empty:
+        raise InvalidInputError(
+            f"`{name}` is empty; at least one point is required; got shape {arr.shape}."
+        )
+    return arr
+
+
 def as_points(
     V: Any, name: str = "V", *, allow_empty: bool = False, copy: bool = False
 ) -> np.ndarray:
     """Return ``V`` as a C-contiguous float64 array of shape (n, 3) with finite entries of
     magnitude at most :data:`MAX_COORDINATE` (1e150)."""
-    try:
-        arr = np.array(V, dtype=np.float64, copy=copy) if copy else np.asarray(V, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(
-            f"`{name}` must be a numeric array of shape (n, 3); got {type(V).__name__}."
-        ) from exc
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise InvalidInputError(f"`{name}` must have shape (n, 3); got {_shape_str(arr)}.")
-    if arr.shape[0] == 0 and not allow_empty:
-        raise InvalidInputError(f"`{name}` is empty; at least one point is required.")
+    arr = coordinate_array(V, name, copy=copy, allow_empty=allow_empty)
     if not np.isfinite(arr).all():
         bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
         raise InvalidInputError(
@@ -135,16 +148,7 @@ def as_frames(frames: Any, name: str = "frames") -> np.ndarray:
     """Validate animation frames: a (T, n, 3) float64 array (or an object with ``.frames``),
     T, n >= 1, all finite and at most :data:`MAX_COORDINATE` in magnitude; the first bad vertex is
     named in the error."""
-    try:
-        A = np.asarray(getattr(frames, "frames", frames), dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(
-            f"`{name}` must be a numeric array of shape (T, n, 3); got {type(frames).__name__}."
-        ) from exc
-    if A.ndim != 3 or A.shape[2] != 3:
-        raise InvalidInputError(f"`{name}` must have shape (T, n, 3); got {A.shape}.")
-    if A.shape[0] == 0 or A.shape[1] == 0:
-        raise InvalidInputError(f"`{name}` is empty; got shape {A.shape}.")
+    A = coordinate_array(getattr(frames, "frames", frames), name, ndim=3)
     if not np.isfinite(A).all():
         bad = np.argwhere(~np.isfinite(A).all(axis=2))[0]
         raise InvalidInputError(

@@ -70,7 +70,6 @@ def _is_animation_input(path: str) -> bool:
 def cmd_compress_animation(args) -> int:
     from .. import compress
     from ..geometry import MeshAnimation
-    from ..io import atomic_write
     from .commands import _read
 
     method = args.method or "blocks"
@@ -86,8 +85,10 @@ def cmd_compress_animation(args) -> int:
     anim, _rep = _read(args.input, kind="animation", weld=False)
     if not isinstance(anim, MeshAnimation):
         raise InvalidInputError(f"{args.input!r} is not a mesh animation.")
-    t0 = time.perf_counter()
-    data = compress.encode_animation(
+    d, dt = _encode_to(
+        args.output,
+        compress.encode_animation,
+        compress.info_animation,
         anim.frames,
         anim.faces,
         method=method,
@@ -95,10 +96,6 @@ def cmd_compress_animation(args) -> int:
         error=args.error,
         step=args.step,
     )
-    dt = time.perf_counter() - t0
-    with atomic_write(args.output) as tmp:
-        Path(tmp).write_bytes(data)
-    d = compress.info_animation(data)
     _status(
         f"wrote {args.output}: {d['bytes']} bytes, {d['bpvf']:.3f} bpvf, {method}, "
         f"{d['n_frames']} frames in {d['n_blocks']} block(s), vertex and face order kept, "
@@ -107,9 +104,21 @@ def cmd_compress_animation(args) -> int:
     return 0
 
 
+def _encode_to(path, encode, info, *data, **options) -> tuple[dict, float]:
+    """Run ``encode(*data, **options)``, write the bytes atomically to ``path``; returns
+    ``(info(bytes), seconds spent encoding)``."""
+    from ..io import atomic_write
+
+    t0 = time.perf_counter()
+    blob = encode(*data, **options)
+    dt = time.perf_counter() - t0
+    with atomic_write(path) as tmp:
+        Path(tmp).write_bytes(blob)
+    return info(blob), dt
+
+
 def cmd_compress(args) -> int:
     from .. import compress
-    from ..io import atomic_write
     from .commands import _check_outputs
 
     out = str(args.output).lower()
@@ -133,8 +142,10 @@ def cmd_compress(args) -> int:
             f"{list(compress.METHODS)}."
         )
     mesh = _read_mesh(args.input)
-    t0 = time.perf_counter()
-    data = compress.encode(
+    d, dt = _encode_to(
+        args.output,
+        compress.encode,
+        compress.info,
         mesh.vertices,
         mesh.faces,
         method=method,
@@ -143,10 +154,6 @@ def cmd_compress(args) -> int:
         reorder=args.reorder,
         **({"step": args.step} if args.step is not None else {}),
     )
-    dt = time.perf_counter() - t0
-    with atomic_write(args.output) as tmp:
-        Path(tmp).write_bytes(data)
-    d = compress.info(data)
     order = (
         "vertices and faces REORDERED by the codec (--reorder)"
         if d["reordered"]

@@ -9,7 +9,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .._errors import InvalidInputError
-from .._validation import MAX_COORDINATE, _shape_str
+from .._validation import MAX_COORDINATE, _shape_str, coordinate_array
 
 
 def as_known(known: Any, n: int, name: str = "known") -> np.ndarray:
@@ -49,16 +49,7 @@ def as_known(known: Any, n: int, name: str = "known") -> np.ndarray:
 def as_partial_points(V: Any, known: np.ndarray | None = None, name: str = "V") -> np.ndarray:
     """``V`` as float64 (n, 3); the rows in ``known`` (all rows when None) must be finite, the
     others may hold anything (NaN included) and are ignored."""
-    try:
-        arr = np.array(V, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(
-            f"`{name}` must be a numeric array of shape (n, 3); got {type(V).__name__}."
-        ) from exc
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise InvalidInputError(f"`{name}` must have shape (n, 3); got {_shape_str(arr)}.")
-    if arr.shape[0] == 0:
-        raise InvalidInputError(f"`{name}` is empty; at least one vertex is required.")
+    arr = coordinate_array(V, name, copy=True)
     if known is not None:
         rows = arr[known]
         bad = ~np.isfinite(rows).all(axis=1) | (np.abs(np.nan_to_num(rows)) > MAX_COORDINATE).any(

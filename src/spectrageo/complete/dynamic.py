@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._errors import InvalidInputError
-from .._validation import _shape_str, as_faces, check_choice, check_positive
+from .._validation import as_faces, check_choice, check_positive, coordinate_array
 from ..graph import adjacency_matrix, knn_graph, laplacian_from_adjacency
 from ..linalg import complete_matrix, laplacian_interpolation, lasso
 from ._common import as_known
@@ -29,17 +29,7 @@ SEQUENCE_METHODS = ("wrli", "li", "lia", "mc")
 
 # --------------------------------------------------------------------------------- validation
 def _as_partial_frames(frames: Any, name: str = "frames") -> np.ndarray:
-    try:
-        A = np.array(getattr(frames, "frames", frames), dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(
-            f"`{name}` must be a numeric array of shape (T, n, 3); got {type(frames).__name__}."
-        ) from exc
-    if A.ndim != 3 or A.shape[2] != 3:
-        raise InvalidInputError(f"`{name}` must have shape (T, n, 3); got {_shape_str(A)}.")
-    if A.shape[0] == 0 or A.shape[1] == 0:
-        raise InvalidInputError(f"`{name}` is empty; got shape {A.shape}.")
-    return A
+    return coordinate_array(getattr(frames, "frames", frames), name, ndim=3, copy=True)
 
 
 def _as_known_frames(known: Any, T: int, n: int) -> np.ndarray:

@@ -37,6 +37,34 @@ def write_md_csv(out, markdown: str, csv_text: str) -> tuple[Path, Path]:
     return md, cs
 
 
+def check_names(given, allowed: Sequence[str], what: str) -> tuple[str, ...]:
+    """``given`` as a tuple, or an :class:`InvalidInputError` naming the unknown entries and the
+    allowed ones (``what``: "method", "split", ...)."""
+    from .._errors import InvalidInputError
+
+    given = tuple(given)
+    bad = [g for g in given if g not in allowed]
+    if bad:
+        raise InvalidInputError(f"unknown {what}(s) {bad}; choose from {list(allowed)}.")
+    return given
+
+
+def markdown_table(rows: Iterable[dict], columns: Sequence[str]) -> list[str]:
+    """Lines of a markdown table of ``rows`` over ``columns`` (cells by :func:`fmt_cell`)."""
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        lines.append("| " + " | ".join(fmt_cell(r.get(c)) for c in columns) + " |")
+    return lines
+
+
+def write_rate_outputs(out, markdown: str, rows: list[dict], columns: Sequence[str], **plot):
+    """``<out>.md`` + ``<out>.csv`` (:func:`write_md_csv`) and ``<out>.png`` with the rate curves
+    of :func:`plot_rate_curves` (``plot``: its keyword arguments)."""
+    md, _ = write_md_csv(out, markdown, rows_to_csv(rows, columns))
+    plot_rate_curves(rows, md.with_suffix(".png"), **plot)
+    return md
+
+
 def have(module: str) -> bool:
     """True when ``module`` imports (optional peers and plotting)."""
     try:

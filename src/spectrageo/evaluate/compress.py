@@ -26,9 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import InvalidInputError
 from .._progress import progress
-from ._tables import fmt_cell, have, plot_rate_curves, rows_to_csv, write_md_csv
+from ._tables import check_names, have, markdown_table, write_rate_outputs
 
 TUNING_SPLIT = ("meshes/fandisk.off", "cad/partLp.obj")
 VALIDATION_SPLIT = (
@@ -155,13 +154,8 @@ def evaluate(
     from .. import io
 
     data = Path(data_dir)
-    methods = tuple(methods) if methods else METHODS + PEERS
-    bad = [m for m in methods if m not in METHODS + PEERS]
-    if bad:
-        raise InvalidInputError(f"unknown method(s) {bad}; choose from {list(METHODS + PEERS)}.")
-    bad = [s for s in splits if s not in SPLITS]
-    if bad:
-        raise InvalidInputError(f"unknown split(s) {bad}; choose from {sorted(SPLITS)}.")
+    methods = check_names(methods or METHODS + PEERS, METHODS + PEERS, "method")
+    splits = check_names(splits, sorted(SPLITS), "split")
     todo = [(s, p) for s in splits for p in SPLITS[s]] + (
         [("large", p) for p in LARGE] if large else []
     )
@@ -203,10 +197,11 @@ def evaluate(
             }
             rows.append(row)
     if out is not None:
-        md, _ = write_md_csv(out, format_markdown(rows), rows_to_csv(rows, COLUMNS))
-        plot_rate_curves(
+        write_rate_outputs(
+            out,
+            format_markdown(rows),
             rows,
-            md.with_suffix(".png"),
+            COLUMNS,
             x="bpv",
             y="hausdorff",
             xlabel="bits per vertex (whole file)",
@@ -241,9 +236,6 @@ def format_markdown(rows: list[dict]) -> str:
         "`draco-ordered` keeps the order; `quant-zstd` is uniform quantisation + zstd. Defaults "
         "were chosen on the tuning split (fandisk, partLp) only.",
         "",
-        "| split | " + " | ".join(cols) + " |",
-        "|" + "---|" * (len(cols) + 1),
+        *markdown_table(rows, ("split", *cols)),
     ]
-    for r in rows:
-        lines.append("| " + " | ".join(fmt_cell(r.get(c)) for c in ("split", *cols)) + " |")
     return "\n".join(lines)

@@ -27,9 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import InvalidInputError
 from .._progress import progress
-from ._tables import fmt_cell, have, plot_rate_curves, rows_to_csv, write_md_csv
+from ._tables import check_names, have, markdown_table, write_rate_outputs
 
 TUNING_SPLIT = ("animations/horse-gallop.npz",)
 VALIDATION_SPLIT = (
@@ -150,13 +149,8 @@ def evaluate(
     from .. import io
 
     data = Path(data_dir)
-    methods = tuple(methods) if methods else METHODS + PEERS
-    bad = [m for m in methods if m not in METHODS + PEERS]
-    if bad:
-        raise InvalidInputError(f"unknown method(s) {bad}; choose from {list(METHODS + PEERS)}.")
-    bad = [s for s in splits if s not in SPLITS]
-    if bad:
-        raise InvalidInputError(f"unknown split(s) {bad}; choose from {sorted(SPLITS)}.")
+    methods = check_names(methods or METHODS + PEERS, METHODS + PEERS, "method")
+    splits = check_names(splits, sorted(SPLITS), "split")
     todo = [(s, p) for s in splits for p in SPLITS[s]]
     rows = []
     for split, rel in progress(todo, desc="compress-animation", total=len(todo)):
@@ -196,10 +190,11 @@ def evaluate(
                 }
             )
     if out is not None:
-        md, _ = write_md_csv(out, format_markdown(rows), rows_to_csv(rows, COLUMNS))
-        plot_rate_curves(
+        write_rate_outputs(
+            out,
+            format_markdown(rows),
             rows,
-            md.with_suffix(".png"),
+            COLUMNS,
             x="bpvf",
             y="kg",
             xlabel="bits per vertex per frame (whole file)",
@@ -209,19 +204,7 @@ def evaluate(
 
 
 def format_markdown(rows: list[dict]) -> str:
-    cols = (
-        "model",
-        "method",
-        "setting",
-        "bpvf",
-        "kg",
-        "sted",
-        "nmsve",
-        "order_kept",
-        "encode_ms_per_frame",
-        "decode_ms_per_frame",
+    """Markdown table of the rows over :data:`COLUMNS` (the split and frame count left to CSV)."""
+    return "\n".join(
+        markdown_table(rows, [c for c in COLUMNS if c not in ("split", "n_frames", "n_vertices")])
     )
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for r in rows:
-        lines.append("| " + " | ".join(fmt_cell(r.get(c)) for c in cols) + " |")
-    return "\n".join(lines)

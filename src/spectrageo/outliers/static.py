@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import check_choice, check_positive
+from .._validation import check_choice, check_positive, coordinate_array
 from ..geometry import PointCloud
 from ._common import SortedCloud, check_k, knn_grid, numba_threads
 from .rpca import rpca_scores
@@ -86,16 +86,7 @@ def _finite_rows(P: Any, nonfinite: str) -> tuple[np.ndarray, np.ndarray | None,
         return P.points, None, P
     if P is None:
         raise InvalidInputError("`cloud` must be a PointCloud or an (n, 3) array; got None.")
-    try:
-        X = np.asarray(P, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(
-            f"`cloud` must be a numeric array of shape (n, 3); got {type(P).__name__}."
-        ) from exc
-    if X.ndim != 2 or X.shape[1] != 3:
-        raise InvalidInputError(f"`cloud` must have shape (n, 3); got {X.shape}.")
-    if X.shape[0] == 0:
-        raise InvalidInputError("`cloud` is empty; at least one point is required.")
+    X = coordinate_array(P, "cloud")
     ok = np.isfinite(X).all(axis=1)
     if ok.all():
         return np.ascontiguousarray(X), None, None
