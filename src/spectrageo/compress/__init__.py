@@ -290,7 +290,7 @@ def info(data) -> dict:
 
 # ----------------------------------------------------------------------------- animations (.sga)
 #: animation methods (thesis Section 5.2.2); see :mod:`spectrageo.compress._animation`
-ANIMATION_METHODS = _animation.METHODS
+ANIMATION_METHODS = _animation.ALL_METHODS
 
 
 def encode_animation(

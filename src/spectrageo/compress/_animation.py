@@ -65,6 +65,8 @@ from ._container import Reader, varint
 from ._entropy import decode_groups, encode_groups, zstd_compress, zstd_decompress
 
 METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks")
+#: with the scalable layered codec of Section 5.2.4 (:mod:`._layered`)
+ALL_METHODS = (*METHODS, "layered")
 #: method ids in the container's method byte; the animation ids start at 16, clear of the static
 #: codecs' ids (0-2) that share the container.
 METHOD_IDS = {
@@ -806,8 +808,14 @@ def encode_animation(
     """See :func:`spectrageo.compress.encode_animation`."""
     from . import _bisect
 
-    if method not in METHODS:
-        raise InvalidInputError(f"`method` must be one of {list(METHODS)}; got {method!r}.")
+    if method == "layered":
+        from . import _layered
+
+        if bpvf is not None and error is not None:
+            raise InvalidInputError("give at most one of `bpvf` and `error`.")
+        return _layered.encode(frames, F, step=step, bpvf=bpvf, error=error, **options)
+    if method not in ALL_METHODS:
+        raise InvalidInputError(f"`method` must be one of {list(ALL_METHODS)}; got {method!r}.")
     if bpvf is not None and error is not None:
         raise InvalidInputError("give at most one of `bpvf` and `error`.")
     for name, v in (("bpvf", bpvf), ("error", error)):
@@ -871,6 +879,10 @@ def _parse_stream(data, partial: bool):
         _p, _e, head = next(segs)
     except StopIteration:
         raise InvalidInputError(".sga data is empty.") from None
+    if head.method == "layered":
+        from ._layered import LayeredState
+
+        return LayeredState(head), segs
     st = read_header(head)
     return st, segs
 
@@ -884,6 +896,9 @@ def iter_decode(data, *, partial: bool = False, serial: bool | None = None):
     if not is_animation(data):
         raise InvalidInputError("not a spectrageo compressed animation (.sga).")
     st, segs = _parse_stream(data, partial)
+    if st.method == "layered":
+        yield from _iter_layered(st, segs, partial)
+        return
     serial = st.method == "pca-qs" if serial is None else serial
     expect = 0
     seen_index = False
@@ -906,6 +921,22 @@ def iter_decode(data, *, partial: bool = False, serial: bool | None = None):
         )
 
 
+def _iter_layered(st, segs, partial: bool):
+    seen_index = False
+    for _pos, _end, c in segs:
+        if seen_index:
+            raise InvalidInputError(".sga data continues after its frame index.")
+        if c.params[:1] == bytes([KIND_INDEX]):
+            seen_index = True
+            continue
+        t = st.expect
+        yield t, st.frame(c)[None]
+    if st.n_frames and st.expect != st.n_frames and not partial:
+        raise InvalidInputError(
+            f".sga data is truncated: {st.expect} of {st.n_frames} frames present."
+        )
+
+
 def decode_animation(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """See :func:`spectrageo.compress.decode_animation`."""
     parts = [X for _t0, X in iter_decode(data, partial=partial)]
@@ -920,6 +951,8 @@ def info_animation(data) -> dict:
     if isinstance(data, memoryview | bytearray):
         data = bytes(data)
     st, segs = _parse_stream(data, False)
+    if st.method == "layered":
+        return _info_layered(data, st, segs)
     n_blocks = 0
     frames = 0
     conn = len(_container.parse(data[: _segment_end(data, 0)]).chunks[0][1])
@@ -956,15 +989,63 @@ def info_animation(data) -> dict:
     }
 
 
+def _info_layered(data: bytes, st, segs) -> dict:
+    from ._layered import _parse_payload
+
+    conn = len(_container.parse(data[: _segment_end(data, 0)]).chunks[0][1])
+    layers = []
+    has_index = False
+    for _p, _e, c in segs:
+        if c.params[:1] == bytes([KIND_INDEX]):
+            has_index = True
+            continue
+        if not c.chunks:
+            raise InvalidInputError(".sga layered frame segment is malformed.")
+        layers.append(_parse_payload(c.chunks[0][1], st.n)[0])
+    frames = len(layers)
+    nvf = max(1, st.n * max(frames, 1))
+    return {
+        "format": "sga",
+        "version": _container.FORMAT_VERSION,
+        "method": "layered",
+        "n_frames": frames,
+        "n_vertices": st.n,
+        "n_faces": st.m,
+        "bytes": len(data),
+        "bpvf": 8.0 * len(data) / nvf,
+        "connectivity_bpvf": 8.0 * conn / nvf,
+        "n_blocks": frames,
+        "frame_index": has_index,
+        "order_preserved": True,
+        "parameters": {
+            "step": st.step,
+            "refresh": st.refresh,
+            "mean_layer": float(np.mean(layers[1:])) / st.n if frames > 1 else 1.0,
+        },
+    }
+
+
 # ----------------------------------------------------------------------------- streaming
 class StreamEncoder:
     """See :class:`spectrageo.compress.StreamEncoder`."""
 
     def __init__(self, F, *, method="blocks", step=None, bpvf=None, **options) -> None:
+        self._lay = None
+        if method == "layered":
+            from ._layered import LayeredEncoder
+
+            bad = sorted(set(options) - {"layer", "refresh", "fine"})
+            if bad:
+                raise InvalidInputError(
+                    f"unknown option(s) {bad} for method 'layered'; use ['fine', 'layer', "
+                    "'refresh']."
+                )
+            self._lay = LayeredEncoder(F, step=step, bpvf=bpvf, **options)
+            return
         if method != "blocks":
             raise InvalidInputError(
-                f"streaming supports method 'blocks' (the others need the whole sequence); "
-                f"got {method!r}."
+                f"streaming supports methods 'blocks' and 'layered' (the others need the whole "
+                f"sequence); got {method!r}."
             )
         if step is not None and bpvf is not None:
             raise InvalidInputError("give at most one of `step` and `bpvf`.")
@@ -1027,6 +1108,8 @@ class StreamEncoder:
 
     def push(self, frame) -> bytes:
         """Add one frame (n, 3); returns the bytes ready to send (possibly empty)."""
+        if self._lay is not None:
+            return self._lay.push(frame)
         if self.closed:
             raise InvalidInputError("the stream is closed.")
         V = np.asarray(frame, dtype=np.float64)
@@ -1093,6 +1176,8 @@ class StreamEncoder:
 
     def close(self) -> bytes:
         """Flush the last (short) block and append the frame index; returns the final bytes."""
+        if self._lay is not None:
+            return self._lay.close()
         if self.closed:
             return b""
         self.closed = True
@@ -1127,11 +1212,20 @@ class StreamDecoder:
             c = _container.parse(self.buf[:end])
             self.buf = self.buf[end:]
             if self.state is None:
-                self.state = read_header(c)
+                if c.method == "layered":
+                    from ._layered import LayeredState
+
+                    self.state = LayeredState(c)
+                else:
+                    self.state = read_header(c)
                 self.F = self.state.F
                 continue
             if c.params[:1] == bytes([KIND_INDEX]):
                 self.done = True
+                continue
+            if self.state.method == "layered":
+                out.append(self.state.frame(c))
+                self.expect += 1
                 continue
             out.extend(self._block(c))
         return out

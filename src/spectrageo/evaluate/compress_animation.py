@@ -6,7 +6,8 @@ Gotsman), STED and NMSVE (Eq. 4.32, mean over frames), whether the vertex order 
 encode / decode wall time per frame.
 
 Methods (this package, Section 5.2.2): ``pca`` (kept-coefficient counts :data:`PCA_ROWS` x n),
-``pca-q``, ``pca-qs``, ``pca-qp``, ``blocks`` at the quantisation steps :data:`STEPS`. Peers, in
+``pca-q``, ``pca-qs``, ``pca-qp``, ``blocks`` at the quantisation steps :data:`STEPS`, and the
+streaming ``layered`` codec (Section 5.2.4) at the layers :data:`LAYERS`. Peers, in
 the same run: Draco per frame through DracoPy at 8-16 quantisation bits, in its default mode
 (``draco``: compression level 7, which reorders vertices; its KG error is measured after matching
 every decoded vertex to its nearest original vertex of the same frame, a lower bound of the true
@@ -39,7 +40,9 @@ VALIDATION_SPLIT = (
     "animations/lion-poses.npz",
 )
 SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
-METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks")
+METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "layered")
+#: ``layered`` (Section 5.2.4): fraction of the vertices sent per frame
+LAYERS = (0.05, 0.1, 0.2)
 PEERS = ("draco", "draco-ordered", "quant-delta-zstd")
 STEPS = {
     "pca-q": (1e-3, 3e-4),
@@ -83,7 +86,10 @@ def _ours(method, A, F, setting):
     from .. import compress
 
     t0 = time.perf_counter()
-    data = compress.encode_animation(A, F, method=method, step=setting)
+    if method == "layered":
+        data = compress.encode_animation(A, F, method=method, layer=setting)
+    else:
+        data = compress.encode_animation(A, F, method=method, step=setting)
     t1 = time.perf_counter()
     R, _F = compress.decode_animation(data)
     t2 = time.perf_counter()
@@ -165,6 +171,8 @@ def evaluate(
             if m == "pca":
                 rows_ = [r for r in PCA_ROWS if r <= T] or [T]
                 jobs += [(m, f"rows={r}", _ours, (m, A, F, r * n)) for r in rows_]
+            elif m == "layered":
+                jobs += [(m, f"layer={f:g}", _ours, (m, A, F, f)) for f in LAYERS]
             elif m in METHODS:
                 jobs += [(m, f"step={s:g}", _ours, (m, A, F, s)) for s in STEPS[m]]
             elif m.startswith("draco") and peers and have("DracoPy"):
