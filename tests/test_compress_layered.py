@@ -80,10 +80,11 @@ def test_error_falls_as_the_layer_grows(anim):
     sizes, errs = zip(*pts)
     assert sizes[0] < sizes[1] < sizes[2]
     assert errs[0] > errs[1] > errs[2]
-    # every vertex sent: only the quantisation error remains (step 2.5e-4 of twice the diagonal)
+    # every vertex sent: only the quantisation error remains (the step is a fraction of twice
+    # the first frame's diagonal)
     R, _ = compress.decode_animation(compress.encode_animation(A, F, method="layered", layer=1.0))
     diag = np.linalg.norm(A[0].max(0) - A[0].min(0))
-    assert np.abs(R - A).max() <= 0.5 * 2.5e-4 * 2 * diag * 1.0001
+    assert np.abs(R - A).max() <= 0.5 * _layered.DEFAULT_STEP * 2 * diag * 1.0001
 
 
 def test_refresh_frames_bound_the_drift(anim):
