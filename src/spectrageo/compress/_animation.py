@@ -887,8 +887,11 @@ def _parse_stream(data, partial: bool):
     return st, segs
 
 
-def iter_decode(data, *, partial: bool = False, serial: bool | None = None):
-    """Yield ``(t0, frames_block)`` for every block of an ``.sga`` byte string, in order."""
+def iter_decode(data, *, partial: bool = False, serial: bool | None = None, _state=None):
+    """Yield ``(t0, frames_block)`` for every block of an ``.sga`` byte string, in order.
+
+    ``_state``: a dict that receives the stream state under ``"st"`` (its faces, parameters).
+    """
     if isinstance(data, memoryview | bytearray):
         data = bytes(data)
     if not isinstance(data, bytes):
@@ -896,6 +899,8 @@ def iter_decode(data, *, partial: bool = False, serial: bool | None = None):
     if not is_animation(data):
         raise InvalidInputError("not a spectrageo compressed animation (.sga).")
     st, segs = _parse_stream(data, partial)
+    if _state is not None:
+        _state["st"] = st
     if st.method == "layered":
         yield from _iter_layered(st, segs, partial)
         return
@@ -939,11 +944,11 @@ def _iter_layered(st, segs, partial: bool):
 
 def decode_animation(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """See :func:`spectrageo.compress.decode_animation`."""
-    parts = [X for _t0, X in iter_decode(data, partial=partial)]
+    state: dict = {}
+    parts = [X for _t0, X in iter_decode(data, partial=partial, _state=state)]
     if not parts:
         raise InvalidInputError(".sga data holds no complete frame.")
-    st, _ = _parse_stream(bytes(data), True)
-    return np.concatenate(parts, axis=0), st.F
+    return np.concatenate(parts, axis=0), state["st"].F
 
 
 def info_animation(data) -> dict:

@@ -58,11 +58,13 @@ frame 0; the frame index still gives each frame's offset and length).
 
 from __future__ import annotations
 
+import heapq
 import math
 import struct
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_frames
@@ -121,31 +123,23 @@ def _rings(F: np.ndarray, n: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     return C.tocsr(), level
 
 
-def _greedy_removal(indptr, indices, levels, ct, rho, n):
-    """Removal order of Eq. (5.56): repeatedly the vertex of lowest cost (5.59); lazy heap."""
-    import heapq
-
+@njit(cache=True)
+def _greedy_removal(indptr, indices, levels, ct, rho, n):  # pragma: no cover - compiled
+    """Removal order of Eq. (5.56): repeatedly the vertex of lowest cost (5.59); a binary heap
+    with lazy deletion (an entry is stale when the vertex's version moved on)."""
     size = np.zeros((n, 4))
     for i in range(n):
         for p in range(indptr[i], indptr[i + 1]):
             size[i, levels[p]] += 1.0
     removed_cnt = np.zeros((n, 4))
     w = np.array([0.0, rho, rho**2, rho**3])
-
-    def cost(i):
-        c = 0.0
-        for j in (1, 2, 3):
-            if size[i, j] > 0:
-                c += removed_cnt[i, j] / size[i, j] * w[j]
-        return c + ct[i]
-
     version = np.zeros(n, dtype=np.int64)
-    alive = np.ones(n, dtype=bool)
-    heap = [(float(ct[i]), i, 0) for i in range(n)]
+    alive = np.ones(n, dtype=np.bool_)
+    heap = [(ct[i], np.int64(i), np.int64(0)) for i in range(n)]
     heapq.heapify(heap)
     order = np.empty(n, dtype=np.int64)
     k = 0
-    while heap:
+    while len(heap) > 0:
         c, i, ver = heapq.heappop(heap)
         if not alive[i] or ver != version[i]:
             continue
@@ -157,8 +151,71 @@ def _greedy_removal(indptr, indices, levels, ct, rho, n):
             if alive[nb]:
                 removed_cnt[nb, levels[p]] += 1.0
                 version[nb] += 1
-                heapq.heappush(heap, (cost(nb), nb, int(version[nb])))
+                cost = ct[nb]
+                for j in range(1, 4):
+                    if size[nb, j] > 0:
+                        cost += removed_cnt[nb, j] / size[nb, j] * w[j]
+                heapq.heappush(heap, (cost, np.int64(nb), version[nb]))
     return order
+
+
+@njit(cache=True)
+def _coarse_kernel(indptr, indices, prev, O, b, B, n_levels, sweeps):  # pragma: no cover
+    """Eq. (5.60)-(5.64) in place on ``B`` (n, 3): edge weights ``P O`` from the previous frame,
+    the unknown vertices ring by ring (``b`` = 1, 2, ...: the weighted mean motion of their
+    neighbours of lower ``b``), then ``sweeps`` Jacobi sweeps over every unknown vertex with its
+    whole first ring; vertices no received vertex reaches (``b < 0``) keep a zero motion."""
+    n = prev.shape[0]
+    nnz = indices.shape[0]
+    w = np.empty(nnz)
+    total = 0.0
+    for i in range(n):
+        for p in range(indptr[i], indptr[i + 1]):
+            j = indices[p]
+            d = np.sqrt(
+                (prev[i, 0] - prev[j, 0]) ** 2
+                + (prev[i, 1] - prev[j, 1]) ** 2
+                + (prev[i, 2] - prev[j, 2]) ** 2
+            )
+            w[p] = d
+            total += d
+    eps = 1e-12 * (1.0 + total / max(nnz, 1))
+    for p in range(nnz):
+        w[p] = O[p] / (w[p] + eps)  # Eq. (5.60) x Eq. (5.61)
+    for level in range(1, n_levels + 1):
+        for i in range(n):
+            if b[i] != level:
+                continue
+            s0 = 0.0
+            acc = np.zeros(3)
+            for p in range(indptr[i], indptr[i + 1]):
+                j = indices[p]
+                if 0 <= b[j] < level:
+                    s0 += w[p]
+                    for c in range(3):
+                        acc[c] += w[p] * B[j, c]
+            if s0 > 0:
+                for c in range(3):
+                    B[i, c] = acc[c] / s0
+    Bn = B.copy()
+    for _ in range(sweeps):
+        for i in range(n):
+            if b[i] <= 0:
+                continue
+            s0 = 0.0
+            acc = np.zeros(3)
+            for p in range(indptr[i], indptr[i + 1]):
+                j = indices[p]
+                s0 += w[p]
+                for c in range(3):
+                    acc[c] += w[p] * B[j, c]
+            if s0 > 0:
+                for c in range(3):
+                    Bn[i, c] = acc[c] / s0
+        for i in range(n):
+            if b[i] > 0:
+                for c in range(3):
+                    B[i, c] = Bn[i, c]
 
 
 #: levels of the temporal term: ``C_t / max C_t`` is rounded to ``k / CT_LEVELS`` and the
@@ -242,6 +299,7 @@ class Reconstructor:
         self.C = C
         self.rows = np.repeat(np.arange(n), np.diff(C.indptr))
         self.cols = C.indices
+        self._plans: dict = {}
         self.prev: np.ndarray | None = None
         self.prev2: np.ndarray | None = None
         self.prev_area: np.ndarray | None = None
@@ -267,47 +325,45 @@ class Reconstructor:
         return self.prev
 
     # -- Eq. (5.60)-(5.65)
-    def coarse(self, known: np.ndarray, motion_known: np.ndarray) -> np.ndarray:
-        n, prev = self.n, self.prev
-        B = np.zeros((n, 3))
-        B[known] = motion_known
+    def _plan(self, known: np.ndarray):
+        """What depends only on the received set: the rings ``b`` around it (BFS) and ``O``
+        (Eq. 5.61); cached, since a stream sends few distinct layers."""
+        key = known.tobytes()
+        plan = self._plans.get(key)
+        if plan is not None:
+            return plan
+        n = self.n
         is_known = np.zeros(n, dtype=bool)
         is_known[known] = True
-        if is_known.all():
-            return prev + B
-        d = np.linalg.norm(prev[self.rows] - prev[self.cols], axis=1)
-        P = 1.0 / (d + 1e-12 * (1.0 + float(d.mean())))  # Eq. (5.60)
-        # b: topological distance to the received set, ring by ring (BFS)
         b = np.full(n, -1, dtype=np.int64)
         b[is_known] = 0
         reached = is_known.copy()
-        Cb = self.C
-        level = 0
         fronts = []
+        level = 0
         while True:
-            nb = (Cb @ reached.astype(np.float64) > 0) & ~reached
+            nb = (self.C @ reached.astype(np.float64) > 0) & ~reached
             if not nb.any():
                 break
             level += 1
             b[nb] = level
-            fronts.append(np.flatnonzero(nb))
+            fronts.append(nb)
             reached |= nb
-        O = np.where(b[self.cols] == 0, 4.0, 1.0 / (np.maximum(b[self.cols], 0) + 1.0))  # (5.61)
-        W = sp.csr_matrix((P * O, (self.rows, self.cols)), shape=(n, n))  # Eq. (5.62)
-        est = is_known.copy()
-        for front in fronts:  # Eq. (5.64), ring by ring from the received vertices
-            Wf = W[front]
-            wsum = Wf @ est.astype(np.float64)
-            B[front] = (Wf @ (B * est[:, None])) / np.where(wsum > 0, wsum, 1.0)[:, None]
-            est[front] = True
-        u = np.flatnonzero(est & ~is_known)
-        if u.size:
-            Wu = W[u]
-            wsum = np.asarray(Wu.sum(axis=1)).ravel()
-            wsum = np.where(wsum > 0, wsum, 1.0)[:, None]
-            for _ in range(SWEEPS):  # until every unknown vertex sees its whole first ring
-                B[u] = (Wu @ B) / wsum
-        B[~est] = 0.0  # components without a received vertex keep their position
+        bc = b[self.cols]
+        O = np.where(bc == 0, 4.0, 1.0 / (np.maximum(bc, 0) + 1.0))  # Eq. (5.61), read on j
+        plan = (is_known, fronts, O, reached & ~is_known, reached, b)
+        if len(self._plans) > 64:
+            self._plans.clear()
+        self._plans[key] = plan
+        return plan
+
+    def coarse(self, known: np.ndarray, motion_known: np.ndarray) -> np.ndarray:
+        n, prev = self.n, self.prev
+        B = np.zeros((n, 3))
+        B[known] = motion_known
+        if known.size == n:
+            return prev + B
+        _k, fronts, O, _u, _r, b = self._plan(np.asarray(known, dtype=np.int64))
+        _coarse_kernel(self.C.indptr, self.cols, prev, O, b, B, len(fronts), SWEEPS)
         return prev + B  # Eq. (5.65)
 
     # -- Eq. (5.66)-(5.72)
@@ -387,9 +443,6 @@ class Reconstructor:
         is_known[known] = True
         if self.fine:
             X = self.refine(X, is_known)
-        else:
-            _N, a = _face_normals(X, self.F)
-            self.prev_area = self.VF @ a
         self.motion_sum += np.linalg.norm(X - self.prev, axis=1)
         self.prev2 = self.prev
         self.prev = X
