@@ -162,3 +162,13 @@ def test_bad_layered_options(anim):
         compress.encode_animation(A, F, method="layered", refresh=-1)
     with pytest.raises(InvalidInputError, match="unknown option"):
         compress.StreamEncoder(F, method="layered", anchors=0.1)
+
+
+def test_whole_file_bpvf_within_5_percent(anim):
+    A, F = anim
+    data = compress.encode_animation(A, F, method="layered", bpvf=7.0)
+    assert abs(8.0 * len(data) / (A.shape[0] * A.shape[1]) - 7.0) <= 0.35
+    with pytest.raises(InvalidInputError, match="header and the whole first frame"):
+        compress.encode_animation(A, F, method="layered", bpvf=0.05)
+    with pytest.raises(InvalidInputError, match="every vertex of every frame"):
+        compress.encode_animation(A, F, method="layered", bpvf=500.0)

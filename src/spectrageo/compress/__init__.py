@@ -305,15 +305,17 @@ def encode_animation(
 ) -> bytes:
     """Compress a mesh animation with fixed connectivity into ``.sga`` bytes (Section 5.2.2).
 
-    Delta coordinates projected on eigen-trajectories (Eq. 5.46-5.52); see
-    :mod:`spectrageo.compress._animation` for the methods and the file layout.
+    Delta coordinates projected on eigen-trajectories (Eq. 5.46-5.52; see
+    :mod:`spectrageo.compress._animation` for the methods and the file layout), or the scalable
+    layered streaming codec of Section 5.2.4 (``method="layered"``, Algorithm 11; see
+    :mod:`spectrageo.compress._layered`).
 
     Parameters
     ----------
     frames : (T, n, 3) float or MeshAnimation
     F : (m, 3) int
         Shared faces; vertex order and faces are kept exactly.
-    method : {"pca", "pca-q", "pca-qs", "pca-qp", "blocks"}
+    method : {"pca", "pca-q", "pca-qs", "pca-qp", "blocks", "layered"}
     bpvf : float, optional
         Target size of the whole file in bits per vertex per frame (met within 5 %).
     error : float, optional
@@ -328,6 +330,10 @@ def encode_animation(
         of pca-qs / pca-qp / blocks, 0.01), ``anchor_ratio`` (anchor step / step, 0.5),
         ``weight`` (anchor weight in Eq. 5.51, 1), ``basis`` ("oi" orthogonal iterations started
         from the previous block, or "exact"), ``n_iter`` (2), ``rd`` (row-dropping strength, 1).
+        ``layered`` takes ``layer`` (fraction of the vertices sent per frame, 0.1; ``bpvf``
+        chooses it per frame instead), ``refresh`` (a refresh frame every that many frames,
+        16; 0 = never) and ``fine`` (the RPCA/ISVD fine reconstruction, off); its ``step``
+        (default 1e-3) is a fraction of twice the first frame's diagonal.
 
     Returns
     -------
@@ -356,7 +362,13 @@ def info_animation(data) -> dict:
 
 
 class StreamEncoder(_animation.StreamEncoder):
-    """Streaming ``blocks`` encoder: :meth:`push` one frame at a time, :meth:`close` at the end.
+    """Streaming encoder (``blocks`` or ``layered``): :meth:`push` one frame at a time,
+    :meth:`close` at the end.
+
+    ``method="layered"`` (Section 5.2.4) emits one segment per frame -- the header and the whole
+    first frame with the first push, so the first frame decodes from the first packet -- and with
+    ``bpvf`` chooses every frame's layer for the rate (Algorithm 11 line 5); its layer order
+    then uses the first frame only (the temporal term needs frames not yet seen).
 
     ``StreamEncoder(F, *, method="blocks", step=None, bpvf=None, **options)``. Every call returns
     the bytes ready to send: the stream header with the first frame, one block segment whenever

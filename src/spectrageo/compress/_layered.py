@@ -20,7 +20,9 @@ horse-gallop the prediction saves only about 2 % of their bits against the last 
 bounding-box diagonal) and entropy coded; the decoder turns them into the motion vectors of
 Eq. (5.64). The
 layer of every frame is chosen for a target rate (``bpvf``: the largest layer whose frame fits
-the budget), which is the per-frame rate adaptation of Algorithm 11 line 5. Every
+the budget), which is the per-frame rate adaptation of Algorithm 11 line 5 (for a whole file,
+:func:`encode` searches the per-frame budget that brings the whole file -- header and first
+frame included -- to ``bpvf``). Every
 ``refresh`` frames (default 16; 0 = never) a refresh frame also sends the quantised residual
 of every other vertex against the decoder's prediction, which bounds the drift of the vertices
 that are never transmitted (the thesis streams without it; the residuals are mostly zero and
@@ -673,8 +675,10 @@ def encode(frames, F, *, step=None, bpvf=None, error=None, **options) -> bytes:
         enc = LayeredEncoder(F, motion_frames=A, n_frames=T, step=step, **options, **kw)
         return b"".join(enc.push(A[t]) for t in range(T)) + enc.close()
 
+    if bpvf is not None:
+        return _whole_file_rate(build, float(bpvf), A.shape[1] * T, "layer" in options)
     if error is None:
-        return build(bpvf=bpvf)
+        return build()
     if "layer" in options:
         raise InvalidInputError("`layer` cannot be combined with `error`.")
     from ..metrics import kg_error
@@ -700,6 +704,52 @@ def encode(frames, F, *, step=None, bpvf=None, error=None, **options) -> bytes:
         raise InvalidInputError(
             f"`error` = {target:g} could not be met within 5 % with 'layered' (closest: "
             f"{best[0]:.1%} away); the step bounds the error from below, try a smaller `step`."
+        )
+    return best[1]
+
+
+def _whole_file_rate(build, target: float, nvf: int, fixed_layer: bool) -> bytes:
+    """``bpvf`` for a whole file: bisection on the per-frame budget of the rate adaptation so
+    that the file -- header and whole first frame included -- is within 5 % of ``target``."""
+    if fixed_layer:
+        raise InvalidInputError("`layer` cannot be combined with `bpvf`.")
+
+    def rate(b):
+        data = build(bpvf=b)
+        return 8.0 * len(data) / nvf, data
+
+    lo, hi = 1e-3 * target, 64.0 * target
+    r_lo, d_lo = rate(lo)
+    if r_lo > target * 1.05:
+        raise InvalidInputError(
+            f"`bpvf` = {target:g} cannot be reached with 'layered': the header and the whole "
+            f"first frame alone give {r_lo:.3g} bpvf here (more frames amortise them)."
+        )
+    r_hi, d_hi = rate(hi)
+    if r_hi < target * 0.95:
+        raise InvalidInputError(
+            f"`bpvf` = {target:g} cannot be reached with 'layered': sending every vertex of "
+            f"every frame gives {r_hi:.3g} bpvf here (use a smaller `step`)."
+        )
+    best = min((abs(r_lo - target) / target, d_lo), (abs(r_hi - target) / target, d_hi))
+    for _ in range(30):
+        mid = math.sqrt(lo * hi)
+        r, d = rate(mid)
+        gap = abs(r - target) / target
+        if gap < best[0]:
+            best = (gap, d)
+        if gap <= 0.03:
+            break
+        if r < target:
+            lo = mid
+        else:
+            hi = mid
+        if hi / lo < 1.0001:
+            break
+    if best[0] > 0.05:
+        raise InvalidInputError(
+            f"`bpvf` = {target:g} could not be met within 5 % with 'layered' (closest: "
+            f"{best[0]:.1%} away)."
         )
     return best[1]
 
