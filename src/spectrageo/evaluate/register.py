@@ -1,0 +1,441 @@
+"""Evaluation of rigid registration (thesis Section 6.2.2-6.2.5): ``spectrageo evaluate register``.
+
+Data
+----
+- ``bunny``: the 10 Stanford bunny range scans of ``scans/bunny`` with the ``bun.conf`` ground
+  truth (``P_world = P @ R(q) + t``). Every unordered pair whose ground-truth overlap exceeds 0.3
+  is used once (source = the scan listed first in ``bun.conf``). Overlap = the smaller of the two
+  directional fractions of points (on a 1/100-diagonal voxel grid) that have a point of the other
+  scan within 1 % of the bounding-box diagonal after ground-truth alignment.
+- ``open3d``: the Open3D fragment pair ``cloud_bin_0`` -> ``cloud_bin_1``. The two files are
+  stored in a common frame: the ground truth is the identity (Open3D's point-to-plane ICP from
+  the identity moves them by 0.36 degrees and 0.5 % of the diagonal, far below the success
+  thresholds).
+- ``generated``: a shared CGAL mesh sampled twice (20,000 area-uniform points each, different
+  seeds), each sample cropped to a partial view by a random half-space keeping 65-85 % of it,
+  Gaussian noise of 0.2 % of the diagonal added.
+
+For every pair the source is moved by a random rigid motion (uniform rotation, translation of up
+to half the diagonal) drawn from the split's seed, so that no method starts near the answer.
+
+Methods: ``spectrageo`` (:func:`spectrageo.register.register`, broad -> robustify -> narrow) and,
+when :mod:`open3d` imports, ``o3d_ransac_fpfh_icp`` (Open3D's RANSAC on FPFH features + point-to-
+plane ICP, the parameters of its global-registration tutorial: voxel = 1/50 of the diagonal, FPFH
+radius 5 voxels, RANSAC distance 1.5 voxels, 100,000 iterations, confidence 0.999; Open3D's random
+seed fixed), ``o3d_fgr`` (fast global registration on the same features) and ``o3d_icp`` (point-to-
+plane ICP from the identity, correspondence distance 5 % of the diagonal).
+
+Errors: rotation error in degrees (Eq. 4.34) and translation error divided by the target's
+bounding-box diagonal (Eq. 4.35); success = rotation error < 5 degrees and translation error <
+5 % of the diagonal; time in seconds (wall clock, one thread for our KD-tree queries).
+
+Splits (fixed in code): the defaults of :mod:`spectrageo.register` (voxel = 1/45 diagonal,
+kernel radius 3 voxels, 600 samples x 15 matches, 15 verified peaks, Tukey annealing down to 2
+spacings, Tukey start at 2 voxels after the broad phase) were chosen on :data:`TUNING`: the bunny
+pairs and the fragment pair moved by motions of seed 1, registration seed 1, and generated pairs
+of the ``armadillo``. The tables report :data:`VALIDATION`: the same scan pairs moved by other
+motions (seed 0), registration seed 0, and generated pairs of five other meshes (not looked at
+while tuning). The real scan pairs are thus in both splits, with different motions and seeds;
+only the generated meshes are disjoint. (The fragment pair failed in the tuning split with 400
+samples x 10 matches and passed with 600 x 15, which is why those defaults were raised.)
+Tuning-split result of the final defaults: 27 of 28 pairs (Open3D RANSAC+FPFH+ICP: 26 of 28).
+A full validation run of the four methods takes about 4-5 minutes on two shared cores.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from ._tables import fmt_cell, have, rows_to_csv, write_md_csv
+
+TUNING = {"bunny_seed": 1, "reg_seed": 1, "generated": ("armadillo",), "gen_seed": 1}
+VALIDATION = {
+    "bunny_seed": 0,
+    "reg_seed": 0,
+    "generated": ("elephant", "camel", "cow", "dino", "bull"),
+    "gen_seed": 0,
+}
+METHODS = ("spectrageo", "o3d_ransac_fpfh_icp", "o3d_fgr", "o3d_icp")
+OVERLAP_BINS = ((0.3, 0.5), (0.5, 0.7), (0.7, 1.01))
+MIN_OVERLAP = 0.3
+ROT_TOL_DEG = 5.0
+TRANS_TOL = 0.05
+GEN_PAIRS_PER_MESH = 2
+GEN_POINTS = 20000
+COLUMNS = ("data", "pair", "overlap", "method", "rot_err_deg", "trans_err", "success",
+           "fitness", "seconds", "note")  # fmt: skip
+
+
+def _quat_matrix(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
+    x, y, z, w = qx, qy, qz, qw
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def bunny_scans(data: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """``(name, points, T_world)`` of the bunny scans in ``bun.conf`` order; ``T_world`` maps the
+    scan into the common frame (column convention; ``bun.conf``: ``P_world = P @ R(q) + t``)."""
+    from .. import io
+    from ..register._common import make_transform
+
+    folder = data / "scans" / "bunny"
+    out = []
+    for line in (folder / "bun.conf").read_text().splitlines():
+        p = line.split()
+        if len(p) == 9 and p[0] == "bmesh":
+            v = [float(x) for x in p[2:]]
+            name = p[1].removesuffix(".ply")
+            f = folder / f"{name}.ply.gz"
+            if f.is_file():
+                T = make_transform(_quat_matrix(*v[3:]).T, np.array(v[:3]))
+                out.append((name, io.read_point_cloud(f).points, T))
+    return out
+
+
+def overlap(A: np.ndarray, B: np.ndarray) -> float:
+    """Ground-truth overlap of two aligned clouds (see the module docstring)."""
+    from scipy.spatial import cKDTree
+
+    from ..register._common import bbox_diagonal, voxel_downsample
+
+    diag = max(bbox_diagonal(A), bbox_diagonal(B))
+    a, _ = voxel_downsample(A, diag / 100)
+    b, _ = voxel_downsample(B, diag / 100)
+    fa = float((cKDTree(B).query(a, distance_upper_bound=0.01 * diag)[0] < np.inf).mean())
+    fb = float((cKDTree(A).query(b, distance_upper_bound=0.01 * diag)[0] < np.inf).mean())
+    return min(fa, fb)
+
+
+def _motion(rng: np.random.Generator, diag: float) -> np.ndarray:
+    from ..register._common import make_transform, random_rotation
+
+    t = rng.normal(size=3)
+    t *= rng.uniform(0, 0.5 * diag) / max(np.linalg.norm(t), 1e-12)
+    return make_transform(random_rotation(rng), t)
+
+
+def bunny_pairs(data: Path, seed: int) -> list[dict]:
+    """Pairs ``{data, pair, source, target, T_gt, overlap}`` with overlap > 0.3; the source is
+    moved by a random motion drawn from ``seed`` (``T_gt`` maps the moved source onto the target)."""
+    from ..register._common import apply_transform
+
+    scans = bunny_scans(data)
+    rng = np.random.default_rng(seed)
+    pairs = []
+    world = [apply_transform(T, P) for _, P, T in scans]
+    for i in range(len(scans)):
+        for j in range(i + 1, len(scans)):
+            ov = overlap(world[i], world[j])
+            if ov <= MIN_OVERLAP:
+                continue
+            (ni, Pi, Ti), (nj, Pj, Tj) = scans[i], scans[j]
+            M = _motion(rng, float(np.linalg.norm(np.ptp(Pj, axis=0))))
+            T_gt = np.linalg.inv(Tj) @ Ti @ np.linalg.inv(M)
+            pairs.append({"data": "bunny", "pair": f"{ni}->{nj}", "source": apply_transform(M, Pi),
+                          "target": Pj, "T_gt": T_gt, "overlap": ov})  # fmt: skip
+    return pairs
+
+
+def fragment_pairs(data: Path, seed: int) -> list[dict]:
+    from .. import io
+    from ..register._common import apply_transform
+
+    folder = data / "scans" / "registration" / "open3d"
+    a, b = folder / "cloud_bin_0.pcd", folder / "cloud_bin_1.pcd"
+    if not (a.is_file() and b.is_file()):
+        return []
+    A, B = io.read_point_cloud(a).points, io.read_point_cloud(b).points
+    M = _motion(np.random.default_rng(seed + 1000), float(np.linalg.norm(np.ptp(B, axis=0))))
+    return [{"data": "open3d", "pair": "cloud_bin_0->cloud_bin_1", "source": apply_transform(M, A),
+             "target": B, "T_gt": np.linalg.inv(M), "overlap": overlap(A, B)}]  # fmt: skip
+
+
+def _sample_surface(V: np.ndarray, F: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    f = rng.choice(F.shape[0], size=n, p=area / area.sum())
+    u, v = rng.random(n), rng.random(n)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    return a[f] + u[:, None] * (b[f] - a[f]) + v[:, None] * (c[f] - a[f])
+
+
+def _crop(P: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    d = rng.normal(size=3)
+    d /= np.linalg.norm(d)
+    s = P @ d
+    return P[s <= np.quantile(s, rng.uniform(0.65, 0.85))]
+
+
+def generated_pairs(data: Path, meshes, seed: int) -> list[dict]:
+    """Two noisy partial samples of each mesh (see the module docstring)."""
+    from .. import io
+    from ..register._common import apply_transform, bbox_diagonal
+
+    rng = np.random.default_rng(seed + 2000)
+    pairs = []
+    for name in meshes:
+        f = data / "meshes" / f"{name}.off"
+        if not f.is_file():
+            continue
+        m = io.read_mesh(f)
+        diag = bbox_diagonal(m.vertices)
+        for k in range(GEN_PAIRS_PER_MESH):
+            A = _crop(_sample_surface(m.vertices, m.faces, GEN_POINTS, rng), rng)
+            B = _crop(_sample_surface(m.vertices, m.faces, GEN_POINTS, rng), rng)
+            A = A + rng.normal(scale=0.002 * diag, size=A.shape)
+            B = B + rng.normal(scale=0.002 * diag, size=B.shape)
+            M = _motion(rng, diag)
+            pairs.append({"data": "generated", "pair": f"{name}#{k}", "source": apply_transform(M, A),
+                          "target": B, "T_gt": np.linalg.inv(M), "overlap": overlap(A, B)})  # fmt: skip
+    return pairs
+
+
+# --------------------------------------------------------------------------- methods
+def _ours(S: np.ndarray, T: np.ndarray, seed: int) -> tuple[np.ndarray, float]:
+    import warnings
+
+    from ..register import register
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = register(S, T, rng=seed)
+    return res.transformation, res.fitness
+
+
+def _o3d_prepare(P: np.ndarray, voxel: float):
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
+    down = pc.voxel_down_sample(voxel)
+    down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
+    feat = reg.compute_fpfh_feature(
+        down, o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
+    )
+    return pc, down, feat
+
+
+def _o3d_refine(src, tgt, T0: np.ndarray, dist: float) -> tuple[np.ndarray, float]:
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    if not tgt.has_normals():
+        tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=dist, max_nn=30))
+    r = reg.registration_icp(src, tgt, dist, T0, reg.TransformationEstimationPointToPlane(),
+                             reg.ICPConvergenceCriteria(max_iteration=60))  # fmt: skip
+    return np.asarray(r.transformation), float(r.fitness)
+
+
+def _o3d_method(method: str, S: np.ndarray, T: np.ndarray, seed: int) -> tuple[np.ndarray, float]:
+    import open3d as o3d
+
+    from ..register._common import bbox_diagonal
+
+    reg = o3d.pipelines.registration
+    if hasattr(o3d.utility, "random"):
+        o3d.utility.random.seed(seed)
+    diag = max(bbox_diagonal(S), bbox_diagonal(T))
+    voxel = diag / 50
+    if method == "o3d_icp":
+        src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(S))
+        tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(T))
+        return _o3d_refine(src, tgt, np.eye(4), 0.05 * diag)
+    src, sd, sf = _o3d_prepare(S, voxel)
+    tgt, td, tf = _o3d_prepare(T, voxel)
+    if method == "o3d_fgr":
+        r = reg.registration_fgr_based_on_feature_matching(
+            sd,
+            td,
+            sf,
+            tf,
+            reg.FastGlobalRegistrationOption(maximum_correspondence_distance=0.5 * voxel),
+        )
+        return np.asarray(r.transformation), float(r.fitness)
+    dist = 1.5 * voxel
+    r = reg.registration_ransac_based_on_feature_matching(
+        sd, td, sf, tf, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+        reg.RANSACConvergenceCriteria(100000, 0.999),
+    )  # fmt: skip
+    return _o3d_refine(src, tgt, np.asarray(r.transformation), 0.4 * voxel)
+
+
+def _run(method: str, pair: dict, seed: int) -> dict:
+    from ..metrics import registration as rm
+    from ..register._common import bbox_diagonal
+
+    S, T, T_gt = pair["source"], pair["target"], pair["T_gt"]
+    t0 = time.perf_counter()
+    note = ""
+    try:
+        if method == "spectrageo":
+            Th, fit = _ours(S, T, seed)
+        else:
+            Th, fit = _o3d_method(method, S, T, seed)
+    except Exception as exc:  # noqa: BLE001 - a failing peer is a failed run, recorded as such
+        Th, fit, note = np.eye(4), float("nan"), f"error: {type(exc).__name__}"
+    sec = time.perf_counter() - t0
+    re = rm.rotation_error_deg(Th, T_gt)
+    te = rm.translation_error(Th, T_gt) / bbox_diagonal(T)
+    return {"data": pair["data"], "pair": pair["pair"], "overlap": pair["overlap"], "method": method,
+            "rot_err_deg": re, "trans_err": te, "success": bool(re < ROT_TOL_DEG and te < TRANS_TOL),
+            "fitness": fit, "seconds": sec, "note": note}  # fmt: skip
+
+
+def pairs_for(data: Path, split: dict, parts=("bunny", "open3d", "generated")) -> list[dict]:
+    out: list[dict] = []
+    if "bunny" in parts:
+        out += bunny_pairs(data, split["bunny_seed"])
+    if "open3d" in parts:
+        out += fragment_pairs(data, split["bunny_seed"])
+    if "generated" in parts:
+        out += generated_pairs(data, split["generated"], split["gen_seed"])
+    return out
+
+
+def evaluate(
+    data_dir: Any,
+    methods: list[str] | None = None,
+    out: Any = None,
+    *,
+    split: str = "validation",
+    parts: tuple[str, ...] = ("bunny", "open3d", "generated"),
+    max_pairs: int | None = None,
+) -> list[dict]:
+    """Run the registration benchmark; one row per (pair, method) with the keys of
+    :data:`COLUMNS`. ``methods`` restricts :data:`METHODS` (Open3D peers are skipped when
+    :mod:`open3d` is missing); ``split`` is ``"validation"`` (reported) or ``"tuning"``;
+    ``max_pairs`` keeps the first pairs of each part (for quick runs)."""
+    data = Path(data_dir)
+    if not data.is_dir():
+        raise InvalidInputError(f"`data_dir` must be a folder; got {data}.")
+    sel = list(methods) if methods else list(METHODS)
+    unknown = set(sel) - set(METHODS)
+    if unknown:
+        raise InvalidInputError(
+            f"unknown method(s) {', '.join(sorted(unknown))}; known: {', '.join(METHODS)}."
+        )
+    if split not in ("validation", "tuning"):
+        raise InvalidInputError(f"`split` must be 'validation' or 'tuning'; got {split!r}.")
+    if not have("open3d"):
+        sel = [m for m in sel if not m.startswith("o3d")]
+    cfg = VALIDATION if split == "validation" else TUNING
+    rows: list[dict] = []
+    for part in parts:
+        pairs = pairs_for(data, cfg, (part,))
+        if max_pairs is not None:
+            pairs = pairs[:max_pairs]
+        for pair in pairs:
+            for m in sel:
+                rows.append(_run(m, pair, cfg["reg_seed"]))
+    if out is not None:
+        write_tables(rows, out)
+    return rows
+
+
+def _bin(ov: float) -> str:
+    for lo, hi in OVERLAP_BINS:
+        if lo <= ov < hi:
+            return f"{lo:.1f}-{min(hi, 1.0):.1f}"
+    return f"<{OVERLAP_BINS[0][0]:.1f}"
+
+
+def summary(rows: list[dict]) -> list[dict]:
+    """Success rate, median errors and mean time per (data, overlap bin, method), plus 'all'."""
+    out = []
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        for key in ((r["data"], _bin(r["overlap"]), r["method"]), ("all", "all", r["method"])):
+            groups.setdefault(key, []).append(r)
+    data_order = {"bunny": 0, "open3d": 1, "generated": 2, "all": 3}
+    meth_order = {m: i for i, m in enumerate(METHODS)}
+
+    def order(key: tuple) -> tuple:
+        d, b, m = key
+        return (data_order.get(d, 9), b, meth_order.get(m, 9), m)
+
+    for (d, b, m), rr in sorted(groups.items(), key=lambda kv: order(kv[0])):
+        out.append({"data": d, "bin": b, "method": m, "n": len(rr),
+                    "success": sum(x["success"] for x in rr),
+                    "rate": float(np.mean([x["success"] for x in rr])),
+                    "med_rot_err_deg": float(np.median([x["rot_err_deg"] for x in rr])),
+                    "med_trans_err": float(np.median([x["trans_err"] for x in rr])),
+                    "mean_seconds": float(np.mean([x["seconds"] for x in rr]))})  # fmt: skip
+    return out
+
+
+def format_markdown(rows: list[dict]) -> str:
+    """Summary table (success per data set / overlap bin / method) followed by the per-pair rows."""
+    cols = ("data", "bin", "method", "n", "success", "rate", "med_rot_err_deg", "med_trans_err",
+            "mean_seconds")  # fmt: skip
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for s in summary(rows):
+        lines.append("| " + " | ".join(fmt_cell(s[c]) for c in cols) + " |")
+    lines += ["", "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    for r in rows:
+        lines.append("| " + " | ".join(fmt_cell(r.get(c)) for c in COLUMNS) + " |")
+    return "\n".join(lines)
+
+
+def format_csv(rows: list[dict]) -> str:
+    return rows_to_csv(rows, COLUMNS)
+
+
+def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
+    """Write ``<out>.md``, ``<out>.csv`` and (with matplotlib) ``<out>.png``."""
+    md, cs = write_md_csv(
+        out,
+        "## Registration (Section 6.2)\n\nProduced by `spectrageo evaluate register` (validation "
+        "split). Success = rotation error < 5 deg and translation error < 5 % of the target's "
+        "bounding-box diagonal; `trans_err` is relative to that diagonal; bins are ground-truth "
+        "overlap.\n\n" + format_markdown(rows) + "\n",
+        format_csv(rows),
+    )
+    _plot(rows, md.with_suffix(".png"))
+    return md, cs
+
+
+def _plot(rows: list[dict], png: Path) -> Path | None:
+    """Success rate against the overlap bin, one curve per method."""
+    if not rows or not have("matplotlib"):
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..io import atomic_write
+
+    bins = [f"{lo:.1f}-{min(hi, 1.0):.1f}" for lo, hi in OVERLAP_BINS]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for m in dict.fromkeys(r["method"] for r in rows):
+        ys = []
+        for b in bins:
+            rr = [r["success"] for r in rows if r["method"] == m and _bin(r["overlap"]) == b]
+            ys.append(np.mean(rr) if rr else np.nan)
+        ax.plot(bins, ys, marker="o", label=m)
+    ax.set_xlabel("ground-truth overlap")
+    ax.set_ylabel("success rate (5 deg, 5 % diag)")
+    ax.set_ylim(-0.05, 1.05)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_write(png) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+    return png
+
+
+__all__ = ["COLUMNS", "METHODS", "TUNING", "VALIDATION", "evaluate", "format_csv",
+           "format_markdown", "summary", "write_tables"]  # fmt: skip

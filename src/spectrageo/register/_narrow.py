@@ -1,0 +1,223 @@
+"""Narrow-phase registration: weighted ICP with Tukey's bi-weight (thesis Section 6.2.4,
+Eq. 6.39-6.41)."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .._errors import ConvergenceWarning
+from .._validation import check_choice, check_positive
+from ._common import (
+    WORKERS,
+    RegistrationResult,
+    apply_transform,
+    bbox_diagonal,
+    downsample_to,
+    knn_normals,
+    make_transform,
+    orthonormalize,
+    rotvec_to_matrix,
+    spacing,
+)
+
+#: Tukey constant: gamma = 4.685 sigma gives 95 % efficiency under Gaussian residuals.
+TUKEY_C = 4.685
+#: per-iteration annealing factor of the Tukey scale (coarse-to-fine down to ``gamma_min``)
+SHRINK = 0.85
+
+
+class TargetIndex:
+    """Reusable state of a target cloud: its KD-tree, unoriented normals and point spacing."""
+
+    def __init__(self, T: np.ndarray, *, normal_k: int = 10, need_normals: bool = True):
+        self.points = T
+        self.tree = cKDTree(T)
+        self.spacing = spacing(T, self.tree)
+        self.normals = knn_normals(T, normal_k, self.tree)[0] if need_normals else None
+
+
+def tukey_weights(r: np.ndarray, gamma: float) -> np.ndarray:
+    """IRLS weights of Tukey's bi-weight: ``psi'(r) / r = (1 - r^2 / gamma^2)^2`` for
+    ``|r| <= gamma``, 0 beyond (Eq. 6.41 gives the influence ``psi'(r)``; dividing by ``r`` turns
+    it into the weight of a weighted least-squares step that minimises Eq. 6.39-6.40)."""
+    u = 1.0 - (r / gamma) ** 2
+    return np.where(np.abs(r) <= gamma, u * u, 0.0)
+
+
+def _kabsch(P: np.ndarray, Q: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Weighted least-squares rigid transform taking ``P`` onto ``Q`` (Kabsch/Umeyama, no scale)."""
+    sw = w.sum()
+    cp = (w[:, None] * P).sum(0) / sw
+    cq = (w[:, None] * Q).sum(0) / sw
+    H = ((P - cp) * w[:, None]).T @ (Q - cq)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.eye(3)
+    D[2, 2] = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    R = Vt.T @ D @ U.T
+    return make_transform(R, cq - R @ cp)
+
+
+def _plane_step(P: np.ndarray, Q: np.ndarray, N: np.ndarray, w: np.ndarray, scale: float):
+    """One linearised weighted point-to-plane step: minimise
+    ``sum w_i (n_i . (R p_i + t - q_i))^2`` for a small rotation; returns the increment or None
+    when the 6x6 system is singular (e.g. a single plane)."""
+    c = (w[:, None] * P).sum(0) / w.sum()
+    Pc = (P - c) / scale
+    J = np.c_[np.cross(Pc, N), N]
+    r = np.einsum("ij,ij->i", (P - Q) / scale, N)
+    A = (J * w[:, None]).T @ J
+    b = -(J * w[:, None]).T @ r
+    ev = np.linalg.eigvalsh(A)
+    if ev[0] <= 1e-9 * max(ev[-1], 1e-300):
+        return None
+    x = np.linalg.solve(A, b)
+    R = rotvec_to_matrix(x[:3])
+    # p -> R (p - c) + c + t
+    return make_transform(R, c - R @ c + x[3:] * scale)
+
+
+def _query(index: TargetIndex, P: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest target point of every row of ``P`` within ``bound`` (``d = inf`` and index 0
+    beyond: such pairs get zero weight)."""
+    d, j = index.tree.query(P, k=1, distance_upper_bound=bound, workers=WORKERS)
+    j = np.where(np.isfinite(d), j, 0)
+    return d, j
+
+
+def _score(P: np.ndarray, index: TargetIndex, T: np.ndarray, dist: float) -> tuple[float, float]:
+    d, _ = index.tree.query(apply_transform(T, P), k=1, distance_upper_bound=dist, workers=WORKERS)
+    ok = np.isfinite(d)
+    fit = float(ok.mean())
+    rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("inf")
+    return fit, rmse
+
+
+def icp(
+    S: np.ndarray,
+    index: TargetIndex,
+    T0: np.ndarray,
+    *,
+    max_iter: int,
+    tol: float,
+    method: str,
+    gamma0: float | None,
+    gamma_min: float,
+    inlier_distance: float,
+) -> RegistrationResult:
+    """Tukey-weighted ICP on prepared data (see :func:`narrow_phase`)."""
+    t0 = time.perf_counter()
+    scale = max(bbox_diagonal(S), 1e-300)
+    T = T0.copy()
+    P = apply_transform(T, S)
+    if gamma0 is None:
+        # robust scale of the initial distances, on a strided subset (a nearest-neighbour query
+        # far from the target is slow; later queries are bounded by gamma)
+        sub = P[:: max(1, P.shape[0] // 2000)]
+        gamma = TUKEY_C * 1.4826 * float(np.median(index.tree.query(sub, k=1, workers=WORKERS)[0]))
+    else:
+        gamma = float(gamma0)
+    gamma = max(gamma, gamma_min)
+    d, j = _query(index, P, gamma)
+    converged = False
+    it = 0
+    while it < max_iter:
+        it += 1
+        w = tukey_weights(d, gamma)
+        if np.count_nonzero(w) < 6:
+            gamma *= 2.0
+            if gamma > scale:
+                break
+            d, j = _query(index, P, gamma)
+            continue
+        Q = index.points[j]
+        inc = None
+        if method == "point_to_plane":
+            inc = _plane_step(P, Q, index.normals[j], w, scale)
+        if inc is None:
+            inc = _kabsch(P, Q, w)
+        T = inc @ T
+        T[:3, :3] = orthonormalize(T[:3, :3])
+        P = apply_transform(T, S)
+        d, j = _query(index, P, gamma)
+        # robust scale of the current inliers; gamma only shrinks (annealing towards the noise)
+        inl = d[d < gamma]
+        new_gamma = gamma
+        if inl.size >= 6:
+            robust = TUKEY_C * 1.4826 * float(np.median(inl))
+            new_gamma = max(gamma_min, min(robust, SHRINK * gamma))
+        ang = np.arccos(np.clip((np.trace(inc[:3, :3]) - 1) / 2, -1.0, 1.0))
+        step = max(ang * scale, float(np.linalg.norm(inc[:3, 3])))
+        gamma_stable = new_gamma > 0.99 * gamma
+        gamma = new_gamma
+        if step < tol * scale and gamma_stable:
+            converged = True
+            break
+    fit, rmse = _score(S, index, T, inlier_distance)
+    return RegistrationResult(
+        transformation=T,
+        fitness=fit,
+        inlier_rmse=rmse,
+        n_iter=it,
+        converged=converged,
+        inlier_distance=inlier_distance,
+        info={"gamma": gamma, "time_s": time.perf_counter() - t0, "n_source": S.shape[0]},
+    )
+
+
+def check_icp_options(max_iter: Any, tol: Any, method: Any) -> None:
+    check_positive(max_iter, "max_iter", integer=True)
+    check_positive(tol, "tol")
+    check_choice(method, "method", ("point_to_plane", "point_to_point"))
+
+
+def run_narrow(
+    S: np.ndarray,
+    Tg: np.ndarray,
+    T0: np.ndarray,
+    *,
+    max_iter: int = 60,
+    tol: float = 1e-6,
+    method: str = "point_to_plane",
+    gamma: float | None = None,
+    inlier_distance: float | None = None,
+    max_points: int = 20000,
+    index: TargetIndex | None = None,
+    warn: bool = True,
+) -> RegistrationResult:
+    check_icp_options(max_iter, tol, method)
+    check_positive(max_points, "max_points", integer=True)
+    if gamma is not None:
+        check_positive(gamma, "gamma")
+    if inlier_distance is not None:
+        check_positive(inlier_distance, "inlier_distance")
+    Sd = downsample_to(S, max_points)
+    if index is None:
+        index = TargetIndex(
+            downsample_to(Tg, max(5 * max_points, 100000)),
+            need_normals=method == "point_to_plane",
+        )
+    h = max(index.spacing, spacing(Sd), 1e-12 * max(bbox_diagonal(Tg), 1.0))
+    dist = float(inlier_distance) if inlier_distance is not None else 3.0 * h
+    res = icp(
+        Sd,
+        index,
+        T0,
+        max_iter=int(max_iter),
+        tol=float(tol),
+        method=method,
+        gamma0=gamma,
+        gamma_min=2.0 * h,
+        inlier_distance=dist,
+    )
+    if warn and not res.converged:
+        warnings.warn(
+            f"narrow phase stopped at max_iter={max_iter} before meeting tol={tol:g}.",
+            ConvergenceWarning,
+            stacklevel=3,
+        )
+    return res
