@@ -4,7 +4,7 @@ hole filling (thesis Section 5.3).
 - ``spectrageo complete IN OUT --known KNOWN.npy [--method mc|li|lsm]`` (meshes; the unknown rows
   of IN may hold anything, NaN included);
 - ``spectrageo complete IN OUT --fill-holes [--method li|lsm|mc]`` (meshes with holes);
-- ``spectrageo complete IN.npz OUT.npz --known KNOWN.npy [--method motion|li|lia|mc]``
+- ``spectrageo complete IN.npz OUT.npz --known KNOWN.npy [--method motion|li|lia|mc|gmc]``
   (animations with ``vertices`` + ``faces``; point-cloud sequences with ``points`` (T, n, 3), where
   ``motion`` is Algorithm 13's WRLI).
 
@@ -23,7 +23,7 @@ import numpy as np
 from .._errors import InvalidInputError
 
 MESH_METHODS = ("mc", "li", "lsm")
-ANIM_METHODS = ("motion", "li", "lia", "mc")
+ANIM_METHODS = ("motion", "li", "lia", "mc", "gmc")
 
 
 def _status(msg: str) -> None:

@@ -37,7 +37,7 @@ FRACTIONS = (0.3, 0.5, 0.7)
 PATTERNS = ("random", "region")
 STATIC_METHODS = ("mc", "li", "lsm", "mean")
 ANIMATIONS = ("horse-gallop", "crane", "chickenCrossing")
-ANIM_METHODS = ("motion", "li", "lia", "mc", "wrli")
+ANIM_METHODS = ("motion", "li", "lia", "mc", "gmc", "wrli")
 ANIM_FRAMES = 25
 ANIM_KNOWN = 0.3
 COLUMNS = ("part", "data", "n", "pattern", "known", "method", "rms", "nmsve", "theta_deg",
@@ -198,7 +198,7 @@ def _animations(data: Path, names, methods, n_frames, frac, seed) -> list[dict]:
                          "rms": float(np.sqrt(np.mean(np.sum((X[u] - A[u]) ** 2, -1))) / diag),
                          "nmsve": float(np.mean([nmsve(X[t], A[t], F) for t in range(1, T)])),
                          "kg": kg_error(X[1:], A[1:]), "seconds": sec,
-                         "note": "offline" if meth == "mc" else "online, s/frame"})  # fmt: skip
+                         "note": "offline" if meth in ("mc", "gmc") else "online, s/frame"})  # fmt: skip
     return rows
 
 
