@@ -970,28 +970,14 @@ def info_animation(data) -> dict:
         n_blocks += 1
         frames += nf
     p = st.params
-    nvf = max(1, st.n * max(frames, 1))
-    return {
-        "format": "sga",
-        "version": _container.FORMAT_VERSION,
-        "method": st.method,
-        "n_frames": frames,
-        "n_vertices": st.n,
-        "n_faces": st.m,
-        "bytes": len(data),
-        "bpvf": 8.0 * len(data) / nvf,
-        "connectivity_bpvf": 8.0 * conn / nvf,
-        "n_blocks": n_blocks,
-        "frame_index": has_index,
-        "order_preserved": True,
-        "parameters": {
-            ("kept_coefficients" if p.method == "pca" else "step"): p.step,
-            "block": p.block,
-            "n_anchors": p.n_anchors,
-            "anchor_ratio": p.anchor_ratio,
-            "basis": "oi" if p.basis else "exact",
-        },
+    parameters = {
+        ("kept_coefficients" if p.method == "pca" else "step"): p.step,
+        "block": p.block,
+        "n_anchors": p.n_anchors,
+        "anchor_ratio": p.anchor_ratio,
+        "basis": "oi" if p.basis else "exact",
     }
+    return _info_dict(data, st, frames, conn, n_blocks, has_index, parameters)
 
 
 def _info_layered(data: bytes, st, segs) -> dict:
@@ -1008,25 +994,30 @@ def _info_layered(data: bytes, st, segs) -> dict:
             raise InvalidInputError(".sga layered frame segment is malformed.")
         layers.append(_parse_payload(c.chunks[0][1], st.n)[0])
     frames = len(layers)
+    parameters = {
+        "step": st.step,
+        "refresh": st.refresh,
+        "mean_layer": float(np.mean(layers[1:])) / st.n if frames > 1 else 1.0,
+    }
+    return _info_dict(data, st, frames, conn, frames, has_index, parameters)
+
+
+def _info_dict(data, st, frames, conn, n_blocks, has_index, parameters) -> dict:
     nvf = max(1, st.n * max(frames, 1))
     return {
         "format": "sga",
         "version": _container.FORMAT_VERSION,
-        "method": "layered",
+        "method": st.method,
         "n_frames": frames,
         "n_vertices": st.n,
         "n_faces": st.m,
         "bytes": len(data),
         "bpvf": 8.0 * len(data) / nvf,
         "connectivity_bpvf": 8.0 * conn / nvf,
-        "n_blocks": frames,
+        "n_blocks": n_blocks,
         "frame_index": has_index,
         "order_preserved": True,
-        "parameters": {
-            "step": st.step,
-            "refresh": st.refresh,
-            "mean_layer": float(np.mean(layers[1:])) / st.n if frames > 1 else 1.0,
-        },
+        "parameters": parameters,
     }
 
 
