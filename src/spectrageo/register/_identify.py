@@ -1,0 +1,549 @@
+"""Identification of known models in a cluttered single-view scan (thesis Section 6.2.3-6.2.6).
+
+:func:`identify` returns one :class:`Match` per model: whether the model is in the scene, its
+dissimilarity factor ``h`` (Eq. 6.38), the rigid transform that maps the model into the scene and
+the scene points of the segment it was matched to.
+
+Pipeline (defaults of Table 6.7 unless stated):
+
+1. **Resolution.** Scene and models are brought to one sampling step ``voxel`` (default: the
+   largest of the scene spacing and 1/40 of the median model bounding-box diagonal) by voxel
+   down-sampling; meshes are first sampled uniformly by area. Every later length is a multiple of
+   ``voxel``, so the method is invariant to the unit of the data (Section 6.2.6).
+2. **Segmentation** (Section 6.2.3): large planes (support table, walls) are removed by RANSAC
+   (not in the thesis; see :mod:`._segment`), then adaptive-epsilon DBSCAN (Eq. 6.28-6.29,
+   ``K_a = 5``) splits the rest into segments. Each segment is a candidate query object ``Q``.
+3. **Robustification** (Section 6.2.5): boundary points of each segment (mean distance to the
+   ``K_D = 10`` nearest neighbours at least twice the segment mean, Eq. 6.43-6.44) are left out of
+   the descriptors. The RPCA small-scale outlier step (Eq. 6.42) is not applied: the voxel
+   averaging of step 1 already removes the small-scale noise it targets.
+4. **Saliency and descriptors** (Eq. 6.30-6.36): spectral saliency of every point
+   (:func:`~spectrageo.saliency.pointcloud.pointcloud_saliency`, ``k = 20``), the joint
+   exponential normalisation of a model/segment pair (Eq. 6.34, ``K_s = 1000``) and the multi-scale
+   means ``a`` over ``5, 10, ..., 25`` neighbours (Eq. 6.35), ``f = [v / voxel, a]`` (Eq. 6.36).
+5. **Initial pose.** The thesis takes it from a separate global registration (Section 6.2.2).
+   Here it comes from the pose-free part of the descriptors: every point also gets the multi-scale
+   saliency ``a`` and a sign-invariant point-pair histogram (``|n_i . n_j|``, ``|n_i . d|``,
+   ``|n_j . d|`` over its ``desc_k = 48`` neighbours, averaged over the neighbourhood as in FPFH),
+   which do not depend on the pose; the 3 nearest model descriptors of every segment point give
+   putative correspondences (Eq. 6.37 without the coordinates). A vectorised RANSAC draws
+   ``n_hypotheses`` triples (the second and third correspondence within 0.6 model diagonals of
+   the first, so that a segment holding several touching objects still yields triples on one of
+   them), keeps those that preserve their pairwise distances, fits them all at once (batched
+   Kabsch) and scores them by the correspondences within ``2 voxel``; the best 64 are re-ranked
+   by the fraction of segment points that lie within ``1.5 voxel`` of the moved model with a
+   normal within ~37 degrees of the model's. The ``n_refine = 3`` best distinct poses are refined
+   by the Tukey-weighted ICP :func:`~spectrageo.register.narrow_phase` (Eq. 6.39-6.41),
+   registering the segment points within ``query_radius = 0.1`` model diagonals of the placed
+   model onto the model (each of them has a model counterpart, not the reverse; touching objects
+   are left out so they do not inflate the Tukey scale).
+6. **Correspondences and dissimilarity** (Eq. 6.37-6.38): with the model moved into the scene,
+   the salient points (normalised saliency above ``tau = 0.4``) of the model and of the segment
+   are paired by nearest augmented feature ``f`` (unique pairs, each model point used once),
+   and ``h`` is the mean feature distance of the ``K_p`` best pairs. Eq. 6.38 as printed averages
+   only the ``K_p = 200`` best pairs, which a wrong model can always produce somewhere after ICP;
+   here ``K_p`` is the larger of 200 and ``k_p_fraction`` (default 0.5) of the salient segment
+   points, so that ``h`` measures how well the model explains the segment as a whole. The
+   coordinates are in units of ``voxel`` (the thesis's UWA data are in millimetres at a ~1 mm
+   sampling, where the same holds).
+   Only the segment points within ``query_radius`` model diagonals of the moved model form the
+   query object (the thesis merges the clusters close to the registered model; here a cluster may
+   also hold touching objects, whose points are left out). Segments smaller than
+   ``min_fraction = 0.05`` of the model's points or 0.15 of its diagonal are not tried.
+7. **Decision**: for each model the segment with the smallest ``h`` is kept; ``found`` when
+   ``h < zeta = 0.4``. When two found models claim mostly the same scene points (more than half
+   of the smaller set), only the one with the smaller ``h`` stays found.
+
+The result is deterministic for a given ``rng``; memory is O(n) (k-d trees, RANSAC scored in
+chunks).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .._errors import InvalidInputError
+from ._common import WORKERS, apply_transform, knn_normals, make_transform, voxel_downsample
+from ._segment import adaptive_dbscan, remove_planes
+
+DEFAULTS: dict[str, Any] = {
+    "zeta": 0.4,  # Table 6.7
+    "k_a": 5,  # Eq. 6.29
+    "k_d": 10,  # Eq. 6.43
+    "k_s": 1000.0,  # Eq. 6.34
+    "k_p": 200,  # Eq. 6.38
+    "k_p_fraction": 0.5,
+    "tau": 0.4,  # salient-point threshold (Section 6.2.6)
+    "saliency_k": 20,  # Eq. 6.30
+    "scale_k": 5,  # Eq. 6.35 (K)
+    "n_scales": 5,
+    "voxel": None,
+    "voxel_fraction": 1.0 / 40.0,
+    "remove_planes": True,
+    "n_hypotheses": 20000,
+    "desc_k": 48,
+    "query_radius": 0.1,
+    "min_fraction": 0.05,
+    "n_refine": 3,
+    "min_segment": 30,
+}
+
+
+@dataclass(frozen=True)
+class Match:
+    """Result of :func:`identify` for one model.
+
+    Attributes
+    ----------
+    model : the model's path or dict key as given (its list index for in-memory geometry).
+    found : bool; ``dissimilarity < zeta``.
+    dissimilarity : float; ``h`` of Eq. 6.38 for the best segment (``inf`` when no segment).
+    transformation : (4, 4) float64; maps the model into the scene frame.
+    n_points : int; number of scene points in ``segment``.
+    segment : (m,) int64; indices of the scene points of the best segment (also reported when the
+        model is not found: the segment that resembled it most).
+    """
+
+    model: Any
+    found: bool
+    dissimilarity: float
+    transformation: np.ndarray = field(repr=False)
+    n_points: int
+    segment: np.ndarray = field(repr=False)
+
+
+# ----------------------------------------------------------------------------------- inputs
+
+
+@dataclass(frozen=True)
+class _VF:
+    vertices: Any
+    faces: Any
+
+
+def _geometry_points(x, name: str, rng) -> tuple[np.ndarray, float]:
+    """Points of an array, PointCloud, Mesh or file; meshes are sampled uniformly by area."""
+    from .. import io
+    from .._validation import as_points
+
+    if isinstance(x, str | Path):
+        p = Path(x)
+        if not p.is_file():
+            raise InvalidInputError(f"`{name}`: file not found: {x}")
+        x = io.read(p)
+    if isinstance(x, tuple) and len(x) == 2:  # (V, F)
+        x = _VF(*x)
+    faces = getattr(x, "faces", None)
+    if hasattr(x, "vertices") and faces is not None and len(faces):
+        from .._validation import as_faces
+        from .scenes import _sample_surface
+
+        V = as_points(x.vertices, name)
+        F = as_faces(faces, V.shape[0], f"{name} faces")
+        a = V[F]
+        area = 0.5 * np.linalg.norm(np.cross(a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]), axis=1).sum()
+        diag = float(np.linalg.norm(np.ptp(V, axis=0)))
+        if area <= 0 or diag <= 0:
+            raise InvalidInputError(f"`{name}` has zero surface area.")
+        # about (diag / (voxel / 3))^2 samples per unit of area fraction; bounded
+        count = int(np.clip(area / (diag / 150.0) ** 2, 20_000, 400_000))
+        return _sample_surface(V, F, count, np.random.default_rng(rng)), diag
+    if hasattr(x, "points") and not isinstance(x, np.ndarray):
+        x = x.points
+    elif hasattr(x, "vertices") and not isinstance(x, np.ndarray):
+        x = x.vertices
+    P = as_points(x, name)
+    return P, float(np.linalg.norm(np.ptp(P, axis=0)))
+
+
+def _key_seed(key) -> int:
+    """A stable integer of a model's key: its random streams do not depend on its position."""
+    import zlib
+
+    return zlib.crc32(repr(key).encode("utf-8"))
+
+
+def _check_options(options: dict) -> dict:
+    unknown = set(options) - set(DEFAULTS)
+    if unknown:
+        raise InvalidInputError(
+            f"unknown option(s) {', '.join(sorted(unknown))}; known: {', '.join(sorted(DEFAULTS))}."
+        )
+    o = {**DEFAULTS, **options}
+    for k in (
+        "zeta",
+        "k_s",
+        "tau",
+        "voxel_fraction",
+        "k_p_fraction",
+        "query_radius",
+        "min_fraction",
+    ):
+        v = o[k]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v) or v <= 0:
+            raise InvalidInputError(f"`{k}` must be a positive number; got {v!r}.")
+    if o["voxel"] is not None:
+        v = o["voxel"]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v) or v <= 0:
+            raise InvalidInputError(f"`voxel` must be a positive number or None; got {v!r}.")
+    for k in ("k_a", "k_d", "k_p", "saliency_k", "scale_k", "n_scales", "n_hypotheses", "desc_k",
+              "n_refine", "min_segment"):  # fmt: skip
+        v = o[k]
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+            raise InvalidInputError(f"`{k}` must be a positive integer; got {v!r}.")
+    if o["tau"] >= 1:
+        raise InvalidInputError(f"`tau` must be in (0, 1); got {o['tau']!r}.")
+    return o
+
+
+# ------------------------------------------------------------------------------ descriptors
+
+
+@dataclass
+class _Cloud:
+    P: np.ndarray  # (m, 3) down-sampled points
+    N: np.ndarray  # unoriented normals
+    s_raw: np.ndarray  # raw saliency (Eq. 6.33)
+    desc: np.ndarray  # pose-free descriptor
+    keep: np.ndarray  # non-boundary mask (Eq. 6.43)
+    tree: cKDTree
+    diag: float
+
+
+def _pair_histograms(P, N, idx, n_bins: int = 6) -> np.ndarray:
+    """Sign-invariant point-pair histograms over each point's neighbours, FPFH-style averaged."""
+    m, k = idx.shape
+    D = P[idx] - P[:, None, :]
+    L = np.linalg.norm(D, axis=2)
+    D = D / np.maximum(L, 1e-300)[:, :, None]
+    Nj = N[idx]
+    f1 = np.abs(np.einsum("mkc,mc->mk", Nj, N))
+    a = np.abs(np.einsum("mkc,mc->mk", D, N))
+    b = np.abs(np.einsum("mkc,mkc->mk", D, Nj))
+    f2, f3 = np.minimum(a, b), np.maximum(a, b)
+    valid = L > 0
+    H = np.zeros((m, 3 * n_bins))
+    rows = np.repeat(np.arange(m), k).reshape(m, k)[valid]
+    for c, f in enumerate((f1, f2, f3)):
+        bins = np.minimum((f[valid] * n_bins).astype(np.int64), n_bins - 1)
+        np.add.at(H, (rows, c * n_bins + bins), 1.0)
+    H /= np.maximum(valid.sum(axis=1), 1)[:, None]
+    # FPFH-like widening: own histogram plus the mean of the neighbours'
+    return 0.5 * (H + H[idx].mean(axis=1))
+
+
+def _prepare(P: np.ndarray, voxel: float, o: dict) -> _Cloud | None:
+    from ..saliency.pointcloud import pointcloud_saliency
+
+    Q, _ = voxel_downsample(P, voxel)
+    m = Q.shape[0]
+    if m < max(o["saliency_k"] + 2, o["scale_k"] * o["n_scales"], 30):
+        return None
+    tree = cKDTree(Q)
+    N, idx = knn_normals(Q, 10, tree)
+    s_raw = pointcloud_saliency(Q, k=o["saliency_k"], normals=N, normalize=False)
+    kk = min(o["desc_k"], m - 1)
+    _, nb = tree.query(Q, k=kk + 1, workers=WORKERS)
+    nb = nb[:, 1:]
+    hist = _pair_histograms(Q, N, nb)
+    # multi-scale raw saliency (Eq. 6.35 on s * (k + 1), which lies in [1, sqrt 3])
+    sr = s_raw * (o["saliency_k"] + 1)
+    kmax = min(o["scale_k"] * o["n_scales"], m)
+    _, nb2 = tree.query(Q, k=kmax, workers=WORKERS)
+    cs = np.cumsum(sr[nb2], axis=1)
+    sizes = np.minimum(o["scale_k"] * np.arange(1, o["n_scales"] + 1), kmax)
+    a = cs[:, sizes - 1] / sizes
+    desc = np.c_[hist, 2.0 * (a - 1.0)]
+    # boundary points (Eq. 6.43-6.44): mean distance to K_D neighbours >= 2 x its average
+    kd = min(o["k_d"], m - 1)
+    dd, _ = tree.query(Q, k=kd + 1, workers=WORKERS)
+    dpsi = dd[:, 1:].mean(axis=1)
+    keep = dpsi < 2.0 * dpsi.mean()
+    diag = float(np.linalg.norm(np.ptp(Q, axis=0)))
+    return _Cloud(Q, N, s_raw, desc, keep, tree, diag)
+
+
+# ------------------------------------------------------------------------------- pose search
+
+
+def _kabsch_batch(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid fits taking A[h] (h, p, 3) onto B[h]: rotations (h, 3, 3), translations (h, 3)."""
+    ca, cb = A.mean(axis=1), B.mean(axis=1)
+    Hm = np.einsum("hpi,hpj->hij", A - ca[:, None], B - cb[:, None])
+    U, _, Vt = np.linalg.svd(Hm)
+    d = np.sign(
+        np.linalg.det(np.einsum("hij,hjk->hik", Vt.transpose(0, 2, 1), U.transpose(0, 2, 1)))
+    )
+    d[d == 0] = 1.0
+    Dm = np.zeros((A.shape[0], 3, 3))
+    Dm[:, 0, 0] = 1
+    Dm[:, 1, 1] = 1
+    Dm[:, 2, 2] = d
+    R = np.einsum("hji,hjk,hlk->hil", Vt, Dm, U)
+    t = cb - np.einsum("hij,hj->hi", R, ca)
+    return R, t
+
+
+def _ransac_poses(
+    model: _Cloud, seg: _Cloud, voxel: float, o: dict, g
+) -> list[tuple[float, np.ndarray]]:
+    """Candidate model->segment poses from descriptor correspondences, best first."""
+    qi = np.flatnonzero(seg.keep)
+    if qi.size < 10:
+        qi = np.arange(seg.P.shape[0])
+    mi = np.flatnonzero(model.keep)
+    if mi.size < 10:
+        mi = np.arange(model.P.shape[0])
+    dtree = cKDTree(model.desc[mi])
+    kc = 3
+    _, j = dtree.query(seg.desc[qi], k=kc, workers=WORKERS)
+    cq = np.repeat(qi, kc)
+    cm = mi[j.ravel()]
+    A, B = model.P[cm], seg.P[cq]  # correspondence: model point -> segment point
+    nc = cm.size
+    nh = o["n_hypotheses"]
+    # first correspondence anywhere, the other two among the ones whose segment points are
+    # nearest to it (a segment may hold several objects: keep the triple on one of them)
+    n1 = min(nc, 500)
+    anchors = g.choice(nc, n1, replace=False)
+    balls = cKDTree(B).query_ball_point(B[anchors], 0.6 * model.diag, workers=WORKERS)
+    cnt = np.array([len(b) for b in balls])
+    off = np.r_[0, np.cumsum(cnt)[:-1]]
+    flat = np.concatenate([np.asarray(b, dtype=np.int64) for b in balls])
+    ai = g.integers(0, n1, size=nh)
+    pick = off[ai, None] + (g.random((nh, 2)) * cnt[ai, None]).astype(np.int64)
+    s = np.c_[anchors[ai], flat[pick]]
+    a, b = A[s], B[s]
+    da = np.linalg.norm(a[:, [0, 1, 2]] - a[:, [1, 2, 0]], axis=2)
+    db = np.linalg.norm(b[:, [0, 1, 2]] - b[:, [1, 2, 0]], axis=2)
+    ok = (np.abs(da - db) <= 0.1 * np.maximum(da, db) + voxel).all(axis=1)
+    ok &= db.min(axis=1) >= max(0.1 * min(model.diag, seg.diag), 2 * voxel)
+    if not ok.any():
+        return []
+    R, t = _kabsch_batch(a[ok], b[ok])
+    thr2 = (2.0 * voxel) ** 2
+    score = np.empty(R.shape[0])
+    for c in range(0, R.shape[0], 128):
+        AR = np.einsum("hij,nj->hni", R[c : c + 128], A) + t[c : c + 128, None, :]
+        score[c : c + 128] = (((AR - B) ** 2).sum(axis=2) <= thr2).sum(axis=1)
+    # re-rank the best hypotheses by the fraction of segment points the moved model explains
+    top = np.argsort(-score, kind="stable")[:64]
+    step = max(1, seg.P.shape[0] // 400)
+    Qs, Ns = seg.P[::step], seg.N[::step]
+    cover = np.empty(top.size)
+    for c, h in enumerate(top):
+        Pm = (Qs - t[h]) @ R[h]  # segment points in model coordinates
+        d, jn = model.tree.query(Pm, k=1, distance_upper_bound=1.5 * voxel, workers=WORKERS)
+        ok = np.isfinite(d)
+        # explained: close to the moved model and with a similar (unoriented) normal
+        agree = np.abs(np.einsum("ij,ij->i", Ns[ok] @ R[h], model.N[jn[ok]])) >= 0.8
+        cover[c] = agree.sum() / Qs.shape[0]
+    order = top[np.argsort(-cover, kind="stable")]
+    score = np.zeros(R.shape[0])
+    score[top] = cover
+    out: list[tuple[float, np.ndarray]] = []
+    for h in order:
+        T = make_transform(R[h], t[h])
+        # skip near-duplicates of an already kept pose
+        if any(np.linalg.norm(T[:3, 3] - U[:3, 3]) < 3 * voxel
+               and np.linalg.norm(T[:3, :3] - U[:3, :3]) < 0.3 for _, U in out):  # fmt: skip
+            continue
+        out.append((float(score[h]), T))
+        if len(out) >= o["n_refine"]:
+            break
+    return out
+
+
+def _refine(model: _Cloud, seg: _Cloud, T0: np.ndarray, o: dict) -> np.ndarray:
+    """Tukey ICP of the segment onto the model from ``inv(T0)``; returns model->scene.
+
+    Only the segment points within ``query_radius`` model diagonals of the initially placed
+    model take part: a segment that also holds touching objects would otherwise set the initial
+    Tukey scale from their (large) distances and drag the model off its object.
+    """
+    import warnings
+
+    from ._api import narrow_phase
+
+    d, _ = cKDTree(apply_transform(T0, model.P)).query(seg.P, k=1, workers=WORKERS)
+    near = d <= o["query_radius"] * model.diag
+    src = seg.P[near] if near.sum() >= 10 else seg.P
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = narrow_phase(src, model.P, init=np.linalg.inv(T0), max_iter=30, tol=1e-4)
+    return np.linalg.inv(res.transformation)
+
+
+# ---------------------------------------------------------------------------- dissimilarity
+
+
+def dissimilarity(model: _Cloud, seg: _Cloud, T: np.ndarray, voxel: float, o: dict) -> float:
+    """``h`` of Eq. 6.38 between the model moved by ``T`` and the segment (see module notes)."""
+    from ..saliency.pointcloud import normalize_saliency_pair
+
+    st, sq = normalize_saliency_pair(model.s_raw, seg.s_raw, K_s=o["k_s"])
+
+    def feats(P, s, tree):
+        kmax = min(o["scale_k"] * o["n_scales"], P.shape[0])
+        _, nb = tree.query(P, k=kmax, workers=WORKERS)
+        cs = np.cumsum(s[nb], axis=1)
+        sizes = np.minimum(o["scale_k"] * np.arange(1, o["n_scales"] + 1), kmax)
+        return cs[:, sizes - 1] / sizes  # Eq. 6.35
+
+    at = feats(model.P, st, model.tree)
+    aq = feats(seg.P, sq, seg.tree)
+    Pt = apply_transform(T, model.P)
+    # the query object: segment points near the moved model (Section 6.2.3 merges the clusters
+    # close to the registered model); others belong to neighbouring objects of the segment
+    dn, _ = cKDTree(Pt).query(seg.P, k=1, workers=WORKERS)
+    near = dn <= o["query_radius"] * model.diag
+    ft = np.c_[Pt / voxel, at]  # Eq. 6.36
+    fq = np.c_[seg.P / voxel, aq]
+    sal_t = st > o["tau"]
+    sal_q = (sq > o["tau"]) & seg.keep & near
+    if sal_q.sum() < 3 or sal_t.sum() < 3:
+        sal_q = near if near.sum() >= 3 else np.ones(seg.P.shape[0], bool)
+        sal_t = np.ones(model.P.shape[0], bool)
+    ti = np.flatnonzero(sal_t)
+    d, j = cKDTree(ft[ti]).query(fq[sal_q], k=1, workers=WORKERS)  # Eq. 6.37
+    # unique pairs: each model point keeps its closest query point
+    order = np.argsort(d, kind="stable")
+    _, first = np.unique(j[order], return_index=True)
+    du = np.sort(d[order][first])
+    # a query point that lost its model point to another counts with its own distance
+    rest = np.setdiff1d(np.arange(d.size), order[first])
+    dall = np.sort(np.r_[du, d[rest]])
+    kp = int(max(o["k_p"], o["k_p_fraction"] * d.size))
+    kp = min(kp, dall.size)
+    return float(dall[:kp].mean())
+
+
+# ------------------------------------------------------------------------------------- API
+
+
+def identify(scene, models, *, rng=0, **options) -> list[Match]:
+    """Find which ``models`` are in the single-view ``scene`` and where (Section 6.2.3-6.2.6).
+
+    Parameters
+    ----------
+    scene : (n, 3) array, PointCloud, Mesh or path of a point-cloud/mesh file.
+    models : list of arrays/PointClouds/Meshes/paths, or a dict name -> geometry. Meshes are
+        sampled uniformly by area; point clouds are used as they are (a partial scan works).
+    rng : seed or numpy Generator (RANSAC hypotheses, mesh sampling).
+    **options : overrides of :data:`DEFAULTS`: ``zeta`` (decision threshold, 0.4), ``k_a``
+        (Eq. 6.29), ``k_d`` (Eq. 6.43), ``k_s`` (Eq. 6.34), ``k_p`` and ``k_p_fraction``
+        (Eq. 6.38), ``tau`` (salient points), ``saliency_k``, ``scale_k``, ``n_scales``
+        (Eq. 6.30, 6.35), ``voxel`` or ``voxel_fraction`` (sampling step), ``remove_planes``,
+        ``desc_k``, ``n_hypotheses``, ``n_refine`` (pose search), ``query_radius``,
+        ``min_fraction``, ``min_segment`` (segments considered). Unknown names raise
+        :class:`~spectrageo.InvalidInputError`.
+
+    Returns
+    -------
+    list of :class:`Match`, one per model in the given order.
+    """
+    o = _check_options(options)
+    if isinstance(models, dict):
+        items = list(models.items())
+    elif isinstance(models, list | tuple):
+        items = [(m if isinstance(m, str | Path) else i, m) for i, m in enumerate(models)]
+    else:
+        raise InvalidInputError(
+            f"`models` must be a list or a dict of geometries; got {type(models).__name__}."
+        )
+    if not items:
+        raise InvalidInputError("`models` is empty; give at least one model.")
+    seed = np.random.default_rng(rng).integers(2**63 - 1)
+    S, _ = _geometry_points(scene, "scene", seed)
+    if S.shape[0] < 50:
+        raise InvalidInputError(f"`scene` must have at least 50 points; got {S.shape[0]}.")
+    mpts, diag_list = [], []
+    for i, (key, m) in enumerate(items):
+        P, dg = _geometry_points(m, f"models[{key!r}]" if isinstance(models, dict) else f"models[{i}]",
+                                [int(seed), _key_seed(key)])  # fmt: skip
+        if P.shape[0] < 30:
+            raise InvalidInputError(
+                f"`models[{i}]` must have at least 30 points; got {P.shape[0]}."
+            )
+        mpts.append(P)
+        diag_list.append(dg)
+    # the input geometry's extent (not the samples'), so the sampling step does not vary
+    diags = np.array(diag_list)
+    if not (diags > 0).all():
+        raise InvalidInputError("every model must have a non-zero extent.")
+    st = cKDTree(S)
+    sub = np.arange(0, S.shape[0], max(1, S.shape[0] // 4000))
+    dsc, _ = st.query(S[sub], k=2, workers=WORKERS)
+    spacing = float(np.median(dsc[:, 1]))
+    voxel = o["voxel"] or max(spacing, float(np.median(diags)) * o["voxel_fraction"])
+    # --- segmentation on the down-sampled scene
+    Sd, vlab = voxel_downsample(S, voxel)
+    keep = np.ones(Sd.shape[0], dtype=bool)
+    if o["remove_planes"] and Sd.shape[0] >= 100:
+        keep, _ = remove_planes(Sd, threshold=1.0 * voxel, rng=[int(seed), 0])
+    labels_d = np.full(Sd.shape[0], -1, dtype=np.int64)
+    ki = np.flatnonzero(keep)
+    if ki.size > o["k_a"] + 1:
+        labels_d[ki] = adaptive_dbscan(Sd[ki], k_a=o["k_a"], min_cluster_size=o["min_segment"])
+    labels = labels_d[vlab]
+    n_seg = int(labels_d.max()) + 1
+    segs: list[tuple[np.ndarray, _Cloud]] = []
+    for c in range(n_seg):
+        idx = np.flatnonzero(labels == c)
+        cl = _prepare(S[idx], voxel, o)
+        if cl is not None:
+            segs.append((idx, cl))
+    # --- every model against every segment
+    cands = []
+    for mi_, P in enumerate(mpts):
+        mc = _prepare(P, voxel, o)
+        best = (np.inf, np.eye(4), np.zeros(0, dtype=np.int64))
+        if mc is not None:
+            for c, (idx, sc) in enumerate(segs):
+                # one stream per (model, segment): a model's answer does not depend on the others
+                g = np.random.default_rng([int(seed), 1, _key_seed(items[mi_][0]), c])
+                # too small to decide (a few dozen points fit anywhere on any model)
+                if sc.diag < 0.15 * mc.diag or sc.P.shape[0] < o["min_fraction"] * mc.P.shape[0]:
+                    continue
+                for _score, T0 in _ransac_poses(mc, sc, voxel, o, g):
+                    T = _refine(mc, sc, T0, o)
+                    h = dissimilarity(mc, sc, T, voxel, o)
+                    if h < best[0]:
+                        best = (h, T, idx)
+                    if h < 0.75 * o["zeta"]:  # a clear match: no need for the other poses
+                        break
+        cands.append((mi_, *best, mc))
+    # --- decisions, conflicts resolved by h
+    found = [np.isfinite(c[1]) and c[1] < o["zeta"] for c in cands]
+    explained = []
+    for _mi, h, T, idx, mc in cands:
+        if not np.isfinite(h) or mc is None:
+            explained.append(np.zeros(0, dtype=np.int64))
+            continue
+        d, _ = cKDTree(apply_transform(T, mc.P)).query(S[idx], k=1, workers=WORKERS)
+        explained.append(idx[d <= 2.0 * voxel])
+    order = sorted(range(len(cands)), key=lambda i: cands[i][1])
+    taken: list[int] = []
+    for i in order:
+        if not found[i]:
+            continue
+        for j in taken:
+            inter = np.intersect1d(explained[i], explained[j]).size
+            if inter > 0.5 * max(1, min(explained[i].size, explained[j].size)):
+                found[i] = False
+                break
+        if found[i]:
+            taken.append(i)
+    out = []
+    for (key, _), (_, h, T, idx, _), f in zip(items, cands, found):
+        out.append(Match(model=key, found=bool(f), dissimilarity=float(h), transformation=T,
+                         n_points=int(idx.size), segment=idx.astype(np.int64)))  # fmt: skip
+    return out
+
+
+__all__ = ["DEFAULTS", "Match", "dissimilarity", "identify"]
