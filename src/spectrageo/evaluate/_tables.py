@@ -85,9 +85,8 @@ def fmt_cell(v) -> str:
     return str(v)
 
 
-def plot_rate_curves(rows: list[dict], png, *, x: str, y: str, xlabel: str, ylabel: str):
-    """Log-log ``y`` vs ``x`` per model, one curve per method, written atomically to ``png``;
-    returns the path, or None without matplotlib or rows."""
+def pyplot():
+    """``matplotlib.pyplot`` on the non-interactive Agg backend, or None without matplotlib."""
     try:
         import matplotlib
 
@@ -95,7 +94,32 @@ def plot_rate_curves(rows: list[dict], png, *, x: str, y: str, xlabel: str, ylab
         import matplotlib.pyplot as plt
     except Exception:  # noqa: BLE001 - plotting is optional
         return None
+    return plt
+
+
+def save_png(fig, png) -> Path:
+    """Write ``fig`` atomically to ``png`` (110 dpi) and close it; returns the path."""
     from ..io import atomic_write
+
+    plt = pyplot()
+    with atomic_write(png) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+    return Path(png)
+
+
+def write_section(out, heading: str, intro: str, body: str, csv_text: str) -> tuple[Path, Path]:
+    """``<out>.md`` (a BENCHMARKS.md section: ``## heading``, ``intro``, ``body``) and
+    ``<out>.csv``, atomically (:func:`write_md_csv`)."""
+    return write_md_csv(out, f"## {heading}\n\n{intro}\n\n{body}\n", csv_text)
+
+
+def plot_rate_curves(rows: list[dict], png, *, x: str, y: str, xlabel: str, ylabel: str):
+    """Log-log ``y`` vs ``x`` per model, one curve per method, written atomically to ``png``;
+    returns the path, or None without matplotlib or rows."""
+    plt = pyplot()
+    if plt is None:
+        return None
 
     models = list(dict.fromkeys(r["model"] for r in rows))
     if not models:
@@ -115,7 +139,4 @@ def plot_rate_curves(rows: list[dict], png, *, x: str, y: str, xlabel: str, ylab
     for ax in axes.ravel()[len(models) :]:
         ax.axis("off")
     fig.tight_layout()
-    with atomic_write(png) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    return Path(png)
+    return save_png(fig, png)

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._tables import rows_to_csv, write_md_csv
+from ._tables import pyplot, rows_to_csv, save_png, write_section
 
 TUNING = {"meshes": ("fandisk",), "seed": 1}
 VALIDATION = {"meshes": ("fandisk", "elephant", "joint", "armadillo"), "seed": 0}
@@ -288,10 +288,12 @@ def format_csv(rows: list[dict]) -> str:
 
 def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
     """Write ``<out>.md``, ``<out>.csv`` and (with matplotlib) ``<out>.png`` heatmaps."""
-    md, cs = write_md_csv(
+    md, cs = write_section(
         out,
-        "## Completion (Section 5.3)\n\nProduced by `spectrageo evaluate complete`; rms = RMS "
-        "error of the unknown vertices / bounding-box diagonal.\n\n" + format_markdown(rows) + "\n",
+        "Completion (Section 5.3)",
+        "Produced by `spectrageo evaluate complete`; rms = RMS error of the unknown vertices / "
+        "bounding-box diagonal.",
+        format_markdown(rows),
         format_csv(rows),
     )
     _plot(rows, md.with_suffix(".png"))
@@ -300,15 +302,9 @@ def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
 
 def _plot(rows: list[dict], png: Path) -> Path | None:
     """Heatmap of log10(rms): rows = methods, columns = (data, pattern, known fraction)."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = pyplot()
+    if plt is None:
         return None
-    from ..io import atomic_write
-
     rr = [r for r in rows if r.get("rms") is not None and np.isfinite(r["rms"])]
     if not rr:
         return None
@@ -325,10 +321,7 @@ def _plot(rows: list[dict], png: Path) -> Path | None:
     )
     fig.colorbar(im, ax=ax, label="log10 rms / diag")
     fig.tight_layout()
-    with atomic_write(png) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    return png
+    return save_png(fig, png)
 
 
 __all__ = ["ANIMATIONS", "COLUMNS", "FRACTIONS", "TUNING", "VALIDATION", "evaluate",

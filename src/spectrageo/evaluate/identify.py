@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._tables import fmt_cell, have, rows_to_csv, write_md_csv
+from ._tables import fmt_cell, have, pyplot, rows_to_csv, save_png, write_section
 
 LIBRARY = {
     "bunny": "meshes/stanford-bunny.obj",
@@ -342,10 +342,11 @@ def format_csv(rows: list[dict]) -> str:
 
 def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
     """``<out>.md``, ``<out>.csv`` and (with matplotlib) ``<out>.png`` (recognition vs occlusion)."""
-    md, cs = write_md_csv(
+    md, cs = write_section(
         out,
-        "## Identification in cluttered scans (Section 6.2)\n\nProduced by `spectrageo evaluate "
-        "identify`.\n\n" + format_markdown(rows) + "\n",
+        "Identification in cluttered scans (Section 6.2)",
+        "Produced by `spectrageo evaluate identify`.",
+        format_markdown(rows),
         format_csv(rows),
     )
     _plot(rows, md.with_suffix(".png"))
@@ -355,12 +356,7 @@ def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
 def _plot(rows: list[dict], png: Path) -> Path | None:
     if not have("matplotlib"):
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..io import atomic_write
+    plt = pyplot()
 
     sc = [r for r in rows if r.get("part") == "scene"]
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -381,10 +377,7 @@ def _plot(rows: list[dict], png: Path) -> Path | None:
     ax.legend()
     ax.set_title("Recognition rate vs occlusion (Fig. 6.40 form)")
     fig.tight_layout()
-    with atomic_write(png) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    return png
+    return save_png(fig, png)
 
 
 __all__ = ["COLUMNS", "LIBRARY", "TUNING", "VALIDATION", "evaluate", "format_csv",

@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._tables import fmt_cell, have, rows_to_csv, write_md_csv
+from ._tables import fmt_cell, have, pyplot, rows_to_csv, save_png, write_section
 
 TUNING = {"bunny_seed": 1, "reg_seed": 1, "generated": ("armadillo",), "gen_seed": 1}
 VALIDATION = {
@@ -394,12 +394,13 @@ def format_csv(rows: list[dict]) -> str:
 
 def write_tables(rows: list[dict], out) -> tuple[Path, Path]:
     """Write ``<out>.md``, ``<out>.csv`` and (with matplotlib) ``<out>.png``."""
-    md, cs = write_md_csv(
+    md, cs = write_section(
         out,
-        "## Registration (Section 6.2)\n\nProduced by `spectrageo evaluate register` (validation "
-        "split). Success = rotation error < 5 deg and translation error < 5 % of the target's "
-        "bounding-box diagonal; `trans_err` is relative to that diagonal; bins are ground-truth "
-        "overlap.\n\n" + format_markdown(rows) + "\n",
+        "Registration (Section 6.2)",
+        "Produced by `spectrageo evaluate register` (validation split). Success = rotation error "
+        "< 5 deg and translation error < 5 % of the target's bounding-box diagonal; `trans_err` "
+        "is relative to that diagonal; bins are ground-truth overlap.",
+        format_markdown(rows),
         format_csv(rows),
     )
     _plot(rows, md.with_suffix(".png"))
@@ -410,12 +411,7 @@ def _plot(rows: list[dict], png: Path) -> Path | None:
     """Success rate against the overlap bin, one curve per method."""
     if not rows or not have("matplotlib"):
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..io import atomic_write
+    plt = pyplot()
 
     bins = [f"{lo:.1f}-{min(hi, 1.0):.1f}" for lo, hi in OVERLAP_BINS]
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -431,10 +427,7 @@ def _plot(rows: list[dict], png: Path) -> Path | None:
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    with atomic_write(png) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    return png
+    return save_png(fig, png)
 
 
 __all__ = ["COLUMNS", "METHODS", "TUNING", "VALIDATION", "evaluate", "format_csv",
