@@ -301,7 +301,18 @@ def cmd_denoise(args) -> int:
         opts["preset"] = args.preset
     if args.pre:
         opts["pre"] = args.pre
+    learned = ("bm3d-cnn", "dae")  # spectrageo.learn (issue 20)
+    if args.weights is not None and args.method not in learned:
+        raise _err(
+            f"--weights applies to the learned methods {', '.join(learned)}; got {args.method!r}."
+        )
+    if args.weights is not None:
+        opts["weights"] = args.weights
+    if args.train_frames is not None and args.method != "dae":
+        raise _err(f"--train-frames applies to --method dae only; got {args.method!r}.")
     t0 = time.perf_counter()
+    if isinstance(obj, Mesh) and args.train_frames is not None:
+        raise _err("--train-frames applies to animations (.npz or frame folders), not to a mesh.")
     if isinstance(obj, Mesh):
         with activity(f"denoise {args.method} ({obj.n_vertices} vertices)"):
             Vd = denoise.denoise(
@@ -310,7 +321,9 @@ def cmd_denoise(args) -> int:
         out = obj.with_vertices(Vd)
     elif isinstance(obj, MeshAnimation):
         dyn = getattr(denoise, "dynamic_methods", lambda: [])()
-        if args.method in dyn:
+        if args.method == "dae" and args.train_frames is not None:
+            opts["train_frames"] = args.train_frames
+        if args.method in dyn or args.method == "dae":
             with activity(f"denoise {args.method} ({obj.n_frames} frames)"):
                 frames = denoise.denoise_animation(
                     obj.frames, obj.faces, method=args.method, **opts
@@ -435,6 +448,8 @@ EVALUATIONS = (
     "compress",
     "complete",
     "compress-animation",
+    "register",
+    "identify",
 )
 
 
@@ -709,6 +724,19 @@ def register_all(sub) -> None:
         help="process vertices as stored: no welding of STL/soup corners or seam copies "
         "(by default seams are processed welded and written back in the input's order)",
     )
+    p.add_argument(
+        "--weights",
+        default=None,
+        metavar="W.npz",
+        help="weights of --method bm3d-cnn or dae (from `spectrageo train`; default: shipped)",
+    )
+    p.add_argument(
+        "--train-frames",
+        type=int,
+        default=None,
+        metavar="N",
+        help="--method dae on an animation: train the autoencoders on its first N frames",
+    )
     p.set_defaults(func=cmd_denoise)
 
     p = sub.add_parser(
@@ -794,4 +822,13 @@ def register_all(sub) -> None:
 
 # Further command groups live in their own modules, each exposing ``register(sub)``:
 # saliency/features/curves/simplify/inspect, the viewer.
-_COMMAND_MODULES = ("saliency_cmds", "view_cmd", "compress_cmds", "complete_cmds", "batch_cmds")
+_COMMAND_MODULES = (
+    "saliency_cmds",
+    "view_cmd",
+    "compress_cmds",
+    "complete_cmds",
+    "batch_cmds",
+    "register_cmds",
+    "identify_cmds",
+    "learn_cmds",
+)

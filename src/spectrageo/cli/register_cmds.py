@@ -148,7 +148,11 @@ def register(sub) -> None:
     )
     p.add_argument("source", help="mesh or point cloud to move")
     p.add_argument("target", help="mesh or point cloud that stays")
-    p.add_argument("--out", required=True, help="T.json: transformation, fitness, inlier_rmse, ...")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="T.json: transformation, fitness, inlier_rmse, converged, n_iter, time_s",
+    )
     p.add_argument(
         "--init",
         default=None,

@@ -29,6 +29,7 @@ _PLUGINS = (
     "spectrageo.denoise.bilateral",
     "spectrageo.denoise.gnf",
     "spectrageo.denoise.tsgsp",
+    "spectrageo.learn._denoisers",
 )
 _loaded = False
 #: methods whose displacements :func:`denoise` bounds with the trust region (``tsgsp`` bounds its

@@ -526,11 +526,16 @@ def denoise_animation(frames, F=None, *, method: str = "gft-rpca", **options) ->
     """Denoise a mesh animation; returns the denoised frames (T, n, 3) in the input vertex order.
 
     ``method``: ``"gft-rpca"`` (:func:`gft_rpca`, Algorithm 3), ``"normals-rpca"``
-    (:func:`normals_rpca`), or any static method of :func:`spectrageo.denoise.available`, which is
+    (:func:`normals_rpca`), ``"dae"`` (:func:`spectrageo.learn.dae_animation`, Section 5.1.3,
+    option ``train_frames``), or any static method of :func:`spectrageo.denoise.available`, which is
     then run frame by frame (:func:`denoise_frames`). ``options`` go to that function.
     """
     if not isinstance(method, str):
         raise InvalidInputError(f"`method` must be a string; got {type(method).__name__}.")
+    if method == "dae":  # content-wise DAEs, trained on the first frames (Section 5.1.3)
+        from ..learn.dae import dae_animation
+
+        return dae_animation(frames, F, **options)
     funcs = {"gft-rpca": gft_rpca, "normals-rpca": normals_rpca}
     if method in funcs:
         func = funcs[method]

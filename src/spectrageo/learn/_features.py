@@ -1,0 +1,246 @@
+"""Input representations of the learned denoisers, in numpy only (shared by training and inference).
+
+* :func:`guided_pixels` -- guided pixels of Eq. (5.38)-(5.39): for every face the "ideal-selected
+  row" among the candidate rows (the kNN rows of the centroids whose row contains the face) with
+  the smallest ``s_ij h_ij`` (eigenvalue gap of the row's covariance times the largest colour
+  difference), averaged and normalised. This is the guided normal of Section 4.2.1 with the
+  geometric kNN row as patch and unweighted averaging, so the repository's
+  :func:`spectrageo.denoise._normals.guided_normals` (``measure="thesis"``) computes it.
+* :func:`rotations_to_axis` -- rotations that map the "normal-of-interest" to ``[1 0 0]``
+  (Fig. 5.41 / 5.43), the coherence step of both Section 5.1.3 and 5.1.4.
+* :func:`normal_images` -- the images of Fig. 5.40: row ``r`` is centred at the ``r``-th nearest
+  centroid of face ``i`` (row 0: the face itself) and holds that centroid's ``k`` nearest centroids,
+  nearest in the centre column, then alternately right / left by increasing distance.
+* :func:`row_eigenvalues` and :func:`assign_classes` -- the flat / edge / corner classification of
+  Section 5.1.4 (kappa-means, kappa = 3, on the eigenvalues of the first row's covariance).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from ..geometry import face_centroids, face_normals
+
+#: default image width ``k`` (an odd number, Fig. 5.40); see :mod:`spectrageo.learn.bm3d_cnn`
+IMAGE_COLS = 9
+
+
+def centroid_knn(C: np.ndarray, k: int) -> np.ndarray:
+    """Indices (m, k) of the ``k`` nearest centroids of every centroid, itself first.
+
+    Ties are broken by index (stable), so the result is deterministic. Meshes with fewer than
+    ``k`` faces repeat their farthest neighbour.
+    """
+    m = C.shape[0]
+    kk = min(k, m)
+    _, idx = cKDTree(C).query(C, k=kk)
+    idx = np.asarray(idx, dtype=np.int64).reshape(m, kk)
+    # the query point itself may not come first when centroids coincide: force it
+    self_pos = np.argmax(idx == np.arange(m)[:, None], axis=1)
+    has_self = (idx == np.arange(m)[:, None]).any(axis=1)
+    swap = has_self & (self_pos > 0)
+    rows = np.flatnonzero(swap)
+    idx[rows, self_pos[rows]] = idx[rows, 0]
+    idx[:, 0] = np.arange(m)
+    if kk < k:
+        idx = np.concatenate([idx, np.repeat(idx[:, -1:], k - kk, axis=1)], axis=1)
+    return idx
+
+
+def column_order(k: int) -> np.ndarray:
+    """Image column of the ``j``-th nearest neighbour (Fig. 5.40): centre, right, left, right, ..."""
+    c = k // 2
+    j = np.arange(k)
+    return np.where(j % 2 == 1, c + (j + 1) // 2, c - j // 2).astype(np.int64)
+
+
+def guided_pixels(N: np.ndarray, knn_idx: np.ndarray) -> np.ndarray:
+    """Guided pixels ``g_i`` of Eq. (5.38)-(5.39), shape (m, 3).
+
+    The candidate rows of face ``i`` are the first rows (kNN rows) of every face whose row contains
+    ``i``; the ideal row minimises ``s_ij h_ij`` with ``s_ij = |lambda_1 - lambda_2|`` (the two
+    smallest eigenvalues of ``C_ij = I^T I``) and ``h_ij`` the largest colour difference between
+    pixel ``i`` and the row (Eq. 5.38); ``g_i`` is its normalised mean pixel (Eq. 5.39).
+    """
+    from ..denoise._normals import PatchSet, guided_normals
+
+    m, k = knn_idx.shape
+    P = sp.csr_matrix((np.ones(m * k), knn_idx.ravel(), np.arange(0, m * k + 1, k)), shape=(m, m))
+    ps = PatchSet.from_matrix(P)
+    g = guided_normals(N, np.ones(m), ps, measure="thesis")
+    bad = ~np.isfinite(g).all(axis=1) | (np.linalg.norm(g, axis=1) < 0.5)
+    g[bad] = N[bad]
+    return g
+
+
+def rotations_to_axis(G: np.ndarray) -> np.ndarray:
+    """Rotations ``R_i`` (m, 3, 3) with ``R_i g_i = [1, 0, 0]`` (Fig. 5.41, 5.43).
+
+    The smallest rotation (Rodrigues about ``g_i x e_x``); a normal opposite to ``e_x`` is turned
+    by 180 degrees about ``e_z``; a zero normal gets the identity.
+    """
+    G = np.asarray(G, dtype=np.float64)
+    m = G.shape[0]
+    nrm = np.linalg.norm(G, axis=1)
+    a = np.divide(G, nrm[:, None], out=np.zeros_like(G), where=nrm[:, None] > 0)
+    a[nrm == 0] = (1.0, 0.0, 0.0)
+    c = a[:, 0]  # a . e_x
+    v = np.stack([np.zeros(m), a[:, 2], -a[:, 1]], axis=1)  # a x e_x
+    K = np.zeros((m, 3, 3))
+    K[:, 0, 1], K[:, 0, 2] = -v[:, 2], v[:, 1]
+    K[:, 1, 0], K[:, 1, 2] = v[:, 2], -v[:, 0]
+    K[:, 2, 0], K[:, 2, 1] = -v[:, 1], v[:, 0]
+    opp = c < -1.0 + 1e-9
+    denom = np.where(opp, 1.0, 1.0 + c)
+    R = np.eye(3)[None] + K + (K @ K) / denom[:, None, None]
+    R[opp] = np.diag([-1.0, -1.0, 1.0])
+    return R
+
+
+def normal_images(
+    G: np.ndarray, knn_idx: np.ndarray, R: np.ndarray, *, rows: int | None = None, faces=None
+) -> np.ndarray:
+    """Images of Fig. 5.40 built from the pixels ``G`` and rotated by ``R`` (Fig. 5.43).
+
+    Parameters
+    ----------
+    G : (m, 3) pixels (guided normals)
+    knn_idx : (m, k) from :func:`centroid_knn` (``k`` odd: the image width)
+    R : (m, 3, 3) rotations of :func:`rotations_to_axis` (one per image centre)
+    rows : int, optional
+        Number of image rows to build (default ``k``, the square image of the thesis). Rows
+        beyond a network's receptive field do not change its output and need not be built.
+    faces : (b,) int, optional
+        Build only the images of these faces (default all).
+
+    Returns
+    -------
+    (b, 3, rows, k) float32, channels first: ``img[i, :, r, column_order(k)[j]] = R_i G[nbr_j]``
+    with ``nbr`` the kNN row of the ``r``-th nearest centroid of face ``i``.
+    """
+    m, k = knn_idx.shape
+    rows = k if rows is None else int(rows)
+    faces = np.arange(m) if faces is None else np.asarray(faces, dtype=np.int64)
+    order = column_order(k)
+    lay = np.empty_like(knn_idx)
+    lay[:, order] = knn_idx  # laid-out rows: lay[j, col] = face shown in column col
+    centres = knn_idx[faces, :rows]  # (b, rows)
+    ids = lay[centres]  # (b, rows, k)
+    px = G[ids]  # (b, rows, k, 3)
+    out = np.einsum("bij,brkj->birk", R[faces], px, optimize=True)
+    return out.astype(np.float32)
+
+
+def row_eigenvalues(first_row: np.ndarray) -> np.ndarray:
+    """Ascending eigenvalues (b, 3) of ``C = I^T I / k`` for first rows ``(b, 3, k)`` (Sec. 5.1.4)."""
+    X = np.asarray(first_row, dtype=np.float64)
+    C = np.einsum("bik,bjk->bij", X, X) / X.shape[-1]
+    return np.linalg.eigvalsh(C)
+
+
+def kmeans(X: np.ndarray, n_clusters: int, *, rng=0, n_iter: int = 50) -> np.ndarray:
+    """Lloyd's kappa-means with k-means++ seeding; returns the centres (n_clusters, d), sorted by
+    their first coordinate's descending value then second (a deterministic order for a seed)."""
+    gen = np.random.default_rng(rng)
+    X = np.asarray(X, dtype=np.float64)
+    n = X.shape[0]
+    n_clusters = min(n_clusters, n)
+    centres = [X[gen.integers(n)]]
+    d2 = np.sum((X - centres[0]) ** 2, axis=1)
+    for _ in range(1, n_clusters):
+        p = d2 / d2.sum() if d2.sum() > 0 else np.full(n, 1.0 / n)
+        centres.append(X[gen.choice(n, p=p)])
+        d2 = np.minimum(d2, np.sum((X - centres[-1]) ** 2, axis=1))
+    Cc = np.array(centres)
+    for _ in range(n_iter):
+        lab = assign_classes(X, Cc)
+        new = np.array(
+            [X[lab == j].mean(axis=0) if (lab == j).any() else Cc[j] for j in range(len(Cc))]
+        )
+        if np.allclose(new, Cc):
+            break
+        Cc = new
+    order = np.lexsort(tuple(-Cc[:, j] for j in reversed(range(Cc.shape[1]))))
+    return Cc[order]
+
+
+def assign_classes(X: np.ndarray, centres: np.ndarray, *, chunk: int = 65536) -> np.ndarray:
+    """Index of the nearest centre for every row of ``X`` (Algorithm 4, line 16)."""
+    X = np.asarray(X, dtype=np.float64)
+    centres = np.asarray(centres, dtype=np.float64)
+    out = np.empty(X.shape[0], dtype=np.int64)
+    cc = np.sum(centres**2, axis=1)
+    for s in range(0, X.shape[0], chunk):
+        x = X[s : s + chunk]
+        d = cc[None, :] - 2.0 * x @ centres.T
+        out[s : s + chunk] = np.argmin(d, axis=1)
+    return out
+
+
+def filtered_pixels(N, G, knn_idx, C, A, *, sigma_r: float = 0.35) -> np.ndarray:
+    """The "filtered image based on guided pixels" of Algorithm 5, line 4: one joint bilateral
+    pass over the kNN row of every face, ``n_i <- normalize(sum_j A_j K_s(||c_i - c_j||)
+    K_r(||g_i - g_j||) n_j)`` with Gaussian kernels, ``sigma_s`` the mean distance to the
+    nearest centroid and ``sigma_r = 0.35`` (the guided filtering of Section 4.2, Zhang et al.
+    2015)."""
+    from ..denoise._normals import joint_bilateral_normals, spatial_weights
+
+    m, k = knn_idx.shape
+    P = sp.csr_matrix((np.ones(m * k), knn_idx.ravel(), np.arange(0, m * k + 1, k)), shape=(m, m))
+    P.sum_duplicates()
+    d1 = np.linalg.norm(C[knn_idx[:, min(1, k - 1)]] - C, axis=1)
+    sigma_s = float(np.mean(d1)) if np.mean(d1) > 0 else 1.0
+    W = spatial_weights(C, A, P, sigma_s)
+    return joint_bilateral_normals(N, G, W, sigma_r)
+
+
+def build_images(V, F, *, k: int = IMAGE_COLS, rows: int = 5, channels: int = 9, faces=None):
+    """Network input of a mesh: images (b, channels, rows, k) float32 and rotations (m, 3, 3).
+
+    ``channels = 9``: filtered pixels (:func:`filtered_pixels`), guided pixels, noisy normals,
+    all rotated so that the face's filtered pixel is ``[1 0 0]``. ``channels = 6``: guided pixels
+    and noisy normals, rotated so that the guided pixel is ``[1 0 0]``. ``channels = 3``: guided
+    pixels only (the thesis' images).
+    """
+    from ..geometry import face_areas
+
+    N = face_normals(V, F)
+    C = face_centroids(V, F)
+    idx = centroid_knn(C, k)
+    G = guided_pixels(N, idx)
+    if channels == 9:
+        Fp = filtered_pixels(N, G, idx, C, face_areas(V, F))
+        R = rotations_to_axis(Fp)
+        parts = [Fp, G, N]
+    else:
+        R = rotations_to_axis(G)
+        parts = [G, N][: channels // 3]
+    img = np.concatenate([normal_images(P, idx, R, rows=rows, faces=faces) for P in parts], axis=1)
+    return img, R
+
+
+def mesh_inputs(V, F, k: int = IMAGE_COLS):
+    """Face normals, kNN rows, guided pixels and rotations of a mesh (the common first steps of
+    Algorithms 4 and 5)."""
+    N = face_normals(V, F)
+    C = face_centroids(V, F)
+    idx = centroid_knn(C, k)
+    G = guided_pixels(N, idx)
+    R = rotations_to_axis(G)
+    return N, idx, G, R
+
+
+__all__ = [
+    "IMAGE_COLS",
+    "assign_classes",
+    "centroid_knn",
+    "column_order",
+    "guided_pixels",
+    "kmeans",
+    "mesh_inputs",
+    "normal_images",
+    "rotations_to_axis",
+    "row_eigenvalues",
+]

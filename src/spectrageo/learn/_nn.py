@@ -1,0 +1,220 @@
+"""Numpy inference of the learned models (no torch needed), and a small numpy trainer for the
+denoising autoencoders that are trained at denoise time (animations, Section 5.1.3).
+
+BM3D-CNN shrinkage network (Section 5.1.4, Eq. 5.40-5.41), per feature class::
+
+    h = W1 * x + b1                              (Eq. 5.40, l = 1: the "wavelet transform")
+    a_c = sum_r w_{c r} exp(-(h_c - mu_r)^2 / (2 s^2))   (Eq. 5.41: RBF shrinkage per channel)
+    y = W2 * a + b2                              (Eq. 5.40, l = 3: the "inverse transform")
+    p_bar = x[:, 0, k//2] + y[:, 0, k//2]        (denoised centre pixel of the first row)
+
+``*`` is a 2-D cross-correlation with zero padding ``ks // 2`` ("same"), as
+``torch.nn.functional.conv2d``. Only the centre pixel of the first row is used (Section 5.1.4,
+"3D Mesh Reconstruction"), so only the ``(ks//2 + 1) x ks`` positions of ``h`` it depends on are
+evaluated here, as one im2col matrix product per batch.
+
+Denoising autoencoder (Section 5.1.3): ``y = W2 tanh(W1 x + b1) + b2`` (or linear, the thesis'
+``sigma = sigma'`` linear choice), trained to reproduce the clean row from the noisy one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+_ACTS = ("tanh", "linear")
+
+
+# --------------------------------------------------------------------------- BM3D CNN
+def rbf(h: np.ndarray, w: np.ndarray, mu: np.ndarray, s: float) -> np.ndarray:
+    """``sum_r w[c, r] exp(-(h_c - mu_r)^2 / (2 s^2))`` on the last axis ``c`` of ``h``."""
+    out = np.zeros(np.broadcast_shapes(h.shape, w.shape[:1]), dtype=np.result_type(h, w))
+    inv = -0.5 / (s * s)
+    for r in range(mu.size):
+        out += w[:, r] * np.exp(inv * (h - mu[r]) ** 2)
+    return out
+
+
+class RBFTable:
+    """The RBF mixture of Eq. (5.41) per channel, tabulated for fast evaluation.
+
+    ``f_c(h) = sum_r w[c, r] exp(-(h - mu_r)^2 / (2 s^2))`` is sampled on ``n`` points over
+    ``[mu_0 - 8 s, mu_-1 + 8 s]`` and linearly interpolated (outside, every Gaussian is below
+    ``exp(-32)``: the end values are used). With the default ``n = 32769`` the interpolation error
+    is below ``h^2 max|f''| / 8``, about 1e-8 for the shipped weights -- far below float32
+    rounding -- and one table look-up replaces ``R`` exponentials per value.
+    """
+
+    def __init__(self, w: np.ndarray, mu: np.ndarray, s: float, n: int = 32769):
+        self.lo = float(mu[0] - 8 * s)
+        hi = float(mu[-1] + 8 * s)
+        self.step = (hi - self.lo) / (n - 1)
+        grid = self.lo + self.step * np.arange(n)
+        tab = rbf(grid[:, None], np.asarray(w, dtype=np.float64), np.asarray(mu), s)  # (n, C)
+        self.table = np.ascontiguousarray(tab.T.astype(np.float32))  # (C, n)
+        self.n = n
+
+    def __call__(self, h: np.ndarray) -> np.ndarray:
+        """``f`` on ``h`` (..., C) float32."""
+        C = self.table.shape[0]
+        u = (h - np.float32(self.lo)) / np.float32(self.step)
+        np.clip(u, 0, self.n - 1.000001, out=u)
+        i = u.astype(np.int32)
+        frac = u - i
+        flat = self.table.ravel()
+        base = np.arange(C, dtype=np.int32) * self.n
+        j = i + base
+        a = flat[j]
+        return a + frac * (flat[j + 1] - a)
+
+
+def cnn_centre(
+    x: np.ndarray, W1, b1, rw, mu, s, W2, b2, *, chunk: int = 4096, table: RBFTable | None = None
+) -> np.ndarray:
+    """Denoised centre pixel of the first row of every image (the network of the module notes).
+
+    Parameters
+    ----------
+    x : (b, ch, rows, k) images, ``rows >= ks`` and ``k >= 2 ks - 1`` (``ks`` the kernel size)
+    W1 : (C, ch, ks, ks), b1 : (C,), rw : (C, R), mu : (R,), s : float,
+    W2 : (3, C, ks, ks), b2 : (3,)
+        (the residual is added to the first three channels, the guided / filtered pixel)
+    table : RBFTable, optional
+        Tabulated shrinkage (fast path, float32 arithmetic); None evaluates Eq. (5.41) exactly
+        in float64.
+
+    Returns
+    -------
+    (b, 3) float64 (not normalised).
+    """
+    b, ch, rows, k = x.shape
+    C, _, ks, _ = W1.shape
+    p = ks // 2
+    c = k // 2
+    if rows < ks or k < 2 * ks - 1:
+        raise ValueError(f"images of {rows}x{k} are too small for kernels of size {ks}.")
+    dt = np.float32 if table is not None else np.float64
+    W1m = np.ascontiguousarray(W1.reshape(C, -1).T, dtype=dt)  # (ch ks ks, C)
+    W2m = np.ascontiguousarray(W2[:, :, p:, :].transpose(2, 3, 1, 0), dtype=dt).reshape(-1, 3)
+    b1 = np.asarray(b1, dtype=dt)
+    b2 = np.asarray(b2, dtype=dt)
+    out = np.empty((b, 3))
+    for s0 in range(0, b, chunk):
+        xb = np.asarray(x[s0 : s0 + chunk, :, :ks, c - 2 * p : c + 2 * p + 1], dtype=dt)
+        nb = xb.shape[0]
+        xp = np.zeros((nb, ch, ks + p, 4 * p + 1), dtype=dt)  # p zero rows above the image
+        xp[:, :, p:] = xb
+        win = sliding_window_view(xp, (ks, ks), axis=(2, 3))  # (nb, ch, p + 1, ks, ks, ks)
+        cols = np.ascontiguousarray(win.transpose(0, 2, 3, 1, 4, 5)).reshape(-1, ch * ks * ks)
+        h = (cols @ W1m + b1).reshape(nb, p + 1, ks, C)
+        a = table(h) if table is not None else rbf(h, rw, mu, s)
+        y = a.reshape(nb, -1) @ W2m + b2
+        out[s0 : s0 + nb] = xb[:, :3, 0, 2 * p] + y
+    return out
+
+
+# --------------------------------------------------------------------------- DAE (MLP)
+def mlp_forward(X: np.ndarray, W1, b1, W2, b2, activation: str = "tanh") -> np.ndarray:
+    """``W2 act(W1 x + b1) + b2`` for rows ``X`` (b, d); weights stored as (d, H), (H,), (H, d), (d,)."""
+    H = X @ W1 + b1
+    if activation == "tanh":
+        H = np.tanh(H)
+    return H @ W2 + b2
+
+
+def init_mlp(d_in: int, hidden: int, d_out: int, rng) -> dict[str, np.ndarray]:
+    """Glorot-uniform weights of a one-hidden-layer autoencoder (float64)."""
+    gen = np.random.default_rng(rng)
+    lim1 = np.sqrt(6.0 / (d_in + hidden))
+    lim2 = np.sqrt(6.0 / (hidden + d_out))
+    return {
+        "W1": gen.uniform(-lim1, lim1, (d_in, hidden)),
+        "b1": np.zeros(hidden),
+        "W2": gen.uniform(-lim2, lim2, (hidden, d_out)),
+        "b2": np.zeros(d_out),
+    }
+
+
+def train_mlp_numpy(
+    X: np.ndarray,
+    Y: np.ndarray,
+    *,
+    hidden: int = 32,
+    activation: str = "tanh",
+    epochs: int = 20,
+    batch_size: int = 256,
+    lr: float = 3e-3,
+    weight: np.ndarray | None = None,
+    rng=0,
+    params: dict | None = None,
+    min_steps: int = 600,
+) -> tuple[dict[str, np.ndarray], list[float]]:
+    """Fit ``Y ~ mlp(X)`` by mini-batch Adam on the mean squared error (numpy only).
+
+    Used for the denoise-time training of Section 5.1.3 (the thesis minimises the same cost with
+    L-BFGS, minFunc; Adam on mini-batches is used here because it scales to the ~10^5 rows of a
+    few frames with a bounded memory). ``weight`` (d,) weights the output columns of the loss.
+    Small training sets get more epochs, so that at least ``min_steps`` Adam steps are taken.
+    Returns the parameters and the mean loss per epoch.
+    """
+    if activation not in _ACTS:
+        raise ValueError(f"activation must be one of {_ACTS}; got {activation!r}")
+    try:  # small matrix products: BLAS threads only add overhead (and oversubscribe)
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
+        return _train_mlp(
+            X, Y, hidden, activation, epochs, batch_size, lr, weight, rng, params, min_steps
+        )
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _train_mlp(
+            X, Y, hidden, activation, epochs, batch_size, lr, weight, rng, params, min_steps
+        )
+
+
+def _train_mlp(X, Y, hidden, activation, epochs, batch_size, lr, weight, rng, params, min_steps):
+    gen = np.random.default_rng(rng)
+    X = np.asarray(X, dtype=np.float64)
+    Y = np.asarray(Y, dtype=np.float64)
+    n, d = X.shape
+    epochs = max(int(epochs), -(-int(min_steps) // max(1, -(-n // batch_size))))
+    p = (
+        init_mlp(d, hidden, Y.shape[1], gen)
+        if params is None
+        else {k: v.copy() for k, v in params.items()}
+    )
+    w = np.ones(Y.shape[1]) if weight is None else np.asarray(weight, dtype=np.float64)
+    m = {k: np.zeros_like(v) for k, v in p.items()}
+    v2 = {k: np.zeros_like(v) for k, v in p.items()}
+    b1, b2, eps = 0.9, 0.999, 1e-8
+    t = 0
+    losses = []
+    for _ in range(int(epochs)):
+        perm = gen.permutation(n)
+        tot = 0.0
+        for s in range(0, n, batch_size):
+            ib = perm[s : s + batch_size]
+            xb, yb = X[ib], Y[ib]
+            z = xb @ p["W1"] + p["b1"]
+            hdn = np.tanh(z) if activation == "tanh" else z
+            out = hdn @ p["W2"] + p["b2"]
+            r = (out - yb) * w
+            tot += float(np.sum(r * (out - yb)))
+            g_out = 2.0 * r / (ib.size * Y.shape[1])
+            grads = {"W2": hdn.T @ g_out, "b2": g_out.sum(axis=0)}
+            g_h = g_out @ p["W2"].T
+            if activation == "tanh":
+                g_h = g_h * (1.0 - hdn * hdn)
+            grads["W1"] = xb.T @ g_h
+            grads["b1"] = g_h.sum(axis=0)
+            t += 1
+            for k in p:
+                m[k] = b1 * m[k] + (1 - b1) * grads[k]
+                v2[k] = b2 * v2[k] + (1 - b2) * grads[k] ** 2
+                mh = m[k] / (1 - b1**t)
+                vh = v2[k] / (1 - b2**t)
+                p[k] -= lr * mh / (np.sqrt(vh) + eps)
+        losses.append(tot / (n * Y.shape[1]))
+    return p, losses
+
+
+__all__ = ["RBFTable", "cnn_centre", "init_mlp", "mlp_forward", "rbf", "train_mlp_numpy"]

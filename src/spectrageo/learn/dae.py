@@ -1,0 +1,425 @@
+"""Feature-aware, content-wise denoising autoencoders (thesis Section 5.1.3, Algorithm 4).
+
+Rows. Every face ``i`` gives a row ``M_i`` in R^{3k}: the guided normals (Section 4.2.1, made unit
+length as in Section 5.1.3) of its ``k = 9`` nearest centroids, nearest first, rotated so that
+its own guided normal is ``[1 0 0]``. The thesis makes the dataset coherent by moving every
+normal into the positive octant (Fig. 5.33); a per-row rotation is used instead because it
+removes the orientation entirely (an octant flip does not keep the angles between the normals
+of a row, which are what the autoencoder must restore).
+
+Feature identification. RPCA (:func:`spectrageo.linalg.rpca`, principal component pursuit) of
+the matrix of rows minus the flat row ``[1 0 0 ... 1 0 0]``: a face is a feature when
+``||s_i||_2 > ||e_i||_2 + e`` (``e = 0.7`` as in the thesis) for its rows ``s_i`` of the sparse
+part ``S`` and ``e_i`` of the low-rank part ``E``. This splits ``M`` into ``M_1`` (features) and
+``M_2`` (flat areas).
+
+Content-wise DAEs (Algorithm 4). Algorithm 4 groups, for every training row, the rows within a
+distance ``epsilon`` and trains one DAE per group, then denoises a row with the DAE of the
+closest training group. With ``n_f`` overlapping groups that would be ``n_f`` networks; here the
+rows of each feature class are grouped by kappa-means (``n_groups`` centres per class), which
+keeps every row in the group of its nearest centre; at denoising time each noisy row takes the
+model of its class and its nearest centre (Algorithm 4, lines 10-17). Each DAE maps a noisy row
+to the clean row (one hidden layer, tanh; the thesis' linear units are ``activation="linear"``);
+the centre normal of the output is the denoised normal ``n_bar_c``, and the vertices follow by
+Eq. (4.28).
+
+Static meshes use the shipped weights (``spectrageo train dae``). Animations (Section 5.1.3,
+Fig. 5.38) train at denoise time on their first ``train_frames`` frames, in numpy
+(:func:`spectrageo.learn._nn.train_mlp_numpy`, no torch needed). The thesis trains on clean
+first frames; a noisy animation comes without them, so the targets are built from the other
+frames instead (Noise2Noise, Lehtinen et al. 2018): the row of frame ``t`` is mapped to the mean
+of the *noisy* normals of the same faces in frames ``t - 1`` and ``t + 1`` (in frame ``t``'s
+rotation). Their noise is independent of frame ``t``'s and has zero mean, so the least-squares
+fit converges to the clean normals' conditional mean; motion between neighbouring frames enters
+only to second order (the linear part cancels in the two-sided mean). When clean first frames
+are at hand, ``clean=`` uses them as targets instead, as in the thesis.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from .._validation import as_faces, as_frames, as_points, check_positive
+from ..geometry import face_normals
+from . import _features as fe
+from ._nn import mlp_forward, train_mlp_numpy
+from ._weights import default_weights, load_weights
+
+ARRAYS = ("centres", "W1", "b1", "W2", "b2")
+#: RPCA feature threshold ``e`` of Section 5.1.3
+FEATURE_THRESHOLD = 0.7
+
+
+# --------------------------------------------------------------------------- rows and groups
+def face_rows(V, F, k: int = fe.IMAGE_COLS):
+    """Rows ``M_i`` (m, 3k) of the module notes, and the rotations (m, 3, 3), kNN (m, k)."""
+    N, idx, G, R = fe.mesh_inputs(V, F, k)
+    return rows_of(G, idx, R), R, idx, N
+
+
+def rows_of(P: np.ndarray, idx: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Rotated values ``P`` of the kNN rows, nearest first, flattened to (m, 3k)."""
+    out = np.einsum("mij,mkj->mki", R, P[idx], optimize=True)
+    return out.reshape(idx.shape[0], -1)
+
+
+def feature_mask(rows: np.ndarray, *, threshold: float = FEATURE_THRESHOLD) -> np.ndarray:
+    """RPCA feature identification of Section 5.1.3: True where ``||s_i|| > ||e_i|| + e``."""
+    from ..linalg import rpca
+
+    k = rows.shape[1] // 3
+    M = rows - np.tile([1.0, 0.0, 0.0], k)
+    if M.shape[0] < 2:
+        return np.zeros(M.shape[0], dtype=bool)
+    res = rpca(M, method="ialm", on_nonconvergence="ignore", max_iter=200)
+    s = np.linalg.norm(res.sparse, axis=1)
+    e = np.linalg.norm(res.low_rank, axis=1)
+    return s > e + threshold
+
+
+def model_index(rows: np.ndarray, centres: np.ndarray, threshold: float) -> np.ndarray:
+    """Model of every row: ``class * n_groups + nearest group centre`` (Algorithm 4, l. 10-17)."""
+    feat = feature_mask(rows, threshold=threshold).astype(np.int64)
+    G = centres.shape[1]
+    out = np.empty(rows.shape[0], dtype=np.int64)
+    for c in (0, 1):
+        sel = np.flatnonzero(feat == c)
+        if sel.size:
+            out[sel] = c * G + fe.assign_classes(rows[sel], centres[c])
+    return out
+
+
+def fit_groups(rows: np.ndarray, feat: np.ndarray, n_groups: int, rng=0) -> np.ndarray:
+    """kappa-means centres (2, n_groups, 3k) of the flat (0) and feature (1) rows."""
+    gen = np.random.default_rng(rng)
+    out = np.zeros((2, n_groups, rows.shape[1]))
+    for c in (0, 1):
+        X = rows[feat == c]
+        if X.shape[0] == 0:
+            X = rows
+        if X.shape[0] > 50000:
+            X = X[gen.choice(X.shape[0], 50000, replace=False)]
+        cc = fe.kmeans(X, n_groups, rng=gen)
+        out[c, : cc.shape[0]] = cc
+        if cc.shape[0] < n_groups:
+            out[c, cc.shape[0] :] = cc[-1]
+    return out
+
+
+# --------------------------------------------------------------------------- model
+class DAEModel:
+    """Content-wise DAEs: ``centres`` (2, G, d) and per model ``W1`` (M, d, H), ``b1`` (M, H),
+    ``W2`` (M, H, d), ``b2`` (M, d) with ``M = 2 G``."""
+
+    def __init__(self, arrays: dict[str, np.ndarray], meta: dict):
+        missing = [k for k in ARRAYS if k not in arrays]
+        if missing:
+            raise InvalidInputError(f"dae weights lack arrays: {', '.join(missing)}.")
+        self.arrays = {k: np.asarray(arrays[k], dtype=np.float64) for k in ARRAYS}
+        self.meta = dict(meta)
+        self.k = int(meta.get("image_cols", fe.IMAGE_COLS))
+        self.activation = str(meta.get("activation", "tanh"))
+        self.threshold = float(meta.get("feature_threshold", FEATURE_THRESHOLD))
+
+    @classmethod
+    def load(cls, path=None) -> DAEModel:
+        path = default_weights("dae") if path is None else Path(path)
+        return cls(*load_weights(path, "dae"))
+
+    def predict_rows(self, rows: np.ndarray) -> np.ndarray:
+        """Denoised rows (m, d) (Algorithm 4, lines 10-17)."""
+        a = self.arrays
+        mid = model_index(rows, a["centres"], self.threshold)
+        out = np.empty((rows.shape[0], a["W2"].shape[-1]))
+        for j in range(a["W1"].shape[0]):
+            sel = np.flatnonzero(mid == j)
+            if sel.size:
+                out[sel] = mlp_forward(
+                    rows[sel], a["W1"][j], a["b1"][j], a["W2"][j], a["b2"][j], self.activation
+                )
+        return out
+
+    def filter_normals(self, V, F) -> np.ndarray:
+        """Denoised unit face normals ``n_bar_c`` (m, 3)."""
+        rows, R, _, _ = face_rows(V, F, self.k)
+        centre = self.predict_rows(rows)[:, :3]  # nearest first: the face itself
+        n = np.einsum("mji,mj->mi", R, centre)
+        nrm = np.linalg.norm(n, axis=1, keepdims=True)
+        return np.divide(n, nrm, out=np.zeros_like(n), where=nrm > 0)
+
+
+@lru_cache(maxsize=8)
+def _cached(path: str, mtime: float) -> DAEModel:
+    return DAEModel.load(path)
+
+
+def load_model(weights=None) -> DAEModel:
+    """The DAE model of ``weights`` (a path, a loaded model, or None: the shipped weights)."""
+    if isinstance(weights, DAEModel):
+        return weights
+    path = default_weights("dae") if weights is None else Path(weights)
+    if not path.is_file():
+        raise InvalidInputError(f"`weights` file not found: {path}.")
+    return _cached(str(path.resolve()), path.stat().st_mtime)
+
+
+def _update(V, F, model: DAEModel, n_iter: int, vertex_iter: int) -> np.ndarray:
+    from ..denoise._normals import fast_update_vertices
+
+    X = V.copy()
+    for _ in range(n_iter):
+        X = fast_update_vertices(X, F, model.filter_normals(X, F), vertex_iter)
+    return X
+
+
+def dae(
+    V, F, *, weights=None, n_iter: int | None = None, vertex_iter: int | None = None
+) -> np.ndarray:
+    """Denoise a static mesh with content-wise DAEs (Section 5.1.3, Algorithm 4).
+
+    Parameters
+    ----------
+    V : (n, 3) float, F : (m, 3) int
+    weights : path or DAEModel, optional
+        Weights from ``spectrageo train dae`` (default: the shipped weights).
+    n_iter : int, optional
+        Passes of (rows -> DAE -> vertex update); default from the metadata, else 1.
+    vertex_iter : int, optional
+        Iterations of Eq. (4.28) per pass; default from the metadata, else 20.
+
+    Returns
+    -------
+    (n, 3) float64 denoised positions.
+    """
+    V = as_points(V, "V")
+    F = as_faces(F, V.shape[0], "F")
+    model = load_model(weights)
+    n_iter = int(model.meta.get("n_iter", 1)) if n_iter is None else n_iter
+    vertex_iter = int(model.meta.get("vertex_iter", 20)) if vertex_iter is None else vertex_iter
+    check_positive(n_iter, "n_iter", integer=True)
+    check_positive(vertex_iter, "vertex_iter", integer=True)
+    return _update(V, F, model, n_iter, vertex_iter)
+
+
+# --------------------------------------------------------------------------- animations
+class _FrameData:
+    """Per-frame normals, guided normals, kNN rows and rotations of an animation."""
+
+    def __init__(self, A: np.ndarray, F: np.ndarray, k: int):
+        self.A, self.F, self.k = A, F, k
+        self.cache: dict[int, tuple] = {}
+
+    def get(self, t: int):
+        t = int(min(max(t, 0), self.A.shape[0] - 1))
+        if t not in self.cache:
+            N, idx, G, R = fe.mesh_inputs(self.A[t], self.F, self.k)
+            self.cache[t] = (N, idx, G, R)
+        return self.cache[t]
+
+    def rows(self, t: int, radius: int) -> tuple[np.ndarray, np.ndarray]:
+        """Temporal rows of frame ``t``: the guided normals of frames ``t - radius .. t + radius``
+        (clamped) at frame ``t``'s kNN faces, in frame ``t``'s rotation; and that rotation."""
+        _, idx, _, R = self.get(t)
+        parts = [rows_of(self.get(t + d)[2], idx, R) for d in range(-radius, radius + 1)]
+        order = sorted(range(len(parts)), key=lambda j: abs(j - radius))  # frame t first
+        return np.concatenate([parts[j] for j in order], axis=1), R
+
+
+def train_frames_model(
+    frames,
+    F,
+    *,
+    train_frames: int,
+    clean=None,
+    inputs=None,
+    temporal: int = 2,
+    k: int = fe.IMAGE_COLS,
+    n_groups: int = 4,
+    hidden: int = 32,
+    epochs: int = 10,
+    max_rows: int = 60000,
+    activation: str = "tanh",
+    rng=0,
+) -> tuple[DAEModel, list[float]]:
+    """Train content-wise DAEs on the first ``train_frames`` frames of an animation (numpy).
+
+    Rows: for ``temporal = 0`` the rows of the module notes (frame ``t`` alone, as in the thesis);
+    for ``temporal = r > 0`` the rows of frames ``t - r .. t + r`` at frame ``t``'s faces, side by
+    side (the animation's temporal coherence: the same surface seen with independent noise).
+    Targets: the clean frames ``clean`` when given (thesis setting), otherwise Noise2Noise: the
+    mean of the noisy normals of frames ``t - r - 1`` and ``t + r + 1`` (outside the input, so
+    their noise is independent of it), which needs ``train_frames >= 2 r + 3``. ``inputs`` (same
+    shape as ``frames``, default ``frames``): the frames the rows come from (later cascade stages
+    pass the previous stage's output); targets always come from the noisy ``frames``.
+    Returns the model and the final training loss of each of its autoencoders.
+    """
+    A = as_frames(frames)
+    F = as_faces(F, A.shape[1], "F")
+    Ain = A if inputs is None else as_frames(inputs, "inputs")
+    check_positive(train_frames, "train_frames", integer=True)
+    check_positive(temporal, "temporal", integer=True, allow_zero=True)
+    if train_frames > A.shape[0]:
+        raise InvalidInputError(
+            f"`train_frames` must be <= the number of frames ({A.shape[0]}); got {train_frames}."
+        )
+    check_positive(k, "k", integer=True)
+    gen = np.random.default_rng(rng)
+    r = int(temporal)
+    data = _FrameData(Ain, F, k)
+    X, Y = [], []
+    if clean is not None:
+        Cl = as_frames(clean, "clean")
+        if Cl.shape[0] < train_frames or Cl.shape[1:] != A.shape[1:]:
+            raise InvalidInputError(
+                f"`clean` must hold at least {train_frames} frames of shape {A.shape[1:]}; "
+                f"got {Cl.shape}."
+            )
+        ts = range(train_frames)
+    else:
+        if train_frames < 2 * r + 3:
+            raise InvalidInputError(
+                f"`train_frames` must be >= {2 * r + 3} without clean frames (frame t is fitted "
+                f"to the noisy normals of frames t-{r + 1} and t+{r + 1}); got {train_frames}."
+            )
+        ts = range(r + 1, train_frames - r - 1)
+    per = max(1, max_rows // len(ts))
+    for t in ts:
+        rows, R = data.rows(t, r)
+        idx = data.get(t)[1]
+        if clean is not None:
+            tgt = rows_of(face_normals(Cl[t], F), idx, R)
+        else:
+            tgt = rows_of(
+                0.5 * (face_normals(A[t - r - 1], F) + face_normals(A[t + r + 1], F)), idx, R
+            )
+        sel = np.arange(rows.shape[0])
+        if sel.size > per:
+            sel = np.sort(gen.choice(sel.size, per, replace=False))
+        X.append(rows[sel])
+        Y.append(tgt[sel])
+    X = np.concatenate(X)
+    Y = np.concatenate(Y)
+    feat = feature_mask(X)
+    centres = fit_groups(X, feat, n_groups, rng=gen)
+    mid = feat.astype(np.int64) * n_groups
+    for c in (0, 1):
+        sel = np.flatnonzero(feat == c)
+        if sel.size:
+            mid[sel] = c * n_groups + fe.assign_classes(X[sel], centres[c])
+    d_in, d = X.shape[1], Y.shape[1]
+    Ms = 2 * n_groups
+    W1 = np.zeros((Ms, d_in, hidden))
+    b1 = np.zeros((Ms, hidden))
+    W2 = np.zeros((Ms, hidden, d))
+    b2 = np.zeros((Ms, d))
+    losses = []
+    wts = np.ones(d)
+    wts[:3] = 4.0  # the centre normal is what is used: weigh it more
+    for j in range(Ms):
+        sel = np.flatnonzero(mid == j)
+        if sel.size < 2 * hidden:  # too few rows for a model of its own: fit it on all rows
+            sel = np.arange(X.shape[0])
+        p, ls = train_mlp_numpy(
+            X[sel], Y[sel], hidden=hidden, activation=activation, epochs=epochs, weight=wts, rng=gen
+        )
+        W1[j], b1[j], W2[j], b2[j] = p["W1"], p["b1"], p["W2"], p["b2"]
+        losses.append(float(ls[-1]))
+    meta = {
+        "model": "dae",
+        "architecture": (
+            f"content-wise DAE: 2 classes x {n_groups} groups, {d_in}-{hidden}-{d} {activation}"
+        ),
+        "activation": activation,
+        "image_cols": k,
+        "temporal": r,
+        "feature_threshold": FEATURE_THRESHOLD,
+        "training": "clean first frames" if clean is not None else "noise2noise",
+        "train_frames": int(train_frames),
+        "epochs": int(epochs),
+    }
+    arrays = {"centres": centres, "W1": W1, "b1": b1, "W2": W2, "b2": b2}
+    return DAEModel(arrays, meta), losses
+
+
+def _denoise_frames(A: np.ndarray, F, model: DAEModel, vertex_iter: int) -> np.ndarray:
+    """One pass of a (temporal) DAE model over every frame, then the vertex update."""
+    from ..denoise._normals import fast_update_vertices
+
+    r = int(model.meta.get("temporal", 0))
+    data = _FrameData(A, F, model.k)
+    out = np.empty_like(A)
+    for t in range(A.shape[0]):
+        rows, R = data.rows(t, r)
+        centre = model.predict_rows(rows)[:, :3]
+        n = np.einsum("mji,mj->mi", R, centre)
+        nrm = np.linalg.norm(n, axis=1, keepdims=True)
+        n = np.divide(n, nrm, out=np.zeros_like(n), where=nrm > 0)
+        out[t] = fast_update_vertices(A[t], F, n, vertex_iter)
+        data.cache.pop(t - r - 1, None)  # frames no longer needed
+    return out
+
+
+def dae_animation(
+    frames,
+    F=None,
+    *,
+    train_frames: int | None = None,
+    weights=None,
+    clean=None,
+    temporal: int = 2,
+    k: int = fe.IMAGE_COLS,
+    n_stages: int = 1,
+    vertex_iter: int = 20,
+    epochs: int = 10,
+    rng=0,
+) -> np.ndarray:
+    """Denoise a mesh animation with content-wise DAEs (Section 5.1.3, Fig. 5.38).
+
+    With ``train_frames`` the DAEs are trained on the first ``train_frames`` frames of this
+    animation (:func:`train_frames_model`, numpy; ``temporal`` frames on each side in the rows)
+    and then denoise every frame, followed by the vertex update of Eq. (4.28). ``n_stages`` > 1
+    cascades: stage ``s`` is trained on the output of stages ``1..s-1`` on the frames (targets
+    still from the noisy frames). Without ``train_frames`` the static ``weights`` (default the
+    shipped ones) denoise every frame on its own (``n_stages`` passes).
+
+    Returns
+    -------
+    (T, n, 3) float64 denoised frames.
+    """
+    if F is None:
+        F = getattr(frames, "faces", None)
+        if F is None:
+            raise InvalidInputError("`F` is required (the faces shared by all frames).")
+    A = as_frames(frames)
+    F = as_faces(F, A.shape[1], "F")
+    check_positive(n_stages, "n_stages", integer=True)
+    check_positive(vertex_iter, "vertex_iter", integer=True)
+    gen = np.random.default_rng(rng)
+    if train_frames is None:
+        model = load_model(weights)
+        return np.stack([_update(A[t], F, model, n_stages, vertex_iter) for t in range(A.shape[0])])
+    if weights is not None:
+        raise InvalidInputError("pass either `train_frames` or `weights`, not both.")
+    out = A.copy()
+    for _ in range(n_stages):
+        model, _ = train_frames_model(
+            A, F, train_frames=train_frames, clean=clean, inputs=out, temporal=temporal, k=k,
+            epochs=epochs, rng=gen,
+        )  # fmt: skip
+        out = _denoise_frames(out, F, model, vertex_iter)
+    return out
+
+
+__all__ = [
+    "DAEModel",
+    "dae",
+    "dae_animation",
+    "face_rows",
+    "feature_mask",
+    "load_model",
+    "train_frames_model",
+]

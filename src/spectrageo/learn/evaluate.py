@@ -1,0 +1,186 @@
+"""Evaluation of the learned denoisers against TSGSP and BNF (issue 20).
+
+Three parts, all on data no weight was trained on (:data:`spectrageo.learn.train.TRAIN_MESHES`
+are disjoint from them, see :func:`spectrageo.learn.train.check_training_meshes`):
+
+* every noisy / ground-truth pair of ``denoise/``;
+* a slice of the validation split of the denoising protocol
+  (:data:`spectrageo.evaluate.denoise.VALIDATION_MESHES`) with Gaussian noise along the normals at
+  0.3 and 0.5, seeded per case exactly as the protocol does;
+* the shared animations with Gaussian noise 0.3 (Fig. 5.38 setting): ``dae`` trained on the first
+  ``train_frames`` frames (denoise-time training, Section 5.1.3) against per-frame TSGSP.
+
+Every method runs through :func:`spectrageo.denoise.denoise` (do-no-harm gate and trust region as
+for any registered method); times are wall-clock seconds in the same process.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .._progress import progress
+
+STATIC_METHODS = ("bm3d-cnn", "dae", "tsgsp", "bnf")
+#: validation-split slice: organic and CAD meshes of 6k-26k vertices
+VALIDATION_SLICE = (
+    "meshes/ChineseDragon-10kv.off",
+    "meshes/armadillo.off",
+    "cad/joint.obj",
+)
+LEVELS = (0.3, 0.5)
+ANIMATIONS = ("crane", "horse-gallop", "chickenCrossing")
+COLUMNS = ("part", "case", "method", "n_vertices", "input_theta", "theta_deg", "time_s")
+
+
+def _theta(X, V0, F) -> float:
+    from ..metrics import theta_deg
+
+    return float(theta_deg(X, V0, F))
+
+
+def _static_rows(part, case, Vn, V0, F, methods, rows):
+    from .. import denoise
+
+    th0 = _theta(Vn, V0, F)
+    for m in methods:
+        t = time.perf_counter()
+        X = denoise.denoise(Vn, F, method=m)
+        dt = time.perf_counter() - t
+        rows.append(
+            {"part": part, "case": case, "method": m, "n_vertices": int(Vn.shape[0]),
+             "input_theta": th0, "theta_deg": _theta(X, V0, F), "time_s": dt}
+        )  # fmt: skip
+
+
+def evaluate_learned(
+    data=None,
+    out=None,
+    *,
+    methods=STATIC_METHODS,
+    validation=VALIDATION_SLICE,
+    levels=LEVELS,
+    animations=ANIMATIONS,
+    max_frames: int = 12,
+    train_frames: int = 8,
+    frame_step: int = 3,
+) -> list[dict]:
+    """Run the comparison of the module notes; returns the rows (keys :data:`COLUMNS`) and, with
+    ``out``, writes ``<out>.md`` and ``<out>.csv``.
+
+    ``frame_step``: per-frame TSGSP (slow) and the error of every method are evaluated on every
+    ``frame_step``-th frame of the first ``max_frames``; ``dae`` denoises all of them.
+    """
+    from .. import denoise, io
+    from ..datasets import data_dir as _data_dir
+    from ..datasets import denoise_pairs
+    from ..evaluate.denoise import ProtocolCase, _load_clean
+    from ..noise import animation_noise, generate
+    from ..noise.generator import case_seed
+    from .dae import dae_animation
+
+    data = _data_dir(required=True) if data is None else Path(data)
+    rows: list[dict] = []
+    from ..denoise._registry import warm_up
+
+    warm_up(list(methods), *_warm_mesh())
+    for name, npth, opth in progress(denoise_pairs(data), desc="pairs"):
+        n, o = io.read_mesh(npth), io.read_mesh(opth)
+        _static_rows("pairs", name, n.vertices, o.vertices, o.faces, methods, rows)
+    for rel in progress(validation, desc="validation"):
+        for lv in levels:
+            case = ProtocolCase(
+                "validation",
+                rel,
+                "gaussian-normal",
+                lv,
+                case_seed(rel, "gaussian-normal", lv, seed=0),
+            )
+            _, V0, F = _load_clean(data, case)
+            Vn = generate(V0, F, kind="gaussian-normal", level=lv, rng=case.seed).vertices
+            _static_rows("validation", case.name, Vn, V0, F, methods, rows)
+    for name in progress(animations, desc="animations"):
+        path = data / "animations" / f"{name}.npz"
+        if not path.is_file():
+            continue
+        z = np.load(path)
+        A = np.asarray(z["vertices"][:max_frames], dtype=np.float64)
+        F = np.asarray(z["faces"], dtype=np.int64)
+        An = animation_noise(A, F, kind="gaussian", level=0.3, rng=0)
+        ev = list(range(0, A.shape[0], frame_step))
+        case = f"{name}[{A.shape[0]} frames]:gaussian@0.3"
+        base = {"part": "animation", "case": case, "n_vertices": int(A.shape[1])}
+        th0 = float(np.mean([_theta(An[t], A[t], F) for t in ev]))
+        t = time.perf_counter()
+        D = dae_animation(An, F, train_frames=min(train_frames, A.shape[0]))
+        dt = time.perf_counter() - t
+        rows.append(base | {"method": f"dae (train {train_frames} frames)", "input_theta": th0,
+                            "theta_deg": float(np.mean([_theta(D[t], A[t], F) for t in ev])),
+                            "time_s": dt * len(ev) / A.shape[0]})  # fmt: skip
+        t = time.perf_counter()
+        th = [_theta(denoise.denoise(An[t], F, method="tsgsp"), A[t], F) for t in ev]
+        rows.append(base | {"method": "tsgsp (per frame)", "input_theta": th0,
+                            "theta_deg": float(np.mean(th)), "time_s": time.perf_counter() - t})  # fmt: skip
+    if out is not None:
+        write(rows, out)
+    return rows
+
+
+def _warm_mesh():
+    from ..datasets import fandisk
+
+    m = fandisk()
+    return m.vertices, m.faces
+
+
+def summary(rows: list[dict]) -> list[dict]:
+    """Mean theta and time per part and method (animations: over the shared animations)."""
+    out = []
+    keys = []
+    for r in rows:
+        k = (r["part"], r["method"])
+        if k not in keys:
+            keys.append(k)
+    for part, m in keys:
+        sel = [r for r in rows if r["part"] == part and r["method"] == m]
+        out.append(
+            {"part": part, "method": m, "cases": len(sel),
+             "input_theta": float(np.mean([r["input_theta"] for r in sel])),
+             "theta_deg": float(np.mean([r["theta_deg"] for r in sel])),
+             "time_s": float(np.mean([r["time_s"] for r in sel]))}
+        )  # fmt: skip
+    return out
+
+
+def format_markdown(rows: list[dict], note: str = "") -> str:
+    from ..evaluate._tables import markdown_table
+
+    lines = ["## Learned denoisers (Sections 5.1.3-5.1.4) against TSGSP and BNF", ""]
+    if note:
+        lines += [note, ""]
+    lines += ["Mean theta (degrees) and mean seconds per case.", ""]
+    lines += markdown_table(
+        summary(rows), ("part", "method", "cases", "input_theta", "theta_deg", "time_s")
+    )
+    lines += ["", "### Per case", ""]
+    lines += markdown_table(rows, COLUMNS)
+    return "\n".join(lines) + "\n"
+
+
+def write(rows: list[dict], out, note: str = ""):
+    """``<out>.md`` and ``<out>.csv`` (atomic); returns both paths."""
+    from ..evaluate._tables import rows_to_csv, write_md_csv
+
+    return write_md_csv(out, format_markdown(rows, note), rows_to_csv(rows, COLUMNS))
+
+
+__all__ = [
+    "ANIMATIONS",
+    "COLUMNS",
+    "VALIDATION_SLICE",
+    "evaluate_learned",
+    "format_markdown",
+    "summary",
+]

@@ -1,0 +1,447 @@
+"""Training of the shipped weights (``spectrageo train dae|bm3d-cnn``); needs torch (``learn`` extra).
+
+Training data: clean shared meshes corrupted by :func:`spectrageo.noise.generate` (Gaussian
+noise along the normals, ``"gaussian-normal"``, at every level of ``levels``; one "general"
+model for all levels, the thesis' GEN OUR). The default meshes (:data:`TRAIN_MESHES`) are
+feature-rich models outside the denoising protocol's validation split, outside the benchmark
+pairs of ``denoise/`` and of other shapes than those pairs (the thesis trains on 5 models);
+:func:`check_training_meshes` refuses any validation or benchmark shape. :data:`REPORT_MESH`,
+used by no choice, gives the validation theta of the training report.
+
+Everything is seeded: the noise of every case (:func:`spectrageo.noise.generator.case_seed`),
+the subsampling, kappa-means and torch (with deterministic algorithms).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from .._validation import check_positive
+from . import _features as fe
+from ._weights import package_version, save_weights
+
+#: training meshes of the shipped weights (relative to the shared data folder)
+TRAIN_MESHES = (
+    "saliency/casting.obj",
+    "saliency/cad.obj",
+    "meshes/rocker-arm.obj",
+    "meshes/spot.obj",
+    "meshes/knot2.off",
+)
+#: mesh whose noisy versions give the validation theta of the training report (no choice uses it)
+REPORT_MESH = "holes/mech-holes-shark.off"
+#: relative Gaussian noise levels of the training cases
+TRAIN_LEVELS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7)
+REPORT_LEVELS = (0.3, 0.5)
+
+
+def check_training_meshes(meshes) -> tuple[str, ...]:
+    """Refuse meshes of the validation split, the benchmark pairs or their shapes."""
+    from ..evaluate.denoise import SAME_SHAPE_AS_TUNING, VALIDATION_MESHES
+
+    banned = set(VALIDATION_MESHES) | set(SAME_SHAPE_AS_TUNING)
+    out = []
+    for m in meshes:
+        m = str(m).replace("\\", "/")
+        if m in banned or m.startswith("denoise/"):
+            raise InvalidInputError(
+                f"training mesh {m!r} is a validation or benchmark shape of the denoising "
+                "protocol (spectrageo.evaluate.denoise); training on it would not be held out."
+            )
+        out.append(m)
+    return tuple(out)
+
+
+def _load(data_dir: Path, rel: str):
+    from .. import io
+
+    path = Path(data_dir) / rel
+    if not path.is_file():
+        raise InvalidInputError(f"training mesh {rel!r} not found under {data_dir}.")
+    m = io.read_mesh(path)
+    return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
+
+
+def _noisy(V, F, rel: str, level: float, seed: int):
+    from ..noise import generate
+    from ..noise.generator import case_seed
+
+    return generate(
+        V, F, kind="gaussian-normal", level=level, rng=case_seed("train", rel, level, seed=seed)
+    ).vertices
+
+
+def _log(log, msg: str) -> None:
+    if log is not None:
+        log(msg)
+
+
+def _theta(X, V0, F) -> float:
+    from ..metrics import theta_deg
+
+    return float(theta_deg(X, V0, F))
+
+
+# --------------------------------------------------------------------------- bm3d-cnn
+def _bm3d_stage_data(cases, model, stage, per_case, gen, kernel, channels):
+    """Images, eigenvalues and targets of one cascade stage over all training cases."""
+    from ..geometry import face_normals
+
+    Xs, Ys = [], []
+    for case in cases:
+        V0, F, X = case["clean"], case["faces"], case["current"]
+        sel = np.arange(F.shape[0])
+        if sel.size > per_case:
+            sel = np.sort(gen.choice(sel.size, per_case, replace=False))
+        img, R = fe.build_images(X, F, rows=kernel, channels=channels, faces=sel)
+        Nc = face_normals(V0, F)[sel]
+        Xs.append(img)
+        Ys.append(np.einsum("mij,mj->mi", R[sel], Nc).astype(np.float32))
+    return np.concatenate(Xs), np.concatenate(Ys)
+
+
+def _advance(cases, model, stage, vertex_iter):
+    from ..denoise._normals import fast_update_vertices
+
+    for case in cases:
+        N = model.filter_normals(case["current"], case["faces"], stage)
+        case["current"] = fast_update_vertices(case["current"], case["faces"], N, vertex_iter)
+
+
+def train_bm3d_cnn(
+    data_dir,
+    out,
+    *,
+    epochs: int = 4,
+    n_stages: int = 3,
+    device: str = "cpu",
+    seed: int = 0,
+    meshes=None,
+    levels=None,
+    per_case: int = 2500,
+    width: int = 16,
+    kernel: int = 5,
+    channels: int = 6,
+    vertex_iter: int = 20,
+    batch_size: int = 1024,
+    lr: float = 3e-3,
+    threads: int | None = None,
+    report: bool = True,
+    log=print,
+) -> dict:
+    """Train the bm3d-cnn weights (Section 5.1.4) and write them to ``out`` with a report.
+
+    Stage ``s`` of the cascade (see :mod:`spectrageo.learn.bm3d_cnn`) is trained on images of
+    the training cases after stages ``1..s-1``; the class centres of each stage are the
+    kappa-means (kappa = 3) centres of its training images' first-row eigenvalues.
+
+    Returns the training summary (also written as ``<out>.json``).
+    """
+    from . import _torch as tt
+    from .bm3d_cnn import BM3DCNNModel
+
+    check_positive(epochs, "epochs", integer=True)
+    check_positive(n_stages, "n_stages", integer=True)
+    if channels not in (3, 6, 9):
+        raise InvalidInputError(f"`channels` must be 3, 6 or 9; got {channels!r}.")
+    data_dir = Path(data_dir)
+    meshes = check_training_meshes(TRAIN_MESHES if meshes is None else meshes)
+    levels = TRAIN_LEVELS if levels is None else tuple(float(x) for x in levels)
+    dev = tt.setup(seed, device=device, threads=threads)
+    gen = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    cases = []
+    for rel in meshes:
+        V0, F = _load(data_dir, rel)
+        for lv in levels:
+            cases.append(
+                {
+                    "mesh": rel,
+                    "level": lv,
+                    "clean": V0,
+                    "faces": F,
+                    "current": _noisy(V0, F, rel, lv, seed),
+                }
+            )
+    stacks: dict[str, list] = {k: [] for k in ("class_centres", "W1", "b1", "rw", "W2", "b2")}
+    history = []
+    mu = None
+    for s in range(n_stages):
+        X, Y = _bm3d_stage_data(cases, None, s, per_case, gen, kernel, channels)
+        lam = fe.row_eigenvalues(X[:, :3, 0, :])
+        sub = lam if lam.shape[0] <= 50000 else lam[gen.choice(lam.shape[0], 50000, replace=False)]
+        centres = fe.kmeans(sub, 3, rng=gen)
+        cls = fe.assign_classes(lam, centres)
+        nval = max(1, X.shape[0] // 20)
+        perm = gen.permutation(X.shape[0])
+        va, tr = perm[:nval], perm[nval:]
+        _log(
+            log,
+            f"stage {s + 1}/{n_stages}: {tr.size} training images, classes {np.bincount(cls, minlength=3).tolist()}",
+        )
+        net = tt.ShrinkageCNN(3, channels, width, kernel)
+        hist = tt.fit(
+            net,
+            X[tr],
+            cls[tr],
+            Y[tr],
+            epochs=epochs,
+            device=dev,
+            seed=seed + s,
+            batch_size=batch_size,
+            lr=lr,
+            val=(X[va], cls[va], Y[va]),
+            log=log,
+        )
+        history.append(hist)
+        w = net.export()
+        mu = w.pop("mu")
+        for k in ("W1", "b1", "rw", "W2", "b2"):
+            stacks[k].append(w[k])
+        stacks["class_centres"].append(centres)
+        arrays = {k: np.stack(v) for k, v in stacks.items()} | {"mu": mu}
+        model = BM3DCNNModel(arrays | {"s": np.asarray(net.s)}, {"image_cols": fe.IMAGE_COLS})
+        if s + 1 < n_stages:
+            _advance(cases, model, s, vertex_iter)
+    train_s = time.perf_counter() - t0
+    meta = {
+        "model": "bm3d-cnn",
+        "architecture": (
+            f"per class (3, kappa-means on first-row eigenvalues): conv {channels}->{width} "
+            f"{kernel}x{kernel}, RBF shrinkage ({mu.size} Gaussians, Eq. 5.41), conv {width}->3 "
+            f"{kernel}x{kernel}, residual on the centre pixel; {n_stages} cascade stage(s); images "
+            f"{kernel}x{fe.IMAGE_COLS} of guided pixels + normals"
+        ),
+        "image_cols": fe.IMAGE_COLS,
+        "rbf_sigma": float(net.s),
+        "n_iter": int(n_stages),
+        "vertex_iter": int(vertex_iter),
+        "training_meshes": list(meshes),
+        "noise": "gaussian-normal",
+        "noise_levels": list(levels),
+        "samples_per_case": int(per_case),
+        "seed": int(seed),
+        "epochs": int(epochs),
+        "device": str(dev),
+        "train_seconds": round(train_s, 1),
+        "spectrageo_version": package_version(),
+    }
+    path = save_weights(out, arrays, meta)
+    summary = {"weights": str(path), "meta": meta, "loss": history}
+    if report:
+        summary["validation"] = _report_theta(data_dir, "bm3d-cnn", path, seed)
+        write_report(path, summary)
+    return summary
+
+
+# --------------------------------------------------------------------------- dae
+def train_dae(
+    data_dir,
+    out,
+    *,
+    epochs: int = 10,
+    device: str = "cpu",
+    seed: int = 0,
+    meshes=None,
+    levels=None,
+    per_case: int = 4000,
+    n_groups: int = 4,
+    hidden: int = 32,
+    vertex_iter: int = 20,
+    threads: int | None = None,
+    report: bool = True,
+    log=print,
+) -> dict:
+    """Train the static content-wise DAE weights (Section 5.1.3, Algorithm 4) and write them."""
+    from ..geometry import face_normals
+    from . import _torch as tt
+    from .dae import face_rows, feature_mask, fit_groups, rows_of
+
+    check_positive(epochs, "epochs", integer=True)
+    data_dir = Path(data_dir)
+    meshes = check_training_meshes(TRAIN_MESHES if meshes is None else meshes)
+    levels = TRAIN_LEVELS if levels is None else tuple(float(x) for x in levels)
+    dev = tt.setup(seed, device=device, threads=threads)
+    gen = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    Xs, Ys, Fs = [], [], []
+    for rel in meshes:
+        V0, F = _load(data_dir, rel)
+        Nc = face_normals(V0, F)
+        for lv in levels:
+            rows, R, idx, _ = face_rows(_noisy(V0, F, rel, lv, seed), F)
+            feat = feature_mask(rows)  # identified per mesh, as at denoising time
+            sel = np.arange(F.shape[0])
+            if sel.size > per_case:
+                sel = np.sort(gen.choice(sel.size, per_case, replace=False))
+            Xs.append(rows[sel])
+            Ys.append(rows_of(Nc, idx[sel], R[sel]))
+            Fs.append(feat[sel])
+    X, Y, feat = np.concatenate(Xs), np.concatenate(Ys), np.concatenate(Fs)
+    centres = fit_groups(X, feat, n_groups, rng=gen)
+    mid = np.empty(X.shape[0], dtype=np.int64)
+    for c in (0, 1):
+        sel = np.flatnonzero(feat == c)
+        mid[sel] = c * n_groups + fe.assign_classes(X[sel], centres[c])
+    nval = max(1, X.shape[0] // 20)
+    perm = gen.permutation(X.shape[0])
+    va, tr = perm[:nval], perm[nval:]
+    _log(
+        log,
+        f"dae: {tr.size} training rows, rows per model {np.bincount(mid, minlength=2 * n_groups).tolist()}",
+    )
+    net = tt.ContentDAE(2 * n_groups, X.shape[1], hidden)
+    hist = tt.fit(
+        net,
+        X[tr],
+        mid[tr],
+        Y[tr],
+        epochs=epochs,
+        device=dev,
+        seed=seed,
+        val=(X[va], mid[va], Y[va]),
+        log=log,
+    )
+    arrays = net.export() | {"centres": centres}
+    train_s = time.perf_counter() - t0
+    meta = {
+        "model": "dae",
+        "architecture": f"content-wise DAE: 2 classes (RPCA features) x {n_groups} kappa-means groups, {X.shape[1]}-{hidden}-{X.shape[1]} tanh",
+        "activation": "tanh",
+        "image_cols": fe.IMAGE_COLS,
+        "feature_threshold": 0.7,
+        "n_iter": 1,
+        "vertex_iter": int(vertex_iter),
+        "training_meshes": list(meshes),
+        "noise": "gaussian-normal",
+        "noise_levels": list(levels),
+        "samples_per_case": int(per_case),
+        "seed": int(seed),
+        "epochs": int(epochs),
+        "device": str(dev),
+        "train_seconds": round(train_s, 1),
+        "spectrageo_version": package_version(),
+    }
+    path = save_weights(out, arrays, meta)
+    summary = {"weights": str(path), "meta": meta, "loss": [hist]}
+    if report:
+        summary["validation"] = _report_theta(data_dir, "dae", path, seed)
+        write_report(path, summary)
+    return summary
+
+
+# --------------------------------------------------------------------------- report
+def _report_theta(data_dir: Path, model: str, weights: Path, seed: int) -> list[dict]:
+    """Theta of the noisy input and of ``model`` on :data:`REPORT_MESH` at :data:`REPORT_LEVELS`."""
+    from .bm3d_cnn import bm3d_cnn
+    from .dae import dae
+
+    func = bm3d_cnn if model == "bm3d-cnn" else dae
+    path = Path(data_dir) / REPORT_MESH
+    if not path.is_file():
+        return []
+    V0, F = _load(data_dir, REPORT_MESH)
+    rows = []
+    for lv in REPORT_LEVELS:
+        Vn = _noisy(V0, F, REPORT_MESH, lv, seed + 1)
+        t = time.perf_counter()
+        X = func(Vn, F, weights=weights)
+        rows.append(
+            {
+                "mesh": REPORT_MESH,
+                "level": lv,
+                "input_theta": _theta(Vn, V0, F),
+                "theta": _theta(X, V0, F),
+                "seconds": time.perf_counter() - t,
+            }
+        )
+    return rows
+
+
+def write_report(weights: Path, summary: dict) -> list[Path]:
+    """``<weights>.json``, ``<weights>.md`` and (with matplotlib) ``<weights>_loss.png``."""
+    weights = Path(weights)
+    base = weights.with_suffix("")
+    paths = []
+    js = base.with_suffix(".json")
+    js.write_text(json.dumps(summary, indent=1, default=float))
+    paths.append(js)
+    meta = summary["meta"]
+    lines = [f"# Training report: {meta['model']}", "", f"- weights: `{weights.name}`"]
+    for k in (
+        "architecture",
+        "training_meshes",
+        "noise",
+        "noise_levels",
+        "epochs",
+        "seed",
+        "device",
+        "train_seconds",
+    ):
+        lines.append(f"- {k}: {meta.get(k)}")
+    lines += [
+        "",
+        "## Loss (mean squared error)",
+        "",
+        "| stage | epoch | train | validation |",
+        "|---|---|---|---|",
+    ]
+    for s, h in enumerate(summary["loss"]):
+        for e, tr in enumerate(h["train"]):
+            va = h["val"][e] if e < len(h.get("val", [])) else float("nan")
+            lines.append(f"| {s + 1} | {e + 1} | {tr:.5f} | {va:.5f} |")
+    val = summary.get("validation") or []
+    if val:
+        lines += [
+            "",
+            f"## Validation theta (degrees) on {REPORT_MESH} (never trained on)",
+            "",
+            "| level | noisy | model | seconds |",
+            "|---|---|---|---|",
+        ]
+        for r in val:
+            lines.append(
+                f"| {r['level']:g} | {r['input_theta']:.2f} | {r['theta']:.2f} | {r['seconds']:.1f} |"
+            )
+    md = base.with_suffix(".md")
+    md.write_text("\n".join(lines) + "\n")
+    paths.append(md)
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return paths
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for s, h in enumerate(summary["loss"]):
+        ax.plot(range(1, len(h["train"]) + 1), h["train"], label=f"stage {s + 1} train")
+        if h.get("val"):
+            ax.plot(range(1, len(h["val"]) + 1), h["val"], "--", label=f"stage {s + 1} validation")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("MSE")
+    ax.set_yscale("log")
+    ax.set_title(f"{meta['model']} training loss")
+    ax.legend()
+    png = Path(str(base) + "_loss.png")
+    fig.tight_layout()
+    fig.savefig(png, dpi=100)
+    plt.close(fig)
+    paths.append(png)
+    return paths
+
+
+__all__ = [
+    "REPORT_MESH",
+    "TRAIN_LEVELS",
+    "TRAIN_MESHES",
+    "check_training_meshes",
+    "train_bm3d_cnn",
+    "train_dae",
+    "write_report",
+]
