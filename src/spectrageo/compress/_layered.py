@@ -96,11 +96,10 @@ SWEEPS = 4
 
 KIND_HEADER, KIND_FRAME, KIND_INDEX = 0, 1, 2
 TAG_CONNECTIVITY = 1
-TAG_ORDER = 2
+TAG_ORDER = 2  # the temporal levels from which the layer order is computed
 TAG_FRAME = 7
 _HEAD = struct.Struct("<BIdIB")  # kind, frame count, step, refresh, fine
 _FRAME = struct.Struct("<BIIId")  # kind, frame number, frame number, 1, step (block layout)
-_KIND = struct.Struct("<B")
 _MAX_FRAMES = 1 << 24
 
 
@@ -268,11 +267,6 @@ def layer_order(frames, F, *, rho: float = RHO, eta: float = ETA) -> np.ndarray:
     return order_from_levels(F, n, motion_levels(A), rho=rho, eta=eta)
 
 
-def _mean_edge(V: np.ndarray, F: np.ndarray) -> float:
-    E = V[F[:, [1, 2, 0]]] - V[F]
-    return float(np.linalg.norm(E, axis=2).mean())
-
-
 # ----------------------------------------------------------------------------- reconstruction
 def _face_normals(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     cr = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
@@ -314,7 +308,6 @@ class Reconstructor:
         self.VF = sp.csr_matrix(
             (np.ones(3 * m), (F.ravel(), np.repeat(np.arange(m), 3))), shape=(n, m)
         )
-        self.ring_area = None
 
     # -- frame 0
     def first(self, V0: np.ndarray) -> np.ndarray:
