@@ -16,17 +16,16 @@ Encoder, online: frame 0 is sent whole (its quantised positions); frame ``t`` se
 ``l_t`` -- the positions of the vertices of ``M_{l_t}`` as residuals against a constant-velocity
 prediction from the two previous *decoded* frames (closed loop, so quantisation errors do not
 accumulate on them; the thesis transmits the vertices without saying how they are coded; on
-horse-gallop the prediction saves only about 2 % of their bits against the last frame alone), uniformly quantised with the step ``s`` (a fraction of the
-bounding-box diagonal) and entropy coded; the decoder turns them into the motion vectors of
-Eq. (5.64). The
+horse-gallop the prediction saves only about 2 % of their bits against the last frame alone),
+uniformly quantised with the step ``s`` (a fraction of twice the first frame's bounding-box
+diagonal) and entropy coded; the decoder turns them into the motion vectors of Eq. (5.64). The
 layer of every frame is chosen for a target rate (``bpvf``: the largest layer whose frame fits
 the budget), which is the per-frame rate adaptation of Algorithm 11 line 5 (for a whole file,
 :func:`encode` searches the per-frame budget that brings the whole file -- header and first
-frame included -- to ``bpvf``). Every
-``refresh`` frames (default 16; 0 = never) a refresh frame also sends the quantised residual
-of every other vertex against the decoder's prediction, which bounds the drift of the vertices
-that are never transmitted (the thesis streams without it; the residuals are mostly zero and
-cheap).
+frame included -- to ``bpvf``). Every ``refresh`` frames (default 16; 0 = never) a refresh frame
+also sends the quantised residual of every other vertex against the decoder's prediction, which
+bounds the drift of the vertices that are never transmitted (the thesis streams without it; the
+residuals are mostly zero and cheap).
 
 Decoder (Algorithm 11 lines 7-15), frame by frame, needing only frames ``<= t``:
 
@@ -40,8 +39,8 @@ Decoder (Algorithm 11 lines 7-15), frame by frame, needing only frames ``<= t``:
    then sweeps a few times over all unknown vertices with all neighbours, until
    ``|R^_1(i)| = |R_1(i)|``; ``v_u(t) = v_u(t-1) + B_u`` (Eq. 5.65);
 2. fine reconstruction (``fine=True``; off by default: on the tuning animation, horse-gallop's
-   first 48 frames at layer 0.1 and 0.05, it changed the KG error by less than 0.3 % while making
-   decoding 4-13 times slower): the face normals of the coarse frame are denoised by RPCA over the
+   first 48 frames at layer 0.1 and 0.05 and step 2.5e-4, it changed the KG error by less than
+   0.3 % while making decoding 4-13 times slower): the face normals of the coarse frame are denoised by RPCA over the
    first ``n_t`` frames (Eq. 5.66-5.68, ``n_t = 8``) and afterwards by the incremental SVD of
    Eq. 5.69-5.71 with the shifting window of Eq. 5.72; the vertices that were not received and
    whose first-ring area changed by more than 1 % (``Phi``, Eq. 5.73) are moved towards the
@@ -52,8 +51,9 @@ Decoder (Algorithm 11 lines 7-15), frame by frame, needing only frames ``<= t``:
    followed).
 
 Stream layout: a header segment (kind 0: frame count, step, refresh, fine; chunks:
-connectivity, the temporal levels from which both sides compute the layer order), one segment per frame (kind 1, ``nf = 1``; chunk: layer, coded
-motion vectors and, on refresh frames, residuals) and, for files, the frame index (kind 2).
+connectivity, the temporal levels from which both sides compute the layer order), one segment
+per frame (kind 1, ``nf = 1``; chunk: layer, coded residuals of the sent vertices and, on
+refresh frames, of the others) and, for files, the frame index (kind 2).
 Decoding is sequential: a frame needs the decoded frame before it (random access starts at
 frame 0; the frame index still gives each frame's offset and length).
 """
