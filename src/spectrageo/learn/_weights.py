@@ -82,3 +82,34 @@ def package_version() -> str:
         return version("spectrageo")
     except Exception:  # noqa: BLE001 - metadata absent in a source checkout
         return "unknown"
+
+
+def unrotate_unit(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``R_i^T p_i`` for (m, 3, 3) rotations and (m, 3) predictions, as unit rows (zero rows stay
+    zero): a normal predicted in the patch frame brought back to the mesh frame."""
+    n = np.einsum("mji,mj->mi", R, p)
+    nrm = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, nrm, out=np.zeros_like(n), where=nrm > 0)
+
+
+def model_loader(model_cls, method: str):
+    """``load_model(weights=None)`` for ``model_cls``: a loaded model passes through, a path is
+    loaded once per (path, modification time), None loads the shipped weights of ``method``."""
+    from functools import lru_cache
+
+    @lru_cache(maxsize=8)
+    def cached(path: str, mtime: float):
+        return model_cls.load(path)
+
+    def load_model(weights=None):
+        if isinstance(weights, model_cls):
+            return weights
+        path = default_weights(method) if weights is None else Path(weights)
+        if not path.is_file():
+            raise InvalidInputError(f"`weights` file not found: {path}.")
+        return cached(str(path.resolve()), path.stat().st_mtime)
+
+    load_model.__doc__ = (
+        f"The {method} model of ``weights`` (a path, a loaded model, or None: the shipped weights)."
+    )
+    return load_model

@@ -39,7 +39,6 @@ Choices where the thesis leaves room (each measured on the training meshes only)
 
 from __future__ import annotations
 
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +47,7 @@ from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
 from . import _features as fe
 from ._nn import RBFTable, cnn_centre
-from ._weights import default_weights, load_weights
+from ._weights import default_weights, load_weights, model_loader, unrotate_unit
 
 #: arrays of a bm3d-cnn weight file (leading axes: stage, class)
 ARRAYS = ("class_centres", "W1", "b1", "rw", "mu", "W2", "b2")
@@ -136,24 +135,10 @@ class BM3DCNNModel:
         """Filtered unit face normals (m, 3) of one stage (steps 1-5 and the rotation back)."""
         img, R = self.images(V, F)
         p = self.predict(img, s)
-        n = np.einsum("mji,mj->mi", R, p)  # R^T p
-        nrm = np.linalg.norm(n, axis=1, keepdims=True)
-        return np.divide(n, nrm, out=np.zeros_like(n), where=nrm > 0)
+        return unrotate_unit(R, p)
 
 
-@lru_cache(maxsize=8)
-def _cached(path: str, mtime: float) -> BM3DCNNModel:
-    return BM3DCNNModel.load(path)
-
-
-def load_model(weights=None) -> BM3DCNNModel:
-    """The bm3d-cnn model of ``weights`` (a path, a loaded model, or None: the shipped weights)."""
-    if isinstance(weights, BM3DCNNModel):
-        return weights
-    path = default_weights("bm3d-cnn") if weights is None else Path(weights)
-    if not path.is_file():
-        raise InvalidInputError(f"`weights` file not found: {path}.")
-    return _cached(str(path.resolve()), path.stat().st_mtime)
+load_model = model_loader(BM3DCNNModel, "bm3d-cnn")
 
 
 def bm3d_cnn(

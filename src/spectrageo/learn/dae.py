@@ -37,7 +37,6 @@ are at hand, ``clean=`` uses them as targets instead, as in the thesis.
 
 from __future__ import annotations
 
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +46,7 @@ from .._validation import as_faces, as_frames, as_points, check_positive
 from ..geometry import face_normals
 from . import _features as fe
 from ._nn import mlp_forward, train_mlp_numpy
-from ._weights import default_weights, load_weights
+from ._weights import default_weights, load_weights, model_loader, unrotate_unit
 
 ARRAYS = ("centres", "W1", "b1", "W2", "b2")
 #: RPCA feature threshold ``e`` of Section 5.1.3
@@ -147,24 +146,10 @@ class DAEModel:
         """Denoised unit face normals ``n_bar_c`` (m, 3)."""
         rows, R, _, _ = face_rows(V, F, self.k)
         centre = self.predict_rows(rows)[:, :3]  # nearest first: the face itself
-        n = np.einsum("mji,mj->mi", R, centre)
-        nrm = np.linalg.norm(n, axis=1, keepdims=True)
-        return np.divide(n, nrm, out=np.zeros_like(n), where=nrm > 0)
+        return unrotate_unit(R, centre)
 
 
-@lru_cache(maxsize=8)
-def _cached(path: str, mtime: float) -> DAEModel:
-    return DAEModel.load(path)
-
-
-def load_model(weights=None) -> DAEModel:
-    """The DAE model of ``weights`` (a path, a loaded model, or None: the shipped weights)."""
-    if isinstance(weights, DAEModel):
-        return weights
-    path = default_weights("dae") if weights is None else Path(weights)
-    if not path.is_file():
-        raise InvalidInputError(f"`weights` file not found: {path}.")
-    return _cached(str(path.resolve()), path.stat().st_mtime)
+load_model = model_loader(DAEModel, "dae")
 
 
 def _update(V, F, model: DAEModel, n_iter: int, vertex_iter: int) -> np.ndarray:
@@ -355,10 +340,7 @@ def _denoise_frames(A: np.ndarray, F, model: DAEModel, vertex_iter: int) -> np.n
     for t in range(A.shape[0]):
         rows, R = data.rows(t, r)
         centre = model.predict_rows(rows)[:, :3]
-        n = np.einsum("mji,mj->mi", R, centre)
-        nrm = np.linalg.norm(n, axis=1, keepdims=True)
-        n = np.divide(n, nrm, out=np.zeros_like(n), where=nrm > 0)
-        out[t] = fast_update_vertices(A[t], F, n, vertex_iter)
+        out[t] = fast_update_vertices(A[t], F, unrotate_unit(R, centre), vertex_iter)
         data.cache.pop(t - r - 1, None)  # frames no longer needed
     return out
 

@@ -113,6 +113,31 @@ def _advance(cases, model, stage, vertex_iter):
         case["current"] = fast_update_vertices(case["current"], case["faces"], N, vertex_iter)
 
 
+def _run_meta(meshes, levels, per_case, seed, epochs, dev, train_s) -> dict:
+    """Metadata of a training run shared by both models (stored in the weights file)."""
+    return {
+        "training_meshes": list(meshes),
+        "noise": "gaussian-normal",
+        "noise_levels": list(levels),
+        "samples_per_case": int(per_case),
+        "seed": int(seed),
+        "epochs": int(epochs),
+        "device": str(dev),
+        "train_seconds": round(train_s, 1),
+        "spectrageo_version": package_version(),
+    }
+
+
+def _finish(out, arrays, meta, loss, data_dir, method, seed, report) -> dict:
+    """Save the weights and, with ``report``, the validation theta and the training report."""
+    path = save_weights(out, arrays, meta)
+    summary = {"weights": str(path), "meta": meta, "loss": loss}
+    if report:
+        summary["validation"] = _report_theta(data_dir, method, path, seed)
+        write_report(path, summary)
+    return summary
+
+
 def train_bm3d_cnn(
     data_dir,
     out,
@@ -221,22 +246,9 @@ def train_bm3d_cnn(
         "rbf_sigma": float(net.s),
         "n_iter": int(n_stages),
         "vertex_iter": int(vertex_iter),
-        "training_meshes": list(meshes),
-        "noise": "gaussian-normal",
-        "noise_levels": list(levels),
-        "samples_per_case": int(per_case),
-        "seed": int(seed),
-        "epochs": int(epochs),
-        "device": str(dev),
-        "train_seconds": round(train_s, 1),
-        "spectrageo_version": package_version(),
+        **_run_meta(meshes, levels, per_case, seed, epochs, dev, train_s),
     }
-    path = save_weights(out, arrays, meta)
-    summary = {"weights": str(path), "meta": meta, "loss": history}
-    if report:
-        summary["validation"] = _report_theta(data_dir, "bm3d-cnn", path, seed)
-        write_report(path, summary)
-    return summary
+    return _finish(out, arrays, meta, history, data_dir, "bm3d-cnn", seed, report)
 
 
 # --------------------------------------------------------------------------- dae
@@ -317,22 +329,9 @@ def train_dae(
         "feature_threshold": 0.7,
         "n_iter": 1,
         "vertex_iter": int(vertex_iter),
-        "training_meshes": list(meshes),
-        "noise": "gaussian-normal",
-        "noise_levels": list(levels),
-        "samples_per_case": int(per_case),
-        "seed": int(seed),
-        "epochs": int(epochs),
-        "device": str(dev),
-        "train_seconds": round(train_s, 1),
-        "spectrageo_version": package_version(),
+        **_run_meta(meshes, levels, per_case, seed, epochs, dev, train_s),
     }
-    path = save_weights(out, arrays, meta)
-    summary = {"weights": str(path), "meta": meta, "loss": [hist]}
-    if report:
-        summary["validation"] = _report_theta(data_dir, "dae", path, seed)
-        write_report(path, summary)
-    return summary
+    return _finish(out, arrays, meta, [hist], data_dir, "dae", seed, report)
 
 
 # --------------------------------------------------------------------------- report
