@@ -172,3 +172,21 @@ def test_whole_file_bpvf_within_5_percent(anim):
         compress.encode_animation(A, F, method="layered", bpvf=0.05)
     with pytest.raises(InvalidInputError, match="every vertex of every frame"):
         compress.encode_animation(A, F, method="layered", bpvf=500.0)
+
+
+def test_still_animation_costs_little_and_stays_exact(anim):
+    """A clean, motionless input: every frame after the first codes zero residuals, so the
+    result is the first frame's quantisation and later frames cost a few bytes each."""
+    A, F = anim
+    still = np.repeat(A[:1], 10, axis=0)
+    data = compress.encode_animation(still, F, method="layered")
+    R, _ = compress.decode_animation(data)
+    diag = np.linalg.norm(A[0].max(0) - A[0].min(0))
+    assert np.abs(R - still).max() <= 0.5 * _layered.DEFAULT_STEP * 2 * diag * 1.0001
+    assert np.array_equal(R[1:], np.repeat(R[:1], 9, axis=0))
+    # the frames after the first hold their segment header (about 100 bytes: the container's
+    # header is repeated per segment) and empty residuals: about half of a moving frame here
+    first = len(compress.encode_animation(still[:1], F, method="layered"))
+    moving = len(compress.encode_animation(A[:10], F, method="layered"))
+    assert (len(data) - first) / 9 < 120
+    assert len(data) - first < 0.6 * (moving - first)

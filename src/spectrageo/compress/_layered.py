@@ -71,6 +71,7 @@ from numba import njit
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_frames
 from . import _connectivity, _container
+from ._animation import KIND_BLOCK, KIND_HEADER, TAG_CONNECTIVITY
 from ._container import Reader, varint
 from ._entropy import decode_groups, encode_groups
 
@@ -94,8 +95,9 @@ AREA_CHANGE = 0.01
 #: sweeps of the geometric Laplacian interpolation after the ring-by-ring pass (Eq. 5.64)
 SWEEPS = 4
 
-KIND_HEADER, KIND_FRAME, KIND_INDEX = 0, 1, 2
-TAG_CONNECTIVITY = 1
+# segment kinds and the connectivity tag are those of the other .sga streams (a frame is a block
+# of one frame), so the shared parser (:func:`._animation.iter_segments`) reads both
+KIND_FRAME = KIND_BLOCK
 TAG_ORDER = 2  # the temporal levels from which the layer order is computed
 TAG_FRAME = 7
 _HEAD = struct.Struct("<BIdIB")  # kind, frame count, step, refresh, fine
@@ -104,13 +106,19 @@ _MAX_FRAMES = 1 << 24
 
 
 # ----------------------------------------------------------------------------- layers
-def _rings(F: np.ndarray, n: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """Binary adjacency ``C`` and the ring-level matrix ``R`` (entry j for j-ring, j = 1..3)."""
+def _adjacency(F: np.ndarray, n: int) -> sp.csr_matrix:
+    """Binary vertex adjacency ``C`` (CSR, zero diagonal) of the faces."""
     i, j = F[:, [0, 1, 2, 1, 2, 0]].ravel(), F[:, [1, 2, 0, 0, 1, 2]].ravel()
     C = sp.csr_matrix((np.ones(i.size), (i, j)), shape=(n, n))
     C.data[:] = 1.0
     C.setdiag(0)
     C.eliminate_zeros()
+    return C.tocsr()
+
+
+def _rings(F: np.ndarray, n: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """Binary adjacency ``C`` and the ring-level matrix ``R`` (entry j for j-ring, j = 1..3)."""
+    C = _adjacency(F, n)
     reach = sp.identity(n, format="csr")
     level = sp.csr_matrix((n, n))
     for ring in (1, 2, 3):
@@ -121,7 +129,7 @@ def _rings(F: np.ndarray, n: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
         reach = nxt
     level = level.tocsr()
     level.sort_indices()
-    return C.tocsr(), level
+    return C, level
 
 
 @njit(cache=True)
@@ -291,7 +299,7 @@ class Reconstructor:
         self.n = n
         self.order = order
         self.fine = fine
-        C, _level = _rings(F, n)
+        C = _adjacency(F, n)
         self.C = C
         self.rows = np.repeat(np.arange(n), np.diff(C.indptr))
         self.cols = C.indices

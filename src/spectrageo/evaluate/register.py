@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._tables import fmt_cell, have, pyplot, rows_to_csv, save_png, write_section
+from ._tables import have, markdown_table, pyplot, rows_to_csv, save_png, write_section
 
 TUNING = {"bunny_seed": 1, "reg_seed": 1, "generated": ("armadillo",), "gen_seed": 1}
 VALIDATION = {
@@ -379,13 +379,7 @@ def format_markdown(rows: list[dict]) -> str:
     """Summary table (success per data set / overlap bin / method) followed by the per-pair rows."""
     cols = ("data", "bin", "method", "n", "success", "rate", "med_rot_err_deg", "med_trans_err",
             "mean_seconds")  # fmt: skip
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for s in summary(rows):
-        lines.append("| " + " | ".join(fmt_cell(s[c]) for c in cols) + " |")
-    lines += ["", "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
-    for r in rows:
-        lines.append("| " + " | ".join(fmt_cell(r.get(c)) for c in COLUMNS) + " |")
-    return "\n".join(lines)
+    return "\n".join([*markdown_table(summary(rows), cols), "", *markdown_table(rows, COLUMNS)])
 
 
 def format_csv(rows: list[dict]) -> str:
