@@ -3,6 +3,12 @@ default settings; mean face-normal change (degrees) and largest vertex move (fra
 bounding-box diagonal) per method. Issue #14's target: <= 2 degrees and <= 0.5 %.
 
     python benchmarks/clean_inputs.py [--methods tsgsp,gnf,bnf] [--max-vertices N] [--out FILE.md]
+                                      [--before OLD.md]
+
+``--before`` reads a table this script wrote earlier (e.g. with a previous gate) and adds its
+mean normal change per method next to the new one. The split column is the protocol of the detail
+test (:mod:`spectrageo.denoise._guard`): meshes at even positions of this list (0-based) are the
+tuning half its thresholds were chosen on, odd positions the validation half.
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from spectrageo import denoise, io
+from spectrageo.denoise._guard import MIN_NOISE, noise_estimate
 from spectrageo.metrics import theta_deg
 
 SKIP = (".txt", ".md", ".yml")
@@ -24,12 +31,15 @@ INTRO = """## Clean inputs: do no harm
 
 `python benchmarks/clean_inputs.py --max-vertices 40000`: every clean mesh of the shared `meshes/`
 and `cad/` folders up to 40k vertices denoised with default settings (`denoise.denoise`, gate
-`min_noise=0.015` and trust region on). Columns: the curvature-robust noise level
-(`denoise.noise_level`), then per method the mean face-normal change in degrees, the largest vertex
-move in % of the bounding-box diagonal and the time in seconds. Target of issue 14: <= 2 degrees and
-<= 0.5 %. The gate threshold was chosen on the shared denoising pairs only. Meshes whose level is
-above the gate (organic scans with detail at 0.02-0.08 patch radii, which a local estimate cannot
-tell from noise) are smoothed.
+`min_noise=0.015` and trust region on). Columns: the split of the detail test (tuning: even
+positions of this list, validation: odd), the curvature-robust quadric residual level (`raw`, the
+level the gate compared before the detail test), the detail test's growth `G`, smoothing survival
+`S` and lower-tail ratio `T` (`spectrageo.denoise._guard.noise_estimate`, Eqs. N2-N4; white noise:
+G = 1, S ~ 0.05, T = 0.72), the gate's decision (`noisy` = denoised), then per method the mean
+face-normal change in degrees (with `--before`: the previous table's value first), the largest
+vertex move in % of the bounding-box diagonal and the time in seconds. Target of issue 14: <= 2
+degrees and <= 0.5 %. The level gate was chosen on the shared denoising pairs, the detail test's
+thresholds on the tuning half with noisy versions of it; the validation half played no part.
 
 """
 
@@ -47,25 +57,61 @@ def clean_meshes(data: Path, max_vertices: int):
             yield f"{sub}/{p.name}", m.vertices, m.faces
 
 
+def _fmt(x: float, digits: int) -> str:
+    """``x`` with ``digits`` decimals; '-' where the detail test did not run (NaN), '>99' where
+    the residual at ``patch`` neighbours is numerically zero (exact tessellations)."""
+    if np.isnan(x):
+        return "-"
+    return ">99" if x > 99 else f"{x:.{digits}f}"
+
+
+def _read_before(path: Path, methods) -> dict:
+    """``{(mesh, method): 'deg'}`` from a markdown table written by this script."""
+    out: dict = {}
+    header = None
+    for line in path.read_text().splitlines():
+        if not line.startswith("|") or line.startswith("|---"):
+            continue
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if cells[0] == "mesh":
+            header = cells
+            continue
+        if header is None:
+            continue
+        for m in methods:
+            if f"{m} deg" in header:
+                out[(cells[0], m)] = cells[header.index(f"{m} deg")]
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--data", default=os.environ.get("SPECTRAGEO_DATA", "../shared/data"))
     ap.add_argument("--methods", default="tsgsp,gnf,bnf")
     ap.add_argument("--max-vertices", type=int, default=500_000)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--before", default=None, help="an earlier output of this script")
     a = ap.parse_args()
     methods = a.methods.split(",")
+    before = _read_before(Path(a.before), methods) if a.before else None
+    deg = [f"{m} deg before | {m} deg" if before is not None else f"{m} deg" for m in methods]
     lines = [
-        "| mesh | n | level | "
-        + " | ".join(f"{m} deg | {m} move % | {m} s" for m in methods)
+        "| mesh | split | n | raw | G | S | T | gate | "
+        + " | ".join(f"{d} | {m} move % | {m} s" for d, m in zip(deg, methods))
         + " |",
-        "|---|---:|---:|" + "---:|---:|---:|" * len(methods),
+        "|---|---|---:|---:|---:|---:|---:|---|"
+        + ("---:|" * (4 if before is not None else 3)) * len(methods),
     ]
     worst = {m: [0.0, 0.0, 0] for m in methods}
     count = 0
-    for name, V, F in clean_meshes(Path(a.data), a.max_vertices):
+    for pos, (name, V, F) in enumerate(clean_meshes(Path(a.data), a.max_vertices)):
         diag = float(np.linalg.norm(np.ptp(V, axis=0)))
-        row = [name, str(V.shape[0]), f"{denoise.noise_level(V):.4f}"]
+        e = noise_estimate(V)
+        row = [name, "tuning" if pos % 2 == 0 else "validation", str(V.shape[0])]
+        row.append(f"{e.raw_level:.4f}")
+        row += [_fmt(x, d) for x, d in ((e.growth, 2), (e.survival, 3), (e.tail, 2))]
+        flipped = e.raw_level >= MIN_NOISE and e.detail  # the level alone would call it noisy
+        row.append("noisy" if e.level >= MIN_NOISE else ("clean (detail)" if flipped else "clean"))
         count += 1
         for m in methods:
             t = time.perf_counter()
@@ -76,6 +122,8 @@ def main() -> None:
             w = worst[m]
             w[0], w[1] = max(w[0], th), max(w[1], mv)
             w[2] += th <= 2.0 and mv <= 0.5
+            if before is not None:
+                row.append(before.get((name, m), "-"))
             row += [f"{th:.2f}", f"{mv:.3f}", f"{dt:.1f}"]
         lines.append("| " + " | ".join(row) + " |")
         print(lines[-1], flush=True)

@@ -109,8 +109,10 @@ def denoise(
     min_noise : float or None
         Do-no-harm gate (:mod:`spectrageo.denoise._guard`): a mesh whose curvature-robust noise
         level (:func:`spectrageo.denoise.noise_level`, noise standard deviation over the median
-        16-neighbour patch radius) is below ``min_noise`` is returned unchanged, whatever the
-        method. Default :data:`spectrageo.denoise._guard.MIN_NOISE` (0.015, chosen on the tuning
+        16-neighbour patch radius; 0 when the residual passes the detail test of
+        :func:`spectrageo.denoise._guard.noise_estimate`, i.e. is spatially correlated surface
+        detail rather than white noise) is below ``min_noise`` is returned unchanged, whatever
+        the method. Default :data:`spectrageo.denoise._guard.MIN_NOISE` (0.015, chosen on the tuning
         split); ``0`` or a negative value disables the gate.
     **options
         Keyword options of the method. ``trust`` (noise standard deviations of Eq. 5.15, default
