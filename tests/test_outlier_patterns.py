@@ -220,7 +220,9 @@ def test_remove_outliers_reports_contamination_and_rule():
     r = remove_outliers(Q, return_points=False, threshold_rule="valley")
     assert r.info["threshold_rule"] == "valley"
     assert abs(r.info["contamination"] - lab.mean()) <= 0.03
-    old = remove_outliers(Q, return_points=False)  # the default rule
+    default = remove_outliers(Q, return_points=False)  # the default rule is the valley
+    assert default.info["threshold_rule"] == "valley" and default.threshold == r.threshold
+    old = remove_outliers(Q, return_points=False, threshold_rule="density")
     assert old.info["threshold_rule"] == "density" and np.array_equal(old.scores, r.scores)
     given = remove_outliers(Q, return_points=False, threshold=1.0)
     assert given.info["threshold_rule"] == "given" and given.threshold == 1.0

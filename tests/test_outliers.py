@@ -278,8 +278,12 @@ def test_remove_far_outliers_synthetic(method):
     assert r.scores.shape == lab.shape and np.isfinite(r.scores).all()
     assert _f1(r.keep, lab) > (0.9 if method == "rpca" else 0.8)
     np.testing.assert_array_equal(r.points.points, P[r.keep])
-    # the threshold reproduces the mask
-    cmp = r.scores < r.threshold if method == "rpca" else r.scores <= r.threshold
+    # the threshold reproduces the mask (rpca: points of small volumetric clusters removed too)
+    if method == "rpca":
+        cmp = (r.scores < r.threshold) & ~rpca_scores(P, 10).clusters
+        assert r.info["n_cluster_outliers"] >= np.count_nonzero(~r.keep & (r.scores < r.threshold))
+    else:
+        cmp = r.scores <= r.threshold
     np.testing.assert_array_equal(r.keep, cmp)
 
 

@@ -139,3 +139,74 @@ def cmd_outliers_tiled(args) -> int:
         f"{i['time_total_s']:.2f} s)"
     )
     return 0
+
+
+def _check_tile(args) -> None:
+    if args.tile is None or args.tile <= 0:
+        raise InvalidInputError(f"`tile` must be a positive number of points; got {args.tile}.")
+
+
+def cmd_saliency_tiled(args) -> int:
+    """``spectrageo saliency IN --out OUT --tile N``: :func:`spectrageo.distributed.saliency_tiled`."""
+    from .. import _progress, distributed
+    from . import commands
+
+    _check_tile(args)
+    if args.per == "face":
+        raise InvalidInputError("a point cloud has no faces; use --per vertex.")
+    commands._check_outputs([args.input], [args.out])
+    res = distributed.saliency_tiled(
+        args.input,
+        args.out,
+        tile=args.tile,
+        k=args.k,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=_progress.progress_enabled(),
+    )
+    i = res.info
+    commands._status(
+        f"wrote {args.out} ({res.n_points} values, {res.n_tiles} tiles of <= "
+        f"{i['tile_points_max']} points, halo +{100 * i['halo_fraction_mean']:.0f} %, "
+        f"{i['n_workers']} workers, {i['time_total_s']:.2f} s)"
+    )
+    return 0
+
+
+def cmd_robot_tiled(args) -> int:
+    """``spectrageo robot IN OUT --tile N``: :func:`spectrageo.distributed.robot_denoise_tiled`."""
+    import numpy as np
+
+    from .. import _progress, distributed
+    from . import commands
+
+    _check_tile(args)
+    if args.mesh:
+        raise InvalidInputError(
+            "--mesh is not available with --tile (the triangulation needs the whole cloud)."
+        )
+    res = distributed.robot_denoise_tiled(
+        args.input,
+        args.output,
+        tile=args.tile,
+        k=args.k,
+        threshold=args.threshold,
+        rpca_k=args.rpca_k,
+        sigma1=args.sigma1,
+        sigma2=args.sigma2,
+        n_iter=args.n_iter,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        return_arrays=bool(args.mask),
+        progress=_progress.progress_enabled(),
+    )
+    if args.mask:
+        commands._save_npy(args.mask, np.asarray(res.keep))
+    i = res.info
+    commands._status(
+        f"wrote {args.output}: kept {res.n_kept} of {res.n_points} points, filtered "
+        f"({res.n_tiles} tiles of <= {i['tile_points_max']} points, halo +"
+        f"{100 * i['halo_fraction_mean']:.0f} %, {i['n_workers']} workers, "
+        f"{i['time_total_s']:.2f} s)"
+    )
+    return 0

@@ -310,9 +310,14 @@ def cmd_denoise(args) -> int:
         opts["weights"] = args.weights
     if args.train_frames is not None and args.method != "dae":
         raise _err(f"--train-frames applies to --method dae only; got {args.method!r}.")
+    block_size = getattr(args, "block_size", None)
+    if block_size is not None and args.method != "gft-rpca":
+        raise _err(f"--block-size applies to --method gft-rpca only; got {args.method!r}.")
     t0 = time.perf_counter()
     if isinstance(obj, Mesh) and args.train_frames is not None:
         raise _err("--train-frames applies to animations (.npz or frame folders), not to a mesh.")
+    if isinstance(obj, Mesh) and block_size is not None:
+        raise _err("--block-size applies to animations (.npz or frame folders), not to a mesh.")
     if isinstance(obj, Mesh):
         with activity(f"denoise {args.method} ({obj.n_vertices} vertices)"):
             Vd = denoise.denoise(
@@ -323,7 +328,15 @@ def cmd_denoise(args) -> int:
         dyn = getattr(denoise, "dynamic_methods", lambda: [])()
         if args.method == "dae" and args.train_frames is not None:
             opts["train_frames"] = args.train_frames
-        if args.method in dyn or args.method == "dae":
+        if block_size is not None:
+            opts["block_size"] = block_size
+        # `spectrageo batch` sets this inside a Dask task: the frame blocks then run as tasks of
+        # the same cluster (spectrageo.distributed.gft_rpca_blocks, equal to the serial run)
+        frame_blocks = getattr(args, "frame_blocks", None)
+        if frame_blocks is not None and block_size is not None:
+            with activity(f"denoise {args.method} ({obj.n_frames} frames, Dask frame blocks)"):
+                frames = frame_blocks(obj.frames, obj.faces, **opts)
+        elif args.method in dyn or args.method == "dae":
             with activity(f"denoise {args.method} ({obj.n_frames} frames)"):
                 frames = denoise.denoise_animation(
                     obj.frames, obj.faces, method=args.method, **opts
@@ -361,7 +374,7 @@ def cmd_outliers(args) -> int:
 
         return cmd_outliers_tiled(args)
     obj, rep = _read(args.input, nan_points="drop")
-    opts = {"method": args.method, "k": args.k}
+    opts = {"method": args.method, "k": args.k, "device": getattr(args, "device", "cpu")}
     if args.threshold is not None:
         opts["threshold"] = args.threshold
     if isinstance(obj, PointCloudSequence):
@@ -424,6 +437,47 @@ def cmd_outliers(args) -> int:
         _save_npy(args.scores, scores)
     _status(
         f"wrote {args.output}: kept {int(np.sum(res.keep))} of {n_in} points ({args.method}){extra}"
+    )
+    return 0
+
+
+# --------------------------------------------------------------------------- robot
+def cmd_robot(args) -> int:
+    """``spectrageo robot IN OUT``: :func:`spectrageo.outliers.robot_pipeline` (Section 5.4.2)."""
+    from .. import io, outliers
+    from ..geometry import Mesh, PointCloud
+
+    _check_outputs([args.input], [args.output, args.mask])
+    if getattr(args, "tile", None) is not None:  # out-of-core on Dask (issue 21)
+        from .batch_cmds import cmd_robot_tiled
+
+        return cmd_robot_tiled(args)
+    obj, _rep = _read(args.input)
+    if isinstance(obj, Mesh):
+        cloud = PointCloud(
+            obj.vertices, obj.vertex_normals, obj.vertex_colors, obj.vertex_attributes
+        )
+    elif isinstance(obj, PointCloud):
+        cloud = obj
+    else:
+        raise _err(f"{Path(args.input).name}: robot needs a point cloud or a mesh's vertices.")
+    t0 = time.perf_counter()
+    res = outliers.robot_pipeline(
+        cloud,
+        k=args.k,
+        threshold=args.threshold,
+        rpca_k=args.rpca_k,
+        sigma1=args.sigma1,
+        sigma2=args.sigma2,
+        n_iter=args.n_iter,
+        output="mesh" if args.mesh else "cloud",
+    )
+    io.write(args.output, res.mesh if args.mesh else res.points)
+    if args.mask:
+        _save_npy(args.mask, np.asarray(res.keep, dtype=bool))
+    _status(
+        f"wrote {args.output}: kept {int(np.sum(res.keep))} of {cloud.n_points} points, "
+        f"filtered ({time.perf_counter() - t0:.2f} s)"
     )
     return 0
 
@@ -578,6 +632,12 @@ HELP_TEXTS: dict[str, tuple[str, str]] = {
         "Remove outliers from a point cloud, the vertices of a mesh (faces of kept vertices are\n"
         "kept) or a point-cloud sequence. Masks and scores cover every input row.",
         "spectrageo outliers scan.pcd clean.pcd --method rpca --mask keep.npy",
+    ),
+    "robot": (
+        "Consolidate a depth-camera cloud (Section 5.4.2): RPCA outlier removal, then bilateral\n"
+        "filtering of the kept points along their normals over k-NN cells (Eq. 5.100-5.101).",
+        "spectrageo robot scan.ply clean.ply --k 7\n"
+        "spectrageo robot big.las clean.las --tile 500000 --workers 2",
     ),
     "evaluate": (
         "Run methods and peers over the shared benchmark data; prints markdown tables and, with\n"
@@ -737,6 +797,14 @@ def register_all(sub) -> None:
         metavar="N",
         help="--method dae on an animation: train the autoencoders on its first N frames",
     )
+    p.add_argument(
+        "--block-size",
+        type=int,
+        default=None,
+        metavar="N",
+        help="--method gft-rpca on an animation: denoise blocks of N consecutive frames "
+        "independently (online mode; `spectrageo batch` runs one Dask task per block)",
+    )
     p.set_defaults(func=cmd_denoise)
 
     p = sub.add_parser(
@@ -772,7 +840,50 @@ def register_all(sub) -> None:
         "--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler"
     )
     p.add_argument("--workers", type=int, default=None, help="with --tile: local Dask workers")
+    p.add_argument(
+        "--device",
+        default="cpu",
+        choices=["cpu", "cuda", "auto"],
+        help="where the RPCA iterations run: cpu (numba, default), cuda (PyTorch on the GPU; "
+        "scores within 1e-3 spacings of cpu), auto (cuda when a GPU is visible). "
+        "--method sor/radius run on the CPU",
+    )
     p.set_defaults(func=cmd_outliers)
+
+    p = sub.add_parser(
+        "robot", help="RPCA outlier removal + bilateral filtering of a scan (Sec. 5.4.2)"
+    )
+    p.add_argument("input")
+    p.add_argument("output")
+    p.add_argument("--k", type=int, default=7, help="neighbours of the filter cells (7)")
+    p.add_argument(
+        "--rpca-k", type=int, default=10, dest="rpca_k", help="neighbours of the RPCA step (10)"
+    )
+    p.add_argument(
+        "--threshold", type=float, default=None, help="RPCA score threshold (default: automatic)"
+    )
+    p.add_argument("--sigma1", type=float, default=None, help="spatial kernel width")
+    p.add_argument("--sigma2", type=float, default=None, help="range kernel width")
+    p.add_argument("--n-iter", type=int, default=1, dest="n_iter", help="filter passes (1)")
+    p.add_argument(
+        "--mesh", action="store_true", help="write the kNN triangulation of the filtered points"
+    )
+    p.add_argument(
+        "--mask", default=None, help="write the RPCA keep mask to .npy (one entry per input row)"
+    )
+    p.add_argument(
+        "--tile",
+        type=int,
+        default=None,
+        metavar="N",
+        help="out of core: stream the cloud, process tiles of about N points with halos on Dask "
+        "(needs spectrageo[dist]; see docs/scaling.md)",
+    )
+    p.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler"
+    )
+    p.add_argument("--workers", type=int, default=None, help="with --tile: local Dask workers")
+    p.set_defaults(func=cmd_robot)
 
     p = sub.add_parser("evaluate", help="run methods on the shared benchmark data and print tables")
     p.add_argument("what", choices=EVALUATIONS, metavar="AREA", help=" | ".join(EVALUATIONS))

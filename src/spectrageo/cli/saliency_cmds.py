@@ -100,6 +100,10 @@ def cmd_saliency(args) -> int:
     from ..geometry import Mesh, MeshAnimation, PointCloud
 
     _suffix(args.out)
+    if getattr(args, "tile", None) is not None:  # out-of-core point clouds on Dask (issue 21)
+        from .batch_cmds import cmd_saliency_tiled
+
+        return cmd_saliency_tiled(args)
     obj = io.read(args.input)
     t0 = time.perf_counter()
     if isinstance(obj, Mesh):
@@ -253,6 +257,18 @@ def register(sub) -> None:
     p.add_argument(
         "--fast", action="store_true", help="leave the least salient class out of the RPCA"
     )
+    p.add_argument(
+        "--tile",
+        type=int,
+        default=None,
+        metavar="N",
+        help="point clouds out of core: stream the cloud, process tiles of about N points with "
+        "halos on Dask (needs spectrageo[dist]; see docs/scaling.md)",
+    )
+    p.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler"
+    )
+    p.add_argument("--workers", type=int, default=None, help="with --tile: local Dask workers")
     p.set_defaults(func=cmd_saliency)
 
     p = sub.add_parser("features", help="corner / edge / flat classification (Sec. 4.4)")

@@ -39,12 +39,16 @@ from .._validation import as_faces, as_frames, as_rng, check_choice, check_posit
 
 __all__ = [
     "DYNAMIC_METHODS",
+    "GFTRPCABlock",
     "GFTRPCAResult",
+    "GFTRPCASetup",
     "NormalsRPCAResult",
     "denoise_animation",
     "denoise_frames",
     "dynamic_methods",
     "gft_rpca",
+    "gft_rpca_block",
+    "gft_rpca_setup",
     "normals_rpca",
 ]
 
@@ -124,6 +128,12 @@ class _Stats:
         self.converged = self.converged and bool(res.converged)
         self.residual = max(self.residual, float(res.residual))
         self.n_rpca += 1
+
+    def merge(self, other) -> None:
+        """Fold in the statistics of another block (max / all / max: order does not matter)."""
+        self.n_iter = max(self.n_iter, int(other.n_iter))
+        self.converged = self.converged and bool(other.converged)
+        self.residual = max(self.residual, float(other.residual))
 
 
 def _low_rank(M: np.ndarray, rank: int | None, lam, max_iter: int, tol: float, gen, stats):
@@ -230,6 +240,297 @@ def _algorithm3_block(
     return _apply(U, out), nh  # IGFT, Eq. 5.37
 
 
+# ---------------------------------------------------------------------- seeds, setup, one block
+#: Spawn-key prefixes of the generators derived from the user's seed: one for the spatial setup
+#: (METIS, the eigensolver's random starts), one per (submesh, frame block) for the RPCA.
+_KEY_SPATIAL = 0
+_KEY_BLOCK = 1
+
+
+def _seed_entropy(rng) -> tuple[int, ...]:
+    """128 bits of entropy drawn once from ``rng`` (seed, Generator or None: seed 0)."""
+    gen = as_rng(rng)
+    return tuple(int(x) for x in gen.integers(0, 2**32, size=4, dtype=np.uint64))
+
+
+def _derived_rng(entropy: tuple[int, ...], *key: int) -> np.random.Generator:
+    """The generator of ``key`` (``(_KEY_SPATIAL,)`` or ``(_KEY_BLOCK, i, b)``): a child
+    :class:`numpy.random.SeedSequence` of ``entropy``, independent of every other key."""
+    return np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=key))
+
+
+def _check_options(energy, rank, lam, basis, submesh_size, overlap, submesh_solver, max_iter, tol):
+    energy = _check_energy(energy)
+    rank = _check_rank(rank)
+    if lam is not None:
+        check_positive(lam, "lam")
+    check_choice(basis, "basis", ("auto", "exact", "partitioned"))
+    check_choice(submesh_solver, "submesh_solver", ("exact", "oi"))
+    check_positive(submesh_size, "submesh_size", integer=True)
+    check_positive(max_iter, "max_iter", integer=True)
+    check_positive(tol, "tol")
+    return energy, rank
+
+
+def _resolve_basis(basis: str, n: int) -> str:
+    if basis == "auto":
+        basis = "partitioned"
+    if basis == "exact" and n > EXACT_LIMIT:
+        raise InvalidInputError(
+            f"`basis`='exact' needs a dense {n} x {n} eigendecomposition; it is limited to "
+            f"{EXACT_LIMIT} vertices. Use basis='partitioned'."
+        )
+    return basis
+
+
+def _binary_adjacency(F: np.ndarray, n: int):
+    from ..graph import adjacency_matrix
+
+    C = adjacency_matrix(F, n)
+    C.data[:] = 1.0
+    return C
+
+
+def _exact_basis(C) -> np.ndarray:
+    from ..graph import laplacian_from_adjacency
+
+    L = laplacian_from_adjacency(C).toarray()
+    _, U = np.linalg.eigh(L)  # Algorithm 3, line 1 (Eq. 4.3)
+    return U
+
+
+def _partition(C, submesh_size, overlap, gen):
+    from ..spectral import overlapped_submeshes
+
+    return overlapped_submeshes(C, submesh_size=int(submesh_size), overlap=overlap, rng=gen)
+
+
+def _part_items(C, subs, submesh_solver, gen, progress_desc=None):
+    """``(i, part, w, U)`` for every submesh, bases computed one at a time (in submesh order: the
+    ``"oi"`` solver starts each from the previous one)."""
+    from ..spectral import submesh_eigenbases
+
+    bases = submesh_eigenbases(C, subs, 1.0, method=submesh_solver, rng=gen)
+    if progress_desc is not None:
+        bases = progress(bases, desc=progress_desc, total=len(subs.parts))
+    for i, _w, U in bases:
+        # weights of Algorithm 8; the tiny offset gives the plain average to a vertex isolated in
+        # all its submeshes
+        yield i, subs.parts[i], subs.degrees[i].astype(np.float64) + 1e-9, U
+
+
+def _denoise_parts(items, A, starts, bs, b0, n_parts, rpca_opts, entropy):
+    """Algorithm 3 on the frame blocks ``A[s : s + bs]`` (global indices ``b0, b0 + 1, ...``) for
+    every spectral part of ``items`` (``(i, part, w, U)``; ``part`` None: the whole mesh on the
+    exact basis), the overlapping submesh results averaged with the weights of Algorithm 8.
+
+    The RPCA of part ``i`` and block ``b`` draws from its own generator (:func:`_derived_rng`), and
+    every output value is the same sum in the same submesh order whether the blocks are processed
+    together or one by one: a block's result depends only on ``entropy``, its frames and ``b``.
+    """
+    energy, rank, lam, max_iter, tol = rpca_opts
+    stats = _Stats()
+    n_high = np.zeros((n_parts, len(starts)), dtype=np.int64)
+    out = den = None
+    for i, part, w, U in items:
+        if part is None:
+            out = np.empty_like(A)
+            for j, s in enumerate(starts):
+                gen = _derived_rng(entropy, _KEY_BLOCK, i, b0 + j)
+                out[s : s + bs], n_high[i, j] = _algorithm3_block(
+                    A[s : s + bs], U, energy, rank, lam, max_iter, tol, gen, stats
+                )
+            continue
+        if out is None:  # sum_j w_ij v_ij and sum_j w_ij of Algorithm 8
+            out = np.zeros_like(A)
+            den = np.zeros(A.shape[1])
+        Xp = A[:, part]
+        Y = np.empty_like(Xp)
+        for j, s in enumerate(starts):
+            gen = _derived_rng(entropy, _KEY_BLOCK, i, b0 + j)
+            Y[s : s + bs], n_high[i, j] = _algorithm3_block(
+                Xp[s : s + bs], U, energy, rank, lam, max_iter, tol, gen, stats
+            )
+        Y *= w[None, :, None]
+        out[:, part] += Y
+        den[part] += w
+        del Xp, Y
+    if den is not None:
+        out /= den[None, :, None]
+    return out, n_high, stats
+
+
+@dataclass(frozen=True, eq=False)
+class GFTRPCASetup:
+    """The spatial part of Algorithm 3, shared by all frame blocks (from :func:`gft_rpca_setup`).
+
+    Attributes
+    ----------
+    basis : str
+        ``"exact"`` or ``"partitioned"``.
+    n_vertices : int
+    parts : tuple of (n_i,) int64 arrays
+        Sorted vertex indices of every submesh (``(None,)`` for the exact basis: the whole mesh).
+    weights : tuple of (n_i,) float64 arrays
+        Degree weights of Algorithm 8 (``(None,)`` for the exact basis).
+    bases : tuple of (n_i, n_i) float64 arrays
+        Full eigenbasis of every part's binary Laplacian, eigenvalues ascending.
+    options : tuple
+        ``(energy, rank, lam, max_iter, tol)`` of the RPCA, validated.
+    single_thread : bool
+    entropy : tuple of int
+        Entropy of the :class:`numpy.random.SeedSequence` from which the generator of every
+        (submesh, frame block) is derived.
+    """
+
+    basis: str
+    n_vertices: int
+    parts: tuple
+    weights: tuple
+    bases: tuple
+    options: tuple
+    single_thread: bool
+    entropy: tuple
+
+    @property
+    def n_parts(self) -> int:
+        """Number of spectral parts (1 for the exact basis)."""
+        return len(self.bases)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the index, weight and basis arrays (what is sent once to every worker)."""
+        arrays = [*self.parts, *self.weights, *self.bases]
+        return int(sum(a.nbytes for a in arrays if a is not None))
+
+    def _items(self):
+        return zip(range(self.n_parts), self.parts, self.weights, self.bases)
+
+
+@dataclass(frozen=True, eq=False)
+class GFTRPCABlock:
+    """Result of :func:`gft_rpca_block` on one block of ``T_b`` frames.
+
+    Attributes
+    ----------
+    frames : (T_b, n, 3) float64
+        The block's denoised frames.
+    n_high : (n_parts,) int64
+        ``n_h`` of Eq. 5.27 of every spectral part for this block (a column of
+        :attr:`GFTRPCAResult.n_high`).
+    n_iter, converged, residual :
+        RPCA statistics over this block (maximum / all / maximum).
+    """
+
+    frames: np.ndarray
+    n_high: np.ndarray
+    n_iter: int
+    converged: bool
+    residual: float
+
+
+def gft_rpca_setup(
+    F,
+    n_vertices: int,
+    *,
+    energy: float = 0.9999,
+    rank: int | None = None,
+    lam: float | None = None,
+    basis: str = "auto",
+    submesh_size: int = 700,
+    overlap: float = 0.15,
+    submesh_solver: str = "exact",
+    max_iter: int = 100,
+    tol: float = 1e-5,
+    single_thread: bool = True,
+    rng=None,
+) -> GFTRPCASetup:
+    """Compute once what every frame block of :func:`gft_rpca` shares (Algorithm 3, line 1).
+
+    The submeshes (METIS + ring growth) and the full eigenbasis of every submesh's binary Laplacian
+    ``L = D - C``, or the exact eigenbasis of the whole mesh's, exactly as :func:`gft_rpca` computes
+    them, plus the validated RPCA options and the seed entropy of the per-block generators. Unlike
+    :func:`gft_rpca`, which holds one submesh basis at a time, all bases are kept:
+    ``sum_i n_i^2`` doubles (about ``8 n (1 + overlap) submesh_size`` bytes; see
+    :attr:`GFTRPCASetup.nbytes`). :func:`gft_rpca_block` then denoises any frame block with it, in
+    any order or process, with the same result as the block's slice of ``gft_rpca(...,
+    block_size=...)`` with the same ``rng``.
+
+    Parameters
+    ----------
+    F : (m, 3) int
+        Faces shared by all frames.
+    n_vertices : int
+        Vertices per frame.
+    energy, rank, lam, basis, submesh_size, overlap, submesh_solver, max_iter, tol, single_thread, rng :
+        As in :func:`gft_rpca`.
+
+    Returns
+    -------
+    GFTRPCASetup
+    """
+    if isinstance(n_vertices, bool) or not isinstance(n_vertices, (int, np.integer)):
+        raise InvalidInputError(f"`n_vertices` must be a positive integer; got {n_vertices!r}.")
+    check_positive(n_vertices, "n_vertices", integer=True)
+    n = int(n_vertices)
+    F = as_faces(F, n, "F")
+    energy, rank = _check_options(
+        energy, rank, lam, basis, submesh_size, overlap, submesh_solver, max_iter, tol
+    )
+    entropy = _seed_entropy(rng)
+    basis = _resolve_basis(basis, n)
+    C = _binary_adjacency(F, n)
+    opts = (energy, rank, lam, int(max_iter), float(tol))
+    if basis == "exact":
+        U = _exact_basis(C)
+        return GFTRPCASetup("exact", n, (None,), (None,), (U,), opts, bool(single_thread), entropy)
+    gen = _derived_rng(entropy, _KEY_SPATIAL)
+    subs = _partition(C, submesh_size, overlap, gen)
+    with _blas_threads(1 if single_thread else None):
+        items = list(_part_items(C, subs, submesh_solver, gen))
+    parts, weights, bases = (tuple(x[k] for x in items) for k in (1, 2, 3))
+    return GFTRPCASetup("partitioned", n, parts, weights, bases, opts, bool(single_thread), entropy)
+
+
+def gft_rpca_block(setup: GFTRPCASetup, frames, block_index: int = 0) -> GFTRPCABlock:
+    """Denoise one block of frames with a precomputed :class:`GFTRPCASetup` (Algorithm 3, lines 2-17).
+
+    Parameters
+    ----------
+    setup : GFTRPCASetup
+        From :func:`gft_rpca_setup`.
+    frames : (T_b, n, 3) array_like
+        The block's frames (consecutive frames of the animation).
+    block_index : int
+        Position of the block in the animation (0, 1, ...): it selects the block's random
+        generators, so that the result equals the block's slice of :func:`gft_rpca` run with
+        ``block_size=T_b`` (the last block may be shorter) and the same ``rng``.
+
+    Returns
+    -------
+    GFTRPCABlock
+    """
+    if not isinstance(setup, GFTRPCASetup):
+        raise InvalidInputError(f"`setup` must be a GFTRPCASetup; got {type(setup).__name__}.")
+    X = as_frames(frames)
+    if X.shape[1] != setup.n_vertices:
+        raise InvalidInputError(
+            f"`frames` must have {setup.n_vertices} vertices per frame (the setup's); "
+            f"got {X.shape[1]}."
+        )
+    if isinstance(block_index, bool) or not isinstance(block_index, (int, np.integer)):
+        raise InvalidInputError(f"`block_index` must be an integer >= 0; got {block_index!r}.")
+    check_positive(block_index, "block_index", integer=True, allow_zero=True)
+    threads = None if setup.basis == "exact" or not setup.single_thread else 1
+    with _blas_threads(threads):
+        out, n_high, stats = _denoise_parts(
+            setup._items(), X, [0], X.shape[0], int(block_index), setup.n_parts,
+            setup.options, setup.entropy,
+        )  # fmt: skip
+    return GFTRPCABlock(out, n_high[:, 0], stats.n_iter, stats.converged, stats.residual)
+
+
+# --------------------------------------------------------------------------- Algorithm 3
 def gft_rpca(
     frames,
     F=None,
@@ -282,9 +583,12 @@ def gft_rpca(
     -----------
     ``block_size``: frames are processed in consecutive blocks of that many frames, each with its
     own ``n_h`` and RPCA (the "online / groups of frames" mode of Section 5.1.2); the basis is
-    computed once. A block's result depends only on its own frames, so blocks can be denoised as
-    they arrive. Blocks should hold at least ~10 frames for the low-rank model to have something to
-    work with.
+    computed once. A block's result depends only on the seed, its own frames and its position, so
+    blocks can be denoised as they arrive, in any order or in parallel:
+    :func:`gft_rpca_setup` computes the basis once and :func:`gft_rpca_block` denoises one block
+    with it (:func:`spectrageo.distributed.gft_rpca_blocks` runs the blocks as Dask tasks, with
+    the same result). Blocks should hold at least ~10 frames for the low-rank model to have
+    something to work with.
 
     Parameters
     ----------
@@ -318,7 +622,11 @@ def gft_rpca(
     single_thread : bool
         Run the many small matrix products with one BLAS thread (faster on shared machines).
     rng : int, Generator or None
-        Seeds METIS and the random starts of the RPCA.
+        Seed (``None``: 0). 128 bits of entropy are drawn from it once; a
+        :class:`numpy.random.SeedSequence` of that entropy gives one generator to METIS and the
+        submesh eigensolver and an independent one to the RPCA random starts of every (submesh,
+        frame block) pair (child keys ``(0,)`` and ``(1, i, b)``). A block's result therefore does
+        not depend on which other blocks are processed, nor in which order.
 
     Returns
     -------
@@ -334,73 +642,29 @@ def gft_rpca(
     A = as_frames(frames)
     T, n, _ = A.shape
     F = as_faces(F, n, "F")
-    energy = _check_energy(energy)
-    rank = _check_rank(rank)
-    if lam is not None:
-        check_positive(lam, "lam")
-    check_choice(basis, "basis", ("auto", "exact", "partitioned"))
-    check_choice(submesh_solver, "submesh_solver", ("exact", "oi"))
-    check_positive(submesh_size, "submesh_size", integer=True)
-    check_positive(max_iter, "max_iter", integer=True)
-    check_positive(tol, "tol")
+    energy, rank = _check_options(
+        energy, rank, lam, basis, submesh_size, overlap, submesh_solver, max_iter, tol
+    )
     bs = _check_block_size(block_size, T)
-    gen = as_rng(rng)
-    if basis == "auto":
-        basis = "partitioned"
-    if basis == "exact" and n > EXACT_LIMIT:
-        raise InvalidInputError(
-            f"`basis`='exact' needs a dense {n} x {n} eigendecomposition; it is limited to "
-            f"{EXACT_LIMIT} vertices. Use basis='partitioned'."
-        )
-    from ..graph import adjacency_matrix, laplacian_from_adjacency
-
-    C = adjacency_matrix(F, n)
-    C.data[:] = 1.0
+    entropy = _seed_entropy(rng)
+    basis = _resolve_basis(basis, n)
+    C = _binary_adjacency(F, n)
     starts = list(range(0, T, bs))
-    stats = _Stats()
+    opts = (energy, rank, lam, int(max_iter), float(tol))
+    # the same spatial setup and per-block code as gft_rpca_setup / gft_rpca_block, but the
+    # submesh bases are computed and dropped one at a time (submesh outer loop, blocks inner)
     if basis == "exact":
-        L = laplacian_from_adjacency(C).toarray()
-        _, U = np.linalg.eigh(L)  # Algorithm 3, line 1 (Eq. 4.3)
-        del L
-        out = np.empty_like(A)
-        n_high = np.zeros((1, len(starts)), dtype=np.int64)
-        with _blas_threads(None):
-            for b, s in enumerate(starts):
-                out[s : s + bs], n_high[0, b] = _algorithm3_block(
-                    A[s : s + bs], U, energy, rank, lam, max_iter, tol, gen, stats
-                )
-        return GFTRPCAResult(
-            out, n_high, "exact", 1, stats.n_iter, stats.converged, stats.residual,
-            time.perf_counter() - t_start,
-        )  # fmt: skip
-
-    from ..spectral import overlapped_submeshes, submesh_eigenbases
-
-    subs = overlapped_submeshes(C, submesh_size=int(submesh_size), overlap=overlap, rng=gen)
-    n_parts = len(subs.parts)
-    # sum_j w_ij v_ij and sum_j w_ij of Algorithm 8, accumulated submesh by submesh; the tiny
-    # offset of the weights gives the plain average to a vertex isolated in all its submeshes
-    num = np.zeros_like(A)
-    den = np.zeros(n)
-    n_high = np.zeros((n_parts, len(starts)), dtype=np.int64)
-    with _blas_threads(1 if single_thread else None):
-        bases = submesh_eigenbases(C, subs, 1.0, method=submesh_solver, rng=gen)
-        for i, _w, U in progress(bases, desc="gft-rpca submeshes", total=n_parts):
-            part = subs.parts[i]
-            w = subs.degrees[i].astype(np.float64) + 1e-9
-            Xp = A[:, part]
-            Y = np.empty_like(Xp)
-            for b, s in enumerate(starts):
-                Y[s : s + bs], n_high[i, b] = _algorithm3_block(
-                    Xp[s : s + bs], U, energy, rank, lam, max_iter, tol, gen, stats
-                )
-            Y *= w[None, :, None]
-            num[:, part] += Y
-            den[part] += w
-            del Xp, Y
-    num /= den[None, :, None]
+        items = [(0, None, None, _exact_basis(C))]
+        n_parts, threads = 1, None
+    else:
+        gen = _derived_rng(entropy, _KEY_SPATIAL)
+        subs = _partition(C, submesh_size, overlap, gen)
+        n_parts, threads = len(subs.parts), (1 if single_thread else None)
+        items = _part_items(C, subs, submesh_solver, gen, progress_desc="gft-rpca submeshes")
+    with _blas_threads(threads):
+        out, n_high, stats = _denoise_parts(items, A, starts, bs, 0, n_parts, opts, entropy)
     return GFTRPCAResult(
-        num, n_high, "partitioned", n_parts, stats.n_iter, stats.converged, stats.residual,
+        out, n_high, basis, n_parts, stats.n_iter, stats.converged, stats.residual,
         time.perf_counter() - t_start,
     )  # fmt: skip
 

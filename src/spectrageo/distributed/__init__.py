@@ -4,22 +4,44 @@
   ``complete``, ``convert``) over many files, one Dask task per file, with a JSON summary.
 * :func:`remove_outliers_tiled` -- outlier removal of a cloud streamed from PLY/NPY/LAS/LAZ in
   spatial tiles with halos, one Dask task per tile, written streaming (see ``docs/scaling.md``).
+* :func:`saliency_tiled`, :func:`robot_denoise_tiled` -- point-cloud saliency and the robot
+  pipeline's outlier removal + bilateral filtering, tiled the same way.
+* :func:`gft_rpca_blocks` -- mesh-animation denoising (Algorithm 3) in online mode, one Dask task
+  per block of frames, equal to the serial ``gft_rpca(..., block_size=...)``.
+* :func:`encode_animation_blocks` -- the ``.sga`` animation codec (Section 5.2.2), one Dask task
+  per frame block, the same bytes as the serial ``compress.encode_animation``.
 
 Dask is imported only when a function runs; without it they raise :class:`DaskMissingError`.
 """
 
 from ._batch import BATCH_COMMANDS, batch, expand_inputs, output_paths
 from ._cluster import DaskMissingError, open_client, require_dask
-from ._tiled import TiledResult, remove_outliers_tiled
+from ._codec import CODEC_BLOCK_METHODS, encode_animation_blocks
+from ._frames import gft_rpca_blocks
+from ._tiled import (
+    TiledResult,
+    TiledRobotResult,
+    TiledSaliencyResult,
+    remove_outliers_tiled,
+    robot_denoise_tiled,
+    saliency_tiled,
+)
 
 __all__ = [
     "BATCH_COMMANDS",
+    "CODEC_BLOCK_METHODS",
     "DaskMissingError",
     "TiledResult",
+    "TiledRobotResult",
+    "TiledSaliencyResult",
     "batch",
+    "encode_animation_blocks",
     "expand_inputs",
+    "gft_rpca_blocks",
     "open_client",
     "output_paths",
     "remove_outliers_tiled",
     "require_dask",
+    "robot_denoise_tiled",
+    "saliency_tiled",
 ]

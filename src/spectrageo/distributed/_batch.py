@@ -5,6 +5,12 @@ command's own parser (defaults, then the caller's options): the options, the che
 of a batch file are those of ``spectrageo COMMAND IN OUT`` by construction, with no second copy of
 the option handling to drift. Per file the task returns a record (status, time, metrics, the
 command's status lines, the error); an exception in one file never stops the others.
+
+Animations with ``denoise --method gft-rpca --block-size N`` are split further: the file's task
+reads the animation, computes the spatial setup, and submits one task per block of ``N`` frames to
+the same cluster (:func:`~spectrageo.distributed.gft_rpca_blocks`, via ``worker_client``: the
+file's task secedes from its worker's thread while it waits, so it holds no slot), then writes the
+output as ``spectrageo denoise`` does; the result equals the serial command's.
 """
 
 from __future__ import annotations
@@ -264,6 +270,11 @@ def run_file(
             if command == "outliers":
                 mask = Path(dst).with_name(f".{Path(dst).name}.keep.npy")
                 ns.mask = str(mask)
+            if command == "denoise" and getattr(ns, "block_size", None) is not None:
+                # an animation's frame blocks run as tasks of this cluster (None off a worker)
+                from ._frames import gft_rpca_blocks_in_task
+
+                ns.frame_blocks = gft_rpca_blocks_in_task(n_threads)
             with _threads(n_threads):
                 rc = int(ns.func(ns) or 0)
             if rc != 0:
