@@ -802,18 +802,9 @@ def _bisect_count(measure, target: float, hi: int, *, increasing: bool, what: st
     return best[1]
 
 
-def encode_animation(
-    frames, F, *, method: str = "blocks", bpvf=None, error=None, step=None, **options
-) -> bytes:
-    """See :func:`spectrageo.compress.encode_animation`."""
-    from . import _bisect
-
-    if method == "layered":
-        from . import _layered
-
-        if bpvf is not None and error is not None:
-            raise InvalidInputError("give at most one of `bpvf` and `error`.")
-        return _layered.encode(frames, F, step=step, bpvf=bpvf, error=error, **options)
+def check_encode_args(frames, F, method: str, step, bpvf, error) -> tuple[np.ndarray, np.ndarray]:
+    """The argument checks of :func:`encode_animation` for the eigen-trajectory methods
+    (``method`` in :data:`ALL_METHODS`, not ``layered``): ``(A, F)`` validated."""
     if method not in ALL_METHODS:
         raise InvalidInputError(f"`method` must be one of {list(ALL_METHODS)}; got {method!r}.")
     if bpvf is not None and error is not None:
@@ -829,7 +820,6 @@ def encode_animation(
     T, n = A.shape[:2]
     if T > _MAX_FRAMES or n > _container.MAX_COUNT or F.shape[0] > _container.MAX_COUNT:
         raise InvalidInputError("the animation is too large for the .sga format.")
-    enc = make_encoder(A, F, method, options)
     fixed = method == "pca"
     if step is not None:
         ok = (1 <= step <= T * n) if fixed else (1e-7 <= step <= 4.0)
@@ -839,38 +829,59 @@ def encode_animation(
                 + ("a kept-coefficient count in [1, T*n]" if fixed else "in [1e-7, 4]")
                 + f"; got {step!r}."
             )
+    return A, F
+
+
+def encode_at_rate(build, A: np.ndarray, method: str, step, bpvf, error) -> bytes:
+    """The file of a fixed ``step`` (default when None), or of the step meeting ``bpvf`` /
+    ``error`` by bisection; ``build(step) -> bytes`` codes the whole file at one step."""
+    from . import _bisect
+
+    T, n = A.shape[:2]
+    fixed = method == "pca"
     if bpvf is None and error is None:
         if step is None:
             step = max(1, min(T, 12) * n) if fixed else DEFAULT_STEP
-        return enc.build(int(step) if fixed else float(step))
+        return build(int(step) if fixed else float(step))
     nvf = float(n * T)
 
     def m_rate(s):
-        data = enc.build(s)
+        data = build(s)
         return 8.0 * len(data) / nvf, data
 
     def m_err(s):
         from ..metrics import kg_error
 
-        data = enc.build(s)
+        data = build(s)
         rec, _F = decode_animation(data)
         return kg_error(rec, A), data
 
     if fixed:
-        m = m_rate if bpvf is not None else m_err
-        target = float(bpvf if bpvf is not None else error)
         return _bisect_count(
-            m,
-            target,
+            m_rate if bpvf is not None else m_err,
+            float(bpvf if bpvf is not None else error),
             T * n,
             increasing=bpvf is not None,
             what="bpvf" if bpvf is not None else "error",
         )
     if bpvf is not None:
-        _s, data = _bisect(m_rate, float(bpvf), increasing=False, what="bpvf")
-        return data
-    _s, data = _bisect(m_err, float(error), increasing=True, what="error")
-    return data
+        return _bisect(m_rate, float(bpvf), increasing=False, what="bpvf")[1]
+    return _bisect(m_err, float(error), increasing=True, what="error")[1]
+
+
+def encode_animation(
+    frames, F, *, method: str = "blocks", bpvf=None, error=None, step=None, **options
+) -> bytes:
+    """See :func:`spectrageo.compress.encode_animation`."""
+    if method == "layered":
+        from . import _layered
+
+        if bpvf is not None and error is not None:
+            raise InvalidInputError("give at most one of `bpvf` and `error`.")
+        return _layered.encode(frames, F, step=step, bpvf=bpvf, error=error, **options)
+    A, F = check_encode_args(frames, F, method, step, bpvf, error)
+    enc = make_encoder(A, F, method, options)
+    return encode_at_rate(enc.build, A, method, step, bpvf, error)
 
 
 def _parse_stream(data, partial: bool):

@@ -37,7 +37,6 @@ frame; no bounded overlap reproduces it, and the encoder runs only serially.
 
 from __future__ import annotations
 
-import math
 import uuid
 from pathlib import Path
 from types import SimpleNamespace
@@ -46,7 +45,6 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import as_faces, as_frames
 from ._cluster import open_client, require_dask, show_progress, thread_budget
 
 __all__ = ["CODEC_BLOCK_METHODS", "encode_animation_blocks"]
@@ -100,7 +98,6 @@ def _segment_task(plan, b: int, head: dict, step, n_threads: int | None) -> byte
 def _check_call(frames, F, method, step, bpvf, error, options):
     """The argument checks of the serial :func:`~spectrageo.compress.encode_animation`."""
     from ..compress import _animation as an
-    from ..compress import _container
 
     if method == "layered":
         raise InvalidInputError(
@@ -113,29 +110,8 @@ def _check_call(frames, F, method, step, bpvf, error, options):
         raise InvalidInputError(
             f"`method` must be one of {list(CODEC_BLOCK_METHODS)}; got {method!r}."
         )
-    if bpvf is not None and error is not None:
-        raise InvalidInputError("give at most one of `bpvf` and `error`.")
-    for name, v in (("bpvf", bpvf), ("error", error)):
-        ok = not isinstance(v, bool) and isinstance(v, int | float | np.integer | np.floating)
-        if v is not None and not (ok and math.isfinite(float(v)) and float(v) > 0):
-            raise InvalidInputError(f"`{name}` must be a positive number; got {v!r}.")
-    if step is not None and (bpvf is not None or error is not None):
-        raise InvalidInputError("`step` cannot be combined with `bpvf` or `error`.")
-    A = as_frames(frames, "frames")
-    F = as_faces(F, A.shape[1], "F")
-    T, n = A.shape[:2]
-    if T > an._MAX_FRAMES or n > _container.MAX_COUNT or F.shape[0] > _container.MAX_COUNT:
-        raise InvalidInputError("the animation is too large for the .sga format.")
+    A, F = an.check_encode_args(frames, F, method, step, bpvf, error)
     o = an._check_options(method, options)
-    fixed = method == "pca"
-    if step is not None:
-        ok = (1 <= step <= T * n) if fixed else (1e-7 <= step <= 4.0)
-        if isinstance(step, bool) or not isinstance(step, int | float) or not ok:
-            raise InvalidInputError(
-                "`step` must be "
-                + ("a kept-coefficient count in [1, T*n]" if fixed else "in [1e-7, 4]")
-                + f"; got {step!r}."
-            )
     return A, F, o
 
 
@@ -225,43 +201,6 @@ class _BlockEncoder:
         return b"".join([head, *segs, index])
 
 
-def _encode(enc: _BlockEncoder, A, step, bpvf, error) -> bytes:
-    """Fixed step, or the serial encoder's rate search over distributed builds."""
-    from ..compress import _bisect
-    from ..compress._animation import DEFAULT_STEP, _bisect_count, decode_animation
-
-    T, n = A.shape[:2]
-    fixed = enc.method == "pca"
-    if bpvf is None and error is None:
-        if step is None:
-            step = max(1, min(T, 12) * n) if fixed else DEFAULT_STEP
-        return enc.build(int(step) if fixed else float(step))
-    nvf = float(n * T)
-
-    def m_rate(s):
-        data = enc.build(s)
-        return 8.0 * len(data) / nvf, data
-
-    def m_err(s):
-        from ..metrics import kg_error
-
-        data = enc.build(s)
-        rec, _F = decode_animation(data)
-        return kg_error(rec, A), data
-
-    if fixed:
-        return _bisect_count(
-            m_rate if bpvf is not None else m_err,
-            float(bpvf if bpvf is not None else error),
-            T * n,
-            increasing=bpvf is not None,
-            what="bpvf" if bpvf is not None else "error",
-        )
-    if bpvf is not None:
-        return _bisect(m_rate, float(bpvf), increasing=False, what="bpvf")[1]
-    return _bisect(m_err, float(error), increasing=True, what="error")[1]
-
-
 def encode_animation_blocks(
     frames,
     F,
@@ -315,6 +254,8 @@ def encode_animation_blocks(
     bytes
         The ``.sga`` file content.
     """
+    from ..compress import _animation as an
+
     require_dask()
     A, F, o = _check_call(frames, F, method, step, bpvf, error, options)
     if path is not None and not Path(path).expanduser().resolve().parent.is_dir():
@@ -331,7 +272,7 @@ def encode_animation_blocks(
         n_workers = len(client.scheduler_info().get("workers", {}))
         budget = thread_budget(n_workers, scheduler)
         enc = _BlockEncoder(client, A, F, method, o, progress, budget)
-        data = _encode(enc, A, step, bpvf, error)
+        data = an.encode_at_rate(enc.build, A, method, step, bpvf, error)
         del enc
     if path is not None:
         from ..io import atomic_write

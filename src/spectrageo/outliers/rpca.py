@@ -506,37 +506,14 @@ def _solve_blocks(
                 c1 = min(n, c0 + KNN_CHUNK)
                 Pn[c0:c1] = (Xs[c0:c1] - centre) * inv_h
             centers = np.arange(lo, hi, dtype=idx.dtype)
+            args = (Pn, centers, idx[lo:hi], lam, rho, tol, rank_tol, max_iter, smoothed)
+            vec = S_s[lo:hi] if vectors else S_s
             if not isinstance(device, str):  # the torch path (spectrageo.outliers._torch)
                 from ._torch import patch_ialm_torch
 
-                out = patch_ialm_torch(
-                    Pn,
-                    centers,
-                    idx[lo:hi],
-                    lam,
-                    rho,
-                    tol,
-                    rank_tol,
-                    max_iter,
-                    smoothed,
-                    S_s[lo:hi] if vectors else S_s,
-                    device,
-                )
+                out = patch_ialm_torch(*args, vec, device)
             else:
-                out = _patch_ialm(
-                    Pn,
-                    centers,
-                    idx[lo:hi],
-                    lam,
-                    rho,
-                    tol,
-                    rank_tol,
-                    max_iter,
-                    smoothed,
-                    pool,
-                    n_threads,
-                    S_s[lo:hi] if vectors else S_s,
-                )
+                out = _patch_ialm(*args, pool, n_threads, vec)
             scores_s[lo:hi] = out[0]
             if smoothed:
                 E0_s[lo:hi] = out[1] * h + centre
