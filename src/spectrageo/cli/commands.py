@@ -435,6 +435,13 @@ def cmd_outliers(args) -> int:
         _save_npy(args.mask, keep)
     if args.scores:
         _save_npy(args.scores, scores)
+    if args.method == "rpca":
+        i = res.info
+        extra += (
+            f"; threshold {res.threshold:.3g} spacings ({i.get('threshold_rule')}), "
+            f"{i.get('n_cluster_outliers', 0)} in small outlier clusters, estimated "
+            f"contamination {100 * i.get('contamination', 0.0):.1f} %"
+        )
     _status(
         f"wrote {args.output}: kept {int(np.sum(res.keep))} of {n_in} points ({args.method}){extra}"
     )
