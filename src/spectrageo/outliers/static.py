@@ -209,7 +209,9 @@ def valley_threshold(scores: Any, *, minimum: float = RPCA_MIN_TAU) -> tuple[flo
     be the histogram of ``x`` over the positive finite scores (bins of :data:`VALLEY_BIN`
     decades from the 0.1 % quantile) smoothed by a Gaussian of :data:`VALLEY_SMOOTH` bins, and
     ``m`` the inlier mode (the highest bin at or below the median of ``x``). Walking up from
-    ``m``, with ``v`` the lowest bin so far, the first bin ``j`` with
+    ``m`` -- or from the bin of ``tau_min`` when that lies higher: a valley below the floor
+    cannot set the threshold, and one inside the inlier mode of a LiDAR scan had cut its
+    far-outlier F1 from 0.97 to 0.84 -- with ``v`` the lowest bin so far, the first bin ``j`` with
 
     .. math::
 
