@@ -1651,8 +1651,12 @@ class ViewerServer:
             return
         self._closed = True
         if self.httpd is not None:
-            if self._serving:
-                self.httpd.shutdown()
+            # shutdown() waits for serve_forever() to return; when it ran in this thread (the CLI,
+            # interrupted by Ctrl+C or SIGTERM) it has already stopped -- possibly before it
+            # entered its loop, when the wait would never end -- so only a server thread is asked
+            if self._serving and self._thread is not None and self._thread.is_alive():
+                if self._thread is not threading.current_thread():
+                    self.httpd.shutdown()
             self.httpd.server_close()
         session = getattr(self, "session", None)
         if session is not None:
