@@ -616,7 +616,15 @@ def test_cli_signal_removes_temp_folder(tmp_path, sig):
         "import sys; from spectrageo.cli.main import main; "
         "sys.exit(main(['view', '--port', '0', '--no-browser', '--max-upload', '5']))"
     )
-    p = subprocess.Popen([sys.executable, "-c", code], env=env, stderr=subprocess.PIPE, text=True)
+    # a runner started as a background job ignores SIGINT and its children inherit that: give
+    # the viewer the default disposition so that Python installs its Ctrl+C handler
+    p = subprocess.Popen(
+        [sys.executable, "-c", code],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         for _ in range(50):
             line = p.stderr.readline()
