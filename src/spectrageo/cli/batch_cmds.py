@@ -210,3 +210,19 @@ def cmd_robot_tiled(args) -> int:
         f"{i['time_total_s']:.2f} s)"
     )
     return 0
+
+
+def add_tile_options(p, what: str = "the cloud") -> None:
+    """``--tile N``, ``--scheduler ADDRESS``, ``--workers W``: out-of-core runs on Dask."""
+    p.add_argument(
+        "--tile",
+        type=int,
+        default=None,
+        metavar="N",
+        help=f"out of core: stream {what}, process tiles of about N points with halos on Dask "
+        "(needs spectrageo[dist]; see docs/scaling.md)",
+    )
+    p.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler"
+    )
+    p.add_argument("--workers", type=int, default=None, help="with --tile: local Dask workers")

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
+from .batch_cmds import add_tile_options
 
 
 def _err(msg: str) -> InvalidInputError:
@@ -835,18 +836,7 @@ def register_all(sub) -> None:
         default=None,
         help="write per-point outlier scores to .npy, one per input row (inf for NaN rows)",
     )
-    p.add_argument(
-        "--tile",
-        type=int,
-        default=None,
-        metavar="N",
-        help="out of core: stream the cloud, process tiles of about N points with halos on Dask "
-        "(needs spectrageo[dist]; see docs/scaling.md)",
-    )
-    p.add_argument(
-        "--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler"
-    )
-    p.add_argument("--workers", type=int, default=None, help="with --tile: local Dask workers")
+    add_tile_options(p)
     p.add_argument(
         "--device",
         default="cpu",
@@ -878,18 +868,7 @@ def register_all(sub) -> None:
     p.add_argument(
         "--mask", default=None, help="write the RPCA keep mask to .npy (one entry per input row)"
     )
-    p.add_argument(
-        "--tile",
-        type=int,
-        default=None,
-        metavar="N",
-        help="out of core: stream the cloud, process tiles of about N points with halos on Dask "
-        "(needs spectrageo[dist]; see docs/scaling.md)",
-    )
-    p.add_argument(
-        "--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler"
-    )
-    p.add_argument("--workers", type=int, default=None, help="with --tile: local Dask workers")
+    add_tile_options(p)
     p.set_defaults(func=cmd_robot)
 
     p = sub.add_parser("evaluate", help="run methods on the shared benchmark data and print tables")

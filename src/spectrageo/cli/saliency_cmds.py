@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
+from .batch_cmds import add_tile_options
 
 _VALUE_SUFFIXES = (".npy", ".csv", ".ply")
 
@@ -257,18 +258,7 @@ def register(sub) -> None:
     p.add_argument(
         "--fast", action="store_true", help="leave the least salient class out of the RPCA"
     )
-    p.add_argument(
-        "--tile",
-        type=int,
-        default=None,
-        metavar="N",
-        help="point clouds out of core: stream the cloud, process tiles of about N points with "
-        "halos on Dask (needs spectrageo[dist]; see docs/scaling.md)",
-    )
-    p.add_argument(
-        "--scheduler", default=None, metavar="ADDRESS", help="with --tile: Dask scheduler"
-    )
-    p.add_argument("--workers", type=int, default=None, help="with --tile: local Dask workers")
+    add_tile_options(p, "a point cloud")
     p.set_defaults(func=cmd_saliency)
 
     p = sub.add_parser("features", help="corner / edge / flat classification (Sec. 4.4)")
