@@ -1,23 +1,28 @@
 """Lossless connectivity coding that keeps the face order and the corner order of every face.
 
-Every face ``(a, b, c)`` becomes three integers: ``a`` minus the first corner of the previous face,
-``b - a`` and ``c - a`` (zigzag mapped to unsigned), split into byte planes (all low bytes, then
-the next bytes, ...) and compressed with zstd. Meshes whose faces follow a traversal (most exported
-files) give small differences and compress well; a random face order costs close to the
-``log2(m!)`` bits that any order-preserving code must spend.
+Two schemes; the encoder writes both and keeps the smaller, the first byte tells them apart:
 
-:func:`reorder` is the ``--reorder`` option: vertices in reverse Cuthill-McKee order (a
-breadth-first order over the edges), each face rotated to start at its smallest index (orientation
-kept) and the faces sorted, which makes the differences small on every mesh.
+- the traversal code of :mod:`._conn_traverse` (first byte ``0x40``): topology by a depth-first
+  traversal, then the file's vertex labels and face order as permutations; near the
+  ``log2(m!) + log2(n!)`` bits any order-preserving code must spend when a file's orders are
+  random, and a few bits per vertex when they follow a traversal;
+- the delta code (first byte 1-8, the index width; files written before the traversal code have
+  only this one): every face ``(a, b, c)`` becomes three integers: ``a`` minus the first corner
+  of the previous face, ``b - a`` and ``c - a`` (zigzag mapped to unsigned), split into byte
+  planes (all low bytes, then the next bytes, ...) and compressed with zstd. It wins on tiny
+  meshes and on some files whose faces and labels both follow one sweep.
+
+:func:`reorder` is the ``--reorder`` option: vertices and faces in the traversal's own order
+(:func:`._conn_traverse.canonical`), each face rotated to start at its smallest index
+(orientation kept), where the traversal code spends only its topology part.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from .._errors import InvalidInputError
+from . import _conn_traverse
 from ._container import Reader, varint
 from ._entropy import zstd_compress, zstd_decompress
 
@@ -32,6 +37,15 @@ def _unzigzag(u: np.ndarray) -> np.ndarray:
 
 
 def encode_faces(F: np.ndarray) -> bytes:
+    """The smaller of the traversal code and the delta code of ``F``."""
+    delta = _encode_delta(F)
+    if len(F) == 0:
+        return delta
+    traversal = _conn_traverse.encode(F)
+    return traversal if len(traversal) < len(delta) else delta
+
+
+def _encode_delta(F: np.ndarray) -> bytes:
     F = np.asarray(F, dtype=np.int64)
     d = np.empty_like(F)
     d[:, 0] = np.diff(np.r_[0, F[:, 0]])
@@ -46,6 +60,11 @@ def encode_faces(F: np.ndarray) -> bytes:
 
 
 def decode_faces(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
+    if len(buf) and buf[0] == _conn_traverse.MARKER and n_faces > 0:
+        F = _conn_traverse.decode(buf, n_vertices, n_faces)
+        if F.min() < 0 or F.max() >= n_vertices:  # pragma: no cover - decode checks the range
+            raise InvalidInputError(".sgc connectivity is malformed (vertex index out of range).")
+        return F
     r = Reader(buf, "connectivity")
     nbytes = r.varint()
     if not 1 <= nbytes <= 8:
@@ -70,16 +89,8 @@ def decode_faces(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
 
 def reorder(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Codec-friendly order: returns ``(V', F', perm)`` with ``V' = V[perm]``."""
-    n = V.shape[0]
-    E = np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]
-    C = sp.csr_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
-    C = ((C + C.T) > 0).astype(np.float64).tocsr()
-    perm = reverse_cuthill_mckee(C, symmetric_mode=True).astype(np.int64)[::-1].copy()
-    inv = np.empty(n, dtype=np.int64)
-    inv[perm] = np.arange(n)
-    G = inv[F]
-    rot = np.argmin(G, axis=1)
-    idx = (rot[:, None] + np.arange(3)[None, :]) % 3
-    G = np.take_along_axis(G, idx, axis=1)
-    G = G[np.lexsort((G[:, 2], G[:, 1], G[:, 0]))]
+    F = np.asarray(F, dtype=np.int64)
+    if len(F) == 0:
+        return V, F, np.arange(V.shape[0], dtype=np.int64)
+    perm, G = _conn_traverse.canonical(F, V.shape[0])
     return V[perm], G, perm

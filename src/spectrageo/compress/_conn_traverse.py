@@ -1,0 +1,765 @@
+"""Order-preserving connectivity coding by traversal: topology first, then the two orders.
+
+A file's face list carries three kinds of information: the *topology* (which vertices form
+triangles), the *vertex order* (which label each vertex has) and the *face order* with the corner
+rotation of every face. Coding ``(a, b, c)`` label triples directly spends about ``3 log2(n)``
+bits per face when the file's orders are not coherent (many shared meshes: ChineseDragon,
+armadillo, the CAD parts), while any order-preserving code needs only about
+``log2(m!) + log2(n!)`` bits for the two orders plus a few bits per face for the topology.
+This coder sends the three parts separately:
+
+1. **Topology** by a depth-first traversal of the faces over shared edges. The decoder numbers
+   vertices in the order the traversal meets them (canonical ids). From an open edge (one decoded
+   face) the encoder says whether an undecoded face lies across it, that face's orientation
+   relative to its neighbour, and its third vertex: *new* (the next canonical id), one of a short
+   candidate list both sides build from the decoded neighbours of the edge's end points (border
+   neighbours first, as in Edgebreaker's L/R cases), or, rarely, an explicit id. Faces the
+   traversal cannot reach (other components, non-manifold and degenerate faces) are *seeds*
+   sent corner by corner in the file's face order.
+2. **Vertex labels**: the file label of every canonical vertex, as its rank among the labels not
+   yet used relative to the rank that would follow the previous vertex's label (0 for files whose
+   vertices are numbered along a traversal), Elias-gamma split into an entropy-coded length and
+   raw bits. A random numbering costs close to ``log2(n!)``, the minimum.
+3. **Face order**: the file's faces in their order, each named as the canonical face after the
+   previous one, one of the first three other not-yet-placed edge neighbours of the previous
+   one, or by its rank among the faces not yet placed (Elias-gamma as above); then each face's
+   rotation relative to "smallest label first".
+
+:func:`canonical` gives the order in which all three parts are nearly free (the ``--reorder``
+option): vertices numbered as the traversal meets them, faces in traversal order, smallest label
+first.
+
+The third-vertex symbol is coded in one of 16 contexts, the classes (new, first candidate,
+second candidate, other) of the two symbols before it: Edgebreaker-like symbol sequences are
+strongly correlated (0.5-0.7 bits per vertex saved on the shared meshes). All symbol streams are
+coded with static categorical models (counts sent in the stream) by
+``constriction``'s ANS coder; raw bits are packed. Both sides run the same compiled state machine
+(:func:`_topology`), so the candidate lists cannot drift apart. Decoding validates every symbol
+and refuses malformed streams with :class:`~spectrageo.InvalidInputError`.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from .._errors import InvalidInputError
+from ._container import Reader, varint
+
+#: length of the candidate list for the third vertex of a traversed face
+KMAX = 30
+#: adjacency entries walked per end point when building the candidate list
+CAP = 32
+W_FAR = 1  # candidates are symbols 2 .. KMAX + 1
+W_ALPHA = KMAX + 2
+C_SEQ = 3
+C_EXPLICIT = 4
+#: alphabets of the categorical streams, in stream order
+#: contexts of the third-vertex symbol: the classes of the two previous ones
+N_CTX = 16
+ALPHABETS = (
+    2,  # gate: a face lies across the open edge
+    2,  # orient: 0 consistent with its neighbour, 1 flipped
+    2,  # seed corner: new or old
+    *([W_ALPHA] * N_CTX),  # third vertex: new, far, candidate 1..KMAX; one stream per context
+    65,  # vertex label: Elias length
+    5,  # face order: neighbour 0-2, next, explicit
+    65,  # face order: Elias length
+    3,  # rotation relative to smallest label first
+)
+N_STREAMS = len(ALPHABETS)
+N_TOPO = 3 + N_CTX  # streams of stage 1
+
+
+# ----------------------------------------------------------------------------- bit buffers
+@numba.njit(cache=True, inline="always")
+def _put(buf, pos, value, width):
+    for k in range(width - 1, -1, -1):
+        if (value >> k) & 1:
+            buf[pos >> 3] |= np.uint8(1 << (7 - (pos & 7)))
+        pos += 1
+    return pos
+
+
+@numba.njit(cache=True, inline="always")
+def _get(buf, pos, width, nbits):
+    if pos + width > nbits:
+        return -1, pos
+    value = 0
+    for _ in range(width):
+        value = (value << 1) | ((buf[pos >> 3] >> (7 - (pos & 7))) & 1)
+        pos += 1
+    return value, pos
+
+
+@numba.njit(cache=True, inline="always")
+def _bitlen(x):
+    k = 0
+    while x > 0:
+        x >>= 1
+        k += 1
+    return k
+
+
+# ----------------------------------------------------------------------------- edge table
+@numba.njit(cache=True, inline="always")
+def _slot(hkeys, key):
+    mask = hkeys.size - 1
+    h = (np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(20)
+    i = np.int64(h & np.uint64(mask))
+    while hkeys[i] != -1 and hkeys[i] != key:
+        i = (i + 1) & mask
+    return i
+
+
+@numba.njit(cache=True)
+def _add_edge(a, b, N, hkeys, hval, ecnt, head, nxt, to, ne):
+    """Count one more face on edge {a, b}; returns the new number of edges."""
+    lo, hi = (a, b) if a < b else (b, a)
+    key = lo * N + hi
+    i = _slot(hkeys, key)
+    if hkeys[i] == -1:
+        hkeys[i] = key
+        hval[i] = ne
+        e = ne
+        ne += 1
+        ecnt[e] = 0
+        to[2 * e] = hi
+        nxt[2 * e] = head[lo]
+        head[lo] = 2 * e
+        to[2 * e + 1] = lo
+        nxt[2 * e + 1] = head[hi]
+        head[hi] = 2 * e + 1
+    else:
+        e = hval[i]
+    ecnt[e] += 1
+    return ne
+
+
+@numba.njit(cache=True)
+def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to):
+    """Decoded neighbours of v, then u: border edges first (one face), then the others."""
+    nc = 0
+    for p in range(4):
+        x0 = v if p % 2 == 0 else u
+        excl = u if p % 2 == 0 else v
+        want_border = p < 2
+        ent = head[x0]
+        steps = 0
+        while ent != -1 and steps < CAP and nc < KMAX:
+            y = to[ent]
+            steps += 1
+            if y != excl and (ecnt[ent >> 1] == 1) == want_border:
+                dup = False
+                for i in range(nc):
+                    if cand[i] == y:
+                        dup = True
+                        break
+                if not dup:
+                    cand[nc] = y
+                    nc += 1
+            ent = nxt[ent]
+    return nc
+
+
+@numba.njit(cache=True)
+def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits, Fc, order, L):
+    """Stage 1, run identically by encoder (``encode``) and decoder.
+
+    Encoder inputs: ``F`` (file faces), ``ekeys/eptr/efaces`` (undirected file edges of the
+    non-degenerate faces, sorted, with their faces). It fills ``syms`` (streams 0-3, lengths in
+    ``lens``), the raw bits, ``Fc`` (canonical faces), ``order`` (file index of each canonical
+    face) and ``L`` (file label of each canonical vertex). The decoder reads the same streams and
+    fills ``Fc``. Returns ``(status, n_canonical_vertices, bit_position)``; status 0 is success.
+    """
+    N = np.int64(3 * m + 3)
+    cap = 1
+    while cap < 2 * N:
+        cap *= 2
+    hkeys = np.full(cap, -1, dtype=np.int64)
+    hval = np.zeros(cap, dtype=np.int64)
+    ecnt = np.zeros(N, dtype=np.int64)
+    head = np.full(N, -1, dtype=np.int64)
+    nxt = np.full(2 * N, -1, dtype=np.int64)
+    to = np.zeros(2 * N, dtype=np.int64)
+    su = np.zeros(N, dtype=np.int64)
+    sv = np.zeros(N, dtype=np.int64)
+    cand = np.zeros(KMAX, dtype=np.int64)
+    cid = np.full(n_univ if encode else 1, -1, dtype=np.int64)
+    done = np.zeros(m if encode else 1, dtype=np.bool_)
+    c = np.zeros(3, dtype=np.int64)
+    ne = 0
+    nv = 0
+    sp = 0
+    t = 0
+    fpos = 0
+    pos = 0
+    cur = np.zeros(N_TOPO, dtype=np.int64)  # read/write cursor per stream
+    ctx = 0
+    while t < m:
+        if sp == 0:  # seed face, corner by corner
+            if encode:
+                while done[fpos]:
+                    fpos += 1
+                f = fpos
+                for k in range(3):
+                    x = F[f, k]
+                    if cid[x] == -1:
+                        syms[2, cur[2]] = 0
+                        cid[x] = nv
+                        L[nv] = x
+                        nv += 1
+                    else:
+                        syms[2, cur[2]] = 1
+                        pos = _put(bits, pos, cid[x], _bitlen(nv - 1))
+                    cur[2] += 1
+                    c[k] = cid[x]
+                done[f] = True
+                order[t] = f
+            else:
+                for k in range(3):
+                    if cur[2] >= lens[2]:
+                        return 1, nv, pos
+                    s = syms[2, cur[2]]
+                    cur[2] += 1
+                    if s == 0:
+                        if nv >= N:
+                            return 1, nv, pos
+                        c[k] = nv
+                        nv += 1
+                    else:
+                        val, pos = _get(bits, pos, _bitlen(nv - 1), nbits)
+                        if val < 0 or val >= nv:
+                            return 1, nv, pos
+                        c[k] = val
+            Fc[t, 0] = c[0]
+            Fc[t, 1] = c[1]
+            Fc[t, 2] = c[2]
+            t += 1
+            if c[0] != c[1] and c[1] != c[2] and c[0] != c[2]:
+                for k in range(3):
+                    ne = _add_edge(c[k], c[(k + 1) % 3], N, hkeys, hval, ecnt, head, nxt, to, ne)
+                for k in range(2, -1, -1):
+                    su[sp] = c[k]
+                    sv[sp] = c[(k + 1) % 3]
+                    sp += 1
+            continue
+        sp -= 1
+        u = su[sp]
+        v = sv[sp]
+        lo, hi = (u, v) if u < v else (v, u)
+        e = hval[_slot(hkeys, lo * N + hi)]
+        if ecnt[e] >= 2:
+            continue
+        f = -1
+        w = -1
+        if encode:
+            a = L[u]
+            b = L[v]
+            la, lb = (a, b) if a < b else (b, a)
+            key = la * n_univ + lb
+            i = np.searchsorted(ekeys, key)
+            if i < ekeys.size and ekeys[i] == key:
+                for q in range(eptr[i], eptr[i + 1]):
+                    if not done[efaces[q]]:
+                        f = efaces[q]
+                        break
+            syms[0, cur[0]] = 1 if f >= 0 else 0
+            cur[0] += 1
+            if f < 0:
+                continue
+            orient = 1
+            for k in range(3):
+                if F[f, k] == b and F[f, (k + 1) % 3] == a:
+                    orient = 0
+                if F[f, k] != a and F[f, k] != b:
+                    w = F[f, k]
+            syms[1, cur[1]] = orient
+            cur[1] += 1
+        else:
+            if cur[0] >= lens[0]:
+                return 1, nv, pos
+            g = syms[0, cur[0]]
+            cur[0] += 1
+            if g == 0:
+                continue
+            if cur[1] >= lens[1]:
+                return 1, nv, pos
+            orient = syms[1, cur[1]]
+            cur[1] += 1
+        p, q2 = (v, u) if orient == 0 else (u, v)
+        nc = _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to)
+        if encode:
+            cw = cid[w]
+            if cw == -1:
+                s = 0
+                cid[w] = nv
+                L[nv] = w
+                cw = nv
+                nv += 1
+            else:
+                s = W_FAR
+                for i in range(nc):
+                    if cand[i] == cw:
+                        s = 2 + i
+                        break
+                if s == W_FAR:
+                    pos = _put(bits, pos, cw, _bitlen(nv - 1))
+            syms[3 + ctx, cur[3 + ctx]] = s
+            cur[3 + ctx] += 1
+            done[f] = True
+            order[t] = f
+        else:
+            if cur[3 + ctx] >= lens[3 + ctx]:
+                return 1, nv, pos
+            s = syms[3 + ctx, cur[3 + ctx]]
+            cur[3 + ctx] += 1
+            if s == 0:
+                if nv >= N:
+                    return 1, nv, pos
+                cw = nv
+                nv += 1
+            elif s == W_FAR:
+                cw, pos = _get(bits, pos, _bitlen(nv - 1), nbits)
+                if cw < 0 or cw >= nv or cw == u or cw == v:
+                    return 1, nv, pos
+            elif s <= nc + 1:
+                cw = cand[s - 2]
+            else:
+                return 1, nv, pos
+        ctx = 4 * (ctx % 4) + (0 if s == 0 else (s - 1 if 2 <= s <= 3 else 3))
+        Fc[t, 0] = p
+        Fc[t, 1] = q2
+        Fc[t, 2] = cw
+        t += 1
+        ne = _add_edge(p, q2, N, hkeys, hval, ecnt, head, nxt, to, ne)
+        ne = _add_edge(q2, cw, N, hkeys, hval, ecnt, head, nxt, to, ne)
+        ne = _add_edge(cw, p, N, hkeys, hval, ecnt, head, nxt, to, ne)
+        su[sp] = q2
+        sv[sp] = cw
+        sp += 1
+        su[sp] = cw
+        sv[sp] = p
+        sp += 1
+    for k in range(N_TOPO):
+        if not encode and cur[k] != lens[k]:
+            return 1, nv, pos
+        lens[k] = cur[k]
+    return 0, nv, pos
+
+
+# ----------------------------------------------------------------------------- Fenwick ranks
+@numba.njit(cache=True)
+def _fen_init(n):
+    tree = np.zeros(n + 1, dtype=np.int64)
+    for i in range(1, n + 1):
+        tree[i] += 1
+        j = i + (i & -i)
+        if j <= n:
+            tree[j] += tree[i]
+    return tree
+
+
+@numba.njit(cache=True, inline="always")
+def _fen_add(tree, i, delta):
+    i += 1
+    n = tree.size - 1
+    while i <= n:
+        tree[i] += delta
+        i += i & -i
+
+
+@numba.njit(cache=True, inline="always")
+def _fen_prefix(tree, i):
+    """Number of unused items with index < i."""
+    s = 0
+    while i > 0:
+        s += tree[i]
+        i -= i & -i
+    return s
+
+
+@numba.njit(cache=True)
+def _fen_select(tree, r):
+    """Index of the unused item of rank r (0-based)."""
+    n = tree.size - 1
+    step = 1
+    while step * 2 <= n:
+        step *= 2
+    pos = 0
+    while step > 0:
+        if pos + step <= n and tree[pos + step] <= r:
+            pos += step
+            r -= tree[pos]
+        step //= 2
+    return pos
+
+
+@numba.njit(cache=True, inline="always")
+def _zig(d):
+    return 2 * d if d >= 0 else -2 * d - 1
+
+
+@numba.njit(cache=True, inline="always")
+def _unzig(z):
+    return z >> 1 if z % 2 == 0 else -((z + 1) >> 1)
+
+
+@numba.njit(cache=True)
+def _ranks(encode, n_items, seq, n_univ, sym, bits, pos, nbits):
+    """Stage 2: a sequence of distinct items of ``range(n_univ)`` as Elias-coded rank steps."""
+    tree = _fen_init(n_univ)
+    prev = -1
+    remaining = n_univ
+    for c in range(n_items):
+        p = _fen_prefix(tree, prev + 1)
+        if encode:
+            d = _fen_prefix(tree, seq[c]) - p
+            z = _zig(d)
+            k = _bitlen(z)
+            sym[c] = k
+            if k > 1:
+                pos = _put(bits, pos, z, k - 1)
+            x = seq[c]
+        else:
+            k = sym[c]
+            if k == 0:
+                z = 0
+            elif k == 1:
+                z = 1
+            else:
+                lo, pos = _get(bits, pos, k - 1, nbits)
+                if lo < 0:
+                    return 1, pos
+                z = (1 << (k - 1)) | lo
+            r = p + _unzig(z)
+            if r < 0 or r >= remaining:
+                return 1, pos
+            x = _fen_select(tree, r)
+            seq[c] = x
+        _fen_add(tree, x, -1)
+        remaining -= 1
+        prev = x
+    return 0, pos
+
+
+@numba.njit(cache=True)
+def _face_order(encode, m, nptr, nbrs, inv, cls, sym, bits, pos, nbits):
+    """Stage 3: the file's face order over the canonical faces (``inv[t]`` = canonical index)."""
+    tree = _fen_init(m)
+    placed = np.zeros(m, dtype=np.bool_)
+    cand = np.zeros(3, dtype=np.int64)
+    prev = -1
+    n_sym = 0
+    for t in range(m):
+        nc = 0
+        if prev >= 0:
+            for q in range(nptr[prev], nptr[prev + 1]):
+                g = nbrs[q]
+                if not placed[g]:
+                    dup = False
+                    for i in range(nc):
+                        if cand[i] == g:
+                            dup = True
+                    if not dup:
+                        cand[nc] = g
+                        nc += 1
+                        if nc == 3:
+                            break
+        seq = prev + 1
+        if seq >= m or placed[seq]:
+            seq = -1
+        k = 0
+        for i in range(nc):  # the next canonical face has its own symbol
+            if cand[i] != seq:
+                cand[k] = cand[i]
+                k += 1
+        nc = k
+        if encode:
+            j = inv[t]
+            s = C_EXPLICIT
+            if j == seq:
+                s = C_SEQ
+            else:
+                for i in range(nc):
+                    if cand[i] == j:
+                        s = i
+            cls[t] = s
+            if s == C_EXPLICIT:
+                d = _fen_prefix(tree, j) - _fen_prefix(tree, prev + 1)
+                z = _zig(d)
+                k = _bitlen(z)
+                sym[n_sym] = k
+                n_sym += 1
+                if k > 1:
+                    pos = _put(bits, pos, z, k - 1)
+        else:
+            s = cls[t]
+            if s < nc:
+                j = cand[s]
+            elif s == C_SEQ and seq >= 0:
+                j = seq
+            elif s == C_EXPLICIT:
+                if n_sym >= sym.size:
+                    return 1, n_sym, pos
+                k = sym[n_sym]
+                n_sym += 1
+                if k == 0:
+                    z = 0
+                elif k == 1:
+                    z = 1
+                else:
+                    lo, pos = _get(bits, pos, k - 1, nbits)
+                    if lo < 0:
+                        return 1, n_sym, pos
+                    z = (1 << (k - 1)) | lo
+                r = _fen_prefix(tree, prev + 1) + _unzig(z)
+                if r < 0 or r >= m - t:
+                    return 1, n_sym, pos
+                j = _fen_select(tree, r)
+            else:
+                return 1, n_sym, pos
+            inv[t] = j
+        placed[j] = True
+        _fen_add(tree, j, -1)
+        prev = j
+    return 0, n_sym, pos
+
+
+# ----------------------------------------------------------------------------- helpers
+def _edge_table(F: np.ndarray, n_univ: int):
+    """Sorted undirected edge keys of the non-degenerate faces, with their faces (CSR)."""
+    nd = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])
+    fi = np.flatnonzero(nd)
+    G = F[fi]
+    a = np.concatenate([G[:, 0], G[:, 1], G[:, 2]])
+    b = np.concatenate([G[:, 1], G[:, 2], G[:, 0]])
+    face = np.tile(fi, 3)
+    key = np.minimum(a, b) * n_univ + np.maximum(a, b)
+    o = np.lexsort((face, key))
+    key = key[o]
+    face = face[o]
+    ukeys, starts = np.unique(key, return_index=True)
+    eptr = np.r_[starts, key.size].astype(np.int64)
+    return ukeys.astype(np.int64), eptr, face.astype(np.int64)
+
+
+def _face_neighbours(Fc: np.ndarray):
+    """Faces sharing an edge with each face (CSR, by edge then face index)."""
+    m = Fc.shape[0]
+    nd = (Fc[:, 0] != Fc[:, 1]) & (Fc[:, 1] != Fc[:, 2]) & (Fc[:, 0] != Fc[:, 2])
+    N = int(Fc.max()) + 1 if m else 1
+    fi = np.flatnonzero(nd)
+    G = Fc[fi]
+    a = np.concatenate([G[:, 0], G[:, 1], G[:, 2]])
+    b = np.concatenate([G[:, 1], G[:, 2], G[:, 0]])
+    slot = np.repeat(np.arange(3), fi.size)
+    face = np.tile(fi, 3)
+    key = np.minimum(a, b) * N + np.maximum(a, b)
+    o = np.lexsort((face, key))
+    key, face, slot = key[o], face[o], slot[o]
+    starts = np.r_[0, np.flatnonzero(np.diff(key)) + 1, key.size]
+    counts = np.diff(starts)
+    # every ordered pair (f, g) of distinct faces on the same edge
+    src, dst, sl = [], [], []
+    for k in range(2, int(counts.max()) + 1 if counts.size else 1):
+        sel = np.flatnonzero(counts == k)
+        if sel.size == 0:
+            continue
+        idx = starts[sel][:, None] + np.arange(k)[None, :]
+        f = face[idx]
+        s = slot[idx]
+        ii, jj = np.nonzero(~np.eye(k, dtype=bool))
+        src.append(f[:, ii].ravel())
+        dst.append(f[:, jj].ravel())
+        sl.append(s[:, ii].ravel())
+    if src:
+        src = np.concatenate(src)
+        dst = np.concatenate(dst)
+        sl = np.concatenate(sl)
+    else:
+        src = dst = sl = np.zeros(0, dtype=np.int64)
+    o = np.lexsort((dst, sl, src))
+    nbrs = dst[o].astype(np.int64)
+    nptr = np.r_[0, np.cumsum(np.bincount(src, minlength=m))].astype(np.int64)
+    return nptr, nbrs
+
+
+def _bitbuf(nbits_max: int) -> np.ndarray:
+    return np.zeros(nbits_max // 8 + 8, dtype=np.uint8)
+
+
+def _categorical(counts: np.ndarray):
+    import constriction
+
+    p = counts.astype(np.float64) / float(counts.sum())
+    return constriction.stream.model.Categorical(p, perfect=False)
+
+
+# ----------------------------------------------------------------------------- public
+MARKER = 0x40
+
+
+def _traverse(F: np.ndarray):
+    m = F.shape[0]
+    n_univ = int(F.max()) + 1
+    ekeys, eptr, efaces = _edge_table(F, n_univ)
+    syms = np.zeros((N_TOPO, 3 * m + 3), dtype=np.int64)
+    lens = np.zeros(N_TOPO, dtype=np.int64)
+    bits = _bitbuf(64 * (3 * m + 3))
+    Fc = np.zeros((m, 3), dtype=np.int64)
+    order = np.zeros(m, dtype=np.int64)
+    L = np.zeros(3 * m + 3, dtype=np.int64)
+    st, nv, pos = _topology(
+        True, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, 0, Fc, order, L
+    )
+    if st != 0:  # pragma: no cover - the encoder's own state machine cannot fail
+        raise RuntimeError("connectivity traversal failed")
+    return n_univ, syms, lens, bits, pos, Fc, order, L[:nv]
+
+
+def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(perm, G)``: the traversal's vertex order (unused vertices last) and faces ``G`` in it.
+
+    ``G`` lists the faces in traversal order, each rotated to start at its smallest index
+    (orientation kept), so that :func:`encode` spends almost nothing on the two orders.
+    """
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    _, _, _, _, _, Fc, _, L = _traverse(F)
+    unused = np.ones(n_vertices, dtype=bool)
+    unused[L] = False
+    perm = np.r_[L, np.flatnonzero(unused)].astype(np.int64)
+    rot = np.argmin(Fc, axis=1)
+    idx = (rot[:, None] + np.arange(3)[None, :]) % 3
+    return perm, np.take_along_axis(Fc, idx, axis=1)
+
+
+def encode(F: np.ndarray) -> bytes:
+    """Traversal code of ``F`` (int64, (m, 3), m >= 1); see the module docstring."""
+    from constriction import stream
+
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    m = F.shape[0]
+    n_univ, syms, lens, bitsA, posA, Fc, order, L = _traverse(F)
+    nv = L.size
+    vb = np.zeros(nv, dtype=np.int64)
+    bitsB = _bitbuf(64 * nv + 64)
+    st, posB = _ranks(True, nv, L, n_univ, vb, bitsB, 0, 0)
+    nptr, nbrs = _face_neighbours(Fc)
+    inv = np.empty(m, dtype=np.int64)
+    inv[order] = np.arange(m)
+    fc = np.zeros(m, dtype=np.int64)
+    fb = np.zeros(m, dtype=np.int64)
+    bitsC = _bitbuf(64 * m + 64)
+    st, n_fb, posC = _face_order(True, m, nptr, nbrs, inv, fc, fb, bitsC, 0, 0)
+    rot = _rotation_symbols(F[order], L[Fc])
+    streams = [syms[k, : lens[k]] for k in range(N_TOPO)] + [vb, fc, fb[:n_fb], rot]
+    head = bytearray([MARKER]) + varint(n_univ) + varint(nv)
+    coder = stream.stack.AnsCoder()
+    for s, alpha in zip(streams, ALPHABETS, strict=True):
+        head += varint(s.size)
+        if s.size:
+            counts = np.bincount(s, minlength=alpha)
+            top = int(np.flatnonzero(counts).max()) + 1
+            head += varint(top) + b"".join(varint(int(x)) for x in counts[:top])
+    for s, alpha in reversed(list(zip(streams, ALPHABETS, strict=True))):
+        if s.size:
+            counts = np.bincount(s, minlength=alpha)
+            coder.encode_reverse(s.astype(np.int32), _categorical(counts))
+    for buf, pos in ((bitsA, posA), (bitsB, posB), (bitsC, posC)):
+        raw = buf[: (pos + 7) // 8].tobytes()
+        head += varint(pos) + raw
+    words = coder.get_compressed().astype("<u4").tobytes()
+    return bytes(head) + words
+
+
+def _rotation_symbols(Ff: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """Rotation r with ``Ff == roll(G, -r)``, coded relative to the smallest label first."""
+    r = np.full(Ff.shape[0], -1, dtype=np.int64)
+    for k in (2, 1, 0):
+        ok = (Ff == np.roll(G, -k, axis=1)).all(axis=1)
+        r[ok] = k
+    if (r < 0).any():  # pragma: no cover - traversal keeps every face a rotation of the file's
+        raise RuntimeError("connectivity traversal lost a face's orientation")
+    return (r - np.argmin(G, axis=1)) % 3
+
+
+def decode(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
+    """Inverse of :func:`encode`; ``buf`` starts with :data:`MARKER`."""
+    from constriction import stream
+
+    what = "connectivity"
+    r = Reader(buf, what)
+    if r.take(1)[0] != MARKER:
+        raise InvalidInputError(".sgc connectivity is malformed (unknown scheme).")
+    m = int(n_faces)
+    n_univ = r.varint()
+    nv = r.varint()
+    if not (1 <= n_univ <= n_vertices and 1 <= nv <= n_univ and nv <= 3 * m):
+        raise InvalidInputError(".sgc connectivity is malformed (bad vertex counts).")
+    limits = (3 * m + 3,) * N_TOPO + (nv, m, m, m)
+    sizes, tables = [], []
+    for alpha, lim in zip(ALPHABETS, limits, strict=True):
+        size = r.varint()
+        if size > lim:
+            raise InvalidInputError(".sgc connectivity is malformed (stream too long).")
+        sizes.append(size)
+        if size:
+            top = r.varint()
+            if not 1 <= top <= alpha:
+                raise InvalidInputError(".sgc connectivity is malformed (bad symbol table).")
+            counts = np.zeros(alpha, dtype=np.int64)
+            counts[:top] = [r.varint() for _ in range(top)]
+            if counts.sum() != size:
+                raise InvalidInputError(".sgc connectivity is malformed (bad symbol table).")
+            tables.append(counts)
+        else:
+            tables.append(None)
+    if sizes[N_TOPO] != nv or sizes[N_TOPO + 1] != m or sizes[N_TOPO + 3] != m:
+        raise InvalidInputError(".sgc connectivity is malformed (stream lengths).")
+    bits = []
+    for _ in range(3):
+        nb = r.varint()
+        if nb > 64 * (3 * m + 3):
+            raise InvalidInputError(".sgc connectivity is malformed (bit stream too long).")
+        raw = np.frombuffer(r.take((nb + 7) // 8), dtype=np.uint8)
+        bits.append((np.r_[raw, np.zeros(8, np.uint8)], nb))
+    words = r.rest()
+    if len(words) % 4:
+        raise InvalidInputError(".sgc connectivity is malformed (coder words misaligned).")
+    w = np.frombuffer(words, dtype="<u4").astype(np.uint32)
+    streams = []
+    try:
+        coder = stream.stack.AnsCoder(w)
+        for size, counts in zip(sizes, tables, strict=True):
+            if size:
+                streams.append(coder.decode(_categorical(counts), size).astype(np.int64))
+            else:
+                streams.append(np.zeros(0, dtype=np.int64))
+    except (ValueError, RuntimeError, OverflowError) as exc:
+        raise InvalidInputError(f".sgc connectivity is malformed ({exc}).") from None
+    syms = np.zeros((N_TOPO, max(1, max(sizes[:N_TOPO]))), dtype=np.int64)
+    for k in range(N_TOPO):
+        syms[k, : sizes[k]] = streams[k]
+    lens = np.array(sizes[:N_TOPO], dtype=np.int64)
+    Fc = np.zeros((m, 3), dtype=np.int64)
+    dummyF = np.zeros((1, 3), dtype=np.int64)
+    z = np.zeros(1, dtype=np.int64)
+    (bA, nA), (bB, nB), (bC, nC) = bits
+    st, nv2, _ = _topology(False, m, dummyF, z, z, z, n_univ, syms, lens, bA, nA, Fc, z, z)
+    if st != 0 or nv2 != nv:
+        raise InvalidInputError(".sgc connectivity is malformed (topology stream).")
+    L = np.zeros(nv, dtype=np.int64)
+    st, _ = _ranks(False, nv, L, n_univ, streams[N_TOPO], bB, 0, nB)
+    if st != 0:
+        raise InvalidInputError(".sgc connectivity is malformed (vertex labels).")
+    nptr, nbrs = _face_neighbours(Fc)
+    inv = np.zeros(m, dtype=np.int64)
+    cls, fb = streams[N_TOPO + 1], streams[N_TOPO + 2]
+    st, used, _ = _face_order(False, m, nptr, nbrs, inv, cls, fb, bC, 0, nC)
+    if st != 0 or used != sizes[N_TOPO + 2]:
+        raise InvalidInputError(".sgc connectivity is malformed (face order).")
+    G = L[Fc]
+    rot = (streams[N_TOPO + 3] + np.argmin(G, axis=1)) % 3
+    idx = (rot[:, None] + np.arange(3)[None, :]) % 3
+    return np.take_along_axis(G, idx, axis=1)[inv]
