@@ -210,3 +210,22 @@ def test_every_shared_mesh_roundtrips(path):
     assert _same_oriented_faces(perm[G], F)
     rbuf = _roundtrip(G, n)
     assert len(rbuf) <= len(buf) or n < 100
+
+
+def test_version_1_files_still_read():
+    import struct
+    import zlib
+
+    from spectrageo import compress
+
+    V, F = load_fandisk()
+    data = bytearray(compress.encode(V, F))
+    assert data[4] == 2
+    V2, F2 = compress.decode(bytes(data))
+    data[4] = 1
+    (plen,) = struct.unpack_from("<H", data, 48)
+    end = 50 + plen
+    data[end : end + 4] = struct.pack("<I", zlib.crc32(bytes(data[:end])))
+    V1, F1 = compress.decode(bytes(data))
+    np.testing.assert_array_equal(F1, F)
+    np.testing.assert_array_equal(V1, V2)

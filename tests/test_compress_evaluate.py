@@ -26,3 +26,32 @@ def test_evaluate_compress_tuning(shared_data, tmp_path):
     md = (tmp_path / "rd.md").read_text()
     assert md.startswith("## Static mesh compression") and "| split | model |" in md
     assert (tmp_path / "rd.csv").read_text().splitlines()[0].startswith("split,model")
+
+
+def test_equal_error_rows_interpolate_without_extrapolating():
+    def row(method, setting, bpv, hd):
+        return {
+            "split": "t",
+            "model": "m",
+            "method": method,
+            "setting": setting,
+            "bpv": bpv,
+            "hausdorff": hd,
+        }
+
+    rows = [
+        row("spectral", "a", 10.0, 1e-2),
+        row("spectral", "b", 20.0, 1e-3),
+        row("draco-ordered", "q=10", 100.0, 1e-3),  # on our curve: 20 bpv
+        row("draco-ordered", "q=16", 130.0, 1e-5),  # below our curve's range
+        row("spectral-reorder", "a", 4.0, 1e-2),
+        row("spectral-reorder", "b", 16.0, 1e-4),
+        row("draco", "q=8", 5.0, 1e-3),  # log-log midpoint: 8 bpv
+    ]
+    out = {r["peer"]: r for r in ev.equal_error_rows(rows)}
+    assert abs(out["draco-ordered q=10"]["ours_bpv"] - 20.0) < 1e-9
+    assert abs(out["draco-ordered q=10"]["ratio"] - 0.2) < 1e-12
+    assert out["draco-ordered q=16"]["ours"] == "-"
+    assert np.isnan(out["draco-ordered q=16"]["ratio"])
+    assert abs(out["draco q=8"]["ours_bpv"] - 8.0) < 1e-9
+    assert out["draco q=8"]["ours"] == "spectral-reorder"

@@ -29,7 +29,10 @@ from dataclasses import dataclass, field
 from .._errors import InvalidInputError
 
 MAGIC = b"SGC\x1a"
-FORMAT_VERSION = 1
+#: version written; 2 added the traversal connectivity code (:mod:`._conn_traverse`)
+FORMAT_VERSION = 2
+#: versions read (a version 1 file's connectivity is always the delta code)
+READ_VERSIONS = (1, 2)
 METHOD_IDS = {
     "spectral": 0,
     "feature": 1,
@@ -96,10 +99,10 @@ def parse(data, *, partial: bool = False) -> Container:
     if len(data) < _FIXED.size + 2:
         raise InvalidInputError(".sgc data is truncated inside the header.")
     magic, version, method, flags, n_chunks, n, m, ox, oy, oz, scale = _FIXED.unpack_from(data)
-    if version != FORMAT_VERSION:
+    if version not in READ_VERSIONS:
         raise InvalidInputError(
-            f".sgc format version {version} is not supported (this spectrageo reads version "
-            f"{FORMAT_VERSION})."
+            f".sgc format version {version} is not supported (this spectrageo reads versions "
+            f"{', '.join(map(str, READ_VERSIONS))})."
         )
     (plen,) = struct.unpack_from("<H", data, _FIXED.size)
     end = _FIXED.size + 2 + plen
