@@ -13,7 +13,9 @@ This coder sends the three parts separately:
    face) the encoder says whether an undecoded face lies across it, that face's orientation
    relative to its neighbour, and its third vertex: *new* (the next canonical id), one of a short
    candidate list both sides build from the decoded neighbours of the edge's end points (border
-   neighbours first, as in Edgebreaker's L/R cases), or, rarely, an explicit id. Faces the
+   neighbours first, as in Edgebreaker's L/R cases), another vertex of the decoded region's
+   border (Edgebreaker's S case) by the step from the gate's rank to its rank among the border
+   vertices (Elias-gamma), or, for non-manifold contacts only, an explicit id. Faces the
    traversal cannot reach (other components, non-manifold and degenerate faces) are *seeds*
    sent corner by corner in the file's face order.
 2. **Vertex labels**: the file label of every canonical vertex, as its rank among the labels not
@@ -50,8 +52,9 @@ from ._container import Reader, varint
 KMAX = 30
 #: adjacency entries walked per end point when building the candidate list
 CAP = 32
-W_FAR = 1  # candidates are symbols 2 .. KMAX + 1
-W_ALPHA = KMAX + 2
+W_FAR = 1  # an old vertex on the decoded region's border, by its rank there
+W_ANY = KMAX + 2  # any old vertex, by its id; candidates are symbols 2 .. KMAX + 1
+W_ALPHA = KMAX + 3
 C_SEQ = 3
 C_EXPLICIT = 4
 #: alphabets of the categorical streams, in stream order
@@ -61,14 +64,15 @@ ALPHABETS = (
     2,  # gate: a face lies across the open edge
     2,  # orient: 0 consistent with its neighbour, 1 flipped
     2,  # seed corner: new or old
-    *([W_ALPHA] * N_CTX),  # third vertex: new, far, candidate 1..KMAX; one stream per context
+    65,  # far border vertex: Elias length of its rank step
+    *([W_ALPHA] * N_CTX),  # third vertex: new, far, candidate 1..KMAX, any; one per context
     65,  # vertex label: Elias length
     5,  # face order: neighbour 0-2, next, explicit
     65,  # face order: Elias length
     3,  # rotation relative to smallest label first
 )
 N_STREAMS = len(ALPHABETS)
-N_TOPO = 3 + N_CTX  # streams of stage 1
+N_TOPO = 4 + N_CTX  # streams of stage 1
 
 
 # ----------------------------------------------------------------------------- bit buffers
@@ -113,8 +117,9 @@ def _slot(hkeys, key):
 
 
 @numba.njit(cache=True)
-def _add_edge(a, b, N, hkeys, hval, ecnt, head, nxt, to, ne):
-    """Count one more face on edge {a, b}; returns the new number of edges."""
+def _add_edge(a, b, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree):
+    """Count one more face on edge {a, b}; returns the new number of edges. ``bcnt`` counts
+    the border edges (one face) of every vertex, ``btree`` flags vertices with one (Fenwick)."""
     lo, hi = (a, b) if a < b else (b, a)
     key = lo * N + hi
     i = _slot(hkeys, key)
@@ -133,6 +138,12 @@ def _add_edge(a, b, N, hkeys, hval, ecnt, head, nxt, to, ne):
     else:
         e = hval[i]
     ecnt[e] += 1
+    if ecnt[e] <= 2:
+        step = 1 if ecnt[e] == 1 else -1
+        for x in (lo, hi):
+            bcnt[x] += step
+            if bcnt[x] == (1 if step == 1 else 0):
+                _fen_add(btree, x, step)
     return ne
 
 
@@ -185,6 +196,8 @@ def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits
     su = np.zeros(N, dtype=np.int64)
     sv = np.zeros(N, dtype=np.int64)
     cand = np.zeros(KMAX, dtype=np.int64)
+    bcnt = np.zeros(N, dtype=np.int64)
+    btree = np.zeros(N + 1, dtype=np.int64)
     cid = np.full(n_univ if encode else 1, -1, dtype=np.int64)
     done = np.zeros(m if encode else 1, dtype=np.bool_)
     c = np.zeros(3, dtype=np.int64)
@@ -238,7 +251,9 @@ def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits
             t += 1
             if c[0] != c[1] and c[1] != c[2] and c[0] != c[2]:
                 for k in range(3):
-                    ne = _add_edge(c[k], c[(k + 1) % 3], N, hkeys, hval, ecnt, head, nxt, to, ne)
+                    ne = _add_edge(
+                        c[k], c[(k + 1) % 3], N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree
+                    )
                 for k in range(2, -1, -1):
                     su[sp] = c[k]
                     sv[sp] = c[(k + 1) % 3]
@@ -303,23 +318,49 @@ def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits
                     if cand[i] == cw:
                         s = 2 + i
                         break
-                if s == W_FAR:
+                if s == W_FAR and bcnt[cw] > 0:
+                    z = _zig(_fen_prefix(btree, cw) - _fen_prefix(btree, u))
+                    k = _bitlen(z)
+                    syms[3, cur[3]] = k
+                    cur[3] += 1
+                    if k > 1:
+                        pos = _put(bits, pos, z, k - 1)
+                elif s == W_FAR:
+                    s = W_ANY
                     pos = _put(bits, pos, cw, _bitlen(nv - 1))
-            syms[3 + ctx, cur[3 + ctx]] = s
-            cur[3 + ctx] += 1
+            syms[4 + ctx, cur[4 + ctx]] = s
+            cur[4 + ctx] += 1
             done[f] = True
             order[t] = f
         else:
-            if cur[3 + ctx] >= lens[3 + ctx]:
+            if cur[4 + ctx] >= lens[4 + ctx]:
                 return 1, nv, pos
-            s = syms[3 + ctx, cur[3 + ctx]]
-            cur[3 + ctx] += 1
+            s = syms[4 + ctx, cur[4 + ctx]]
+            cur[4 + ctx] += 1
             if s == 0:
                 if nv >= N:
                     return 1, nv, pos
                 cw = nv
                 nv += 1
             elif s == W_FAR:
+                if cur[3] >= lens[3]:
+                    return 1, nv, pos
+                k = syms[3, cur[3]]
+                cur[3] += 1
+                if k <= 1:
+                    z = k
+                else:
+                    lo_bits, pos = _get(bits, pos, k - 1, nbits)
+                    if lo_bits < 0:
+                        return 1, nv, pos
+                    z = (1 << (k - 1)) | lo_bits
+                r = _fen_prefix(btree, u) + _unzig(z)
+                if r < 0 or r >= _fen_prefix(btree, N):
+                    return 1, nv, pos
+                cw = _fen_select(btree, r)
+                if cw >= nv or cw == u or cw == v:
+                    return 1, nv, pos
+            elif s == W_ANY:
                 cw, pos = _get(bits, pos, _bitlen(nv - 1), nbits)
                 if cw < 0 or cw >= nv or cw == u or cw == v:
                     return 1, nv, pos
@@ -332,9 +373,9 @@ def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits
         Fc[t, 1] = q2
         Fc[t, 2] = cw
         t += 1
-        ne = _add_edge(p, q2, N, hkeys, hval, ecnt, head, nxt, to, ne)
-        ne = _add_edge(q2, cw, N, hkeys, hval, ecnt, head, nxt, to, ne)
-        ne = _add_edge(cw, p, N, hkeys, hval, ecnt, head, nxt, to, ne)
+        ne = _add_edge(p, q2, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree)
+        ne = _add_edge(q2, cw, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree)
+        ne = _add_edge(cw, p, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree)
         su[sp] = q2
         sv[sp] = cw
         sp += 1
