@@ -63,6 +63,7 @@ SECTIONS = [
     ("bench_outliers_speed", [*_script("bench_outliers_speed"), "--repeat", "3", "--large"]),
     ("saliency", _script("saliency")),
     ("compress", _evaluate("compress", "compress")),
+    ("connectivity", _script("connectivity")),
     ("compress_animation", _evaluate("compress-animation", "compress_animation")),
     ("complete", _evaluate("complete", "complete")),
     ("register", _evaluate("register", "register")),

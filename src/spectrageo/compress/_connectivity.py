@@ -14,7 +14,8 @@ Two schemes; the encoder writes both and keeps the smaller, the first byte tells
 
 :func:`reorder` is the ``--reorder`` option: vertices and faces in the traversal's own order
 (:func:`._conn_traverse.canonical`), each face rotated to start at its smallest index
-(orientation kept), where the traversal code spends only its topology part.
+(orientation kept), where the traversal code spends only its topology part; or the input's
+order where that codes smaller.
 """
 
 from __future__ import annotations
@@ -88,9 +89,17 @@ def decode_faces(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
 
 
 def reorder(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Codec-friendly order: returns ``(V', F', perm)`` with ``V' = V[perm]``."""
+    """Codec-friendly order: returns ``(V', F', perm)`` with ``V' = V[perm]``.
+
+    The traversal's order, unless the input's own order already codes smaller (files written
+    along one sweep, e.g. range maps, can cost well under a bit per vertex); then the input is
+    returned with the identity permutation.
+    """
     F = np.asarray(F, dtype=np.int64)
+    identity = np.arange(V.shape[0], dtype=np.int64)
     if len(F) == 0:
-        return V, F, np.arange(V.shape[0], dtype=np.int64)
+        return V, F, identity
     perm, G = _conn_traverse.canonical(F, V.shape[0])
+    if len(encode_faces(F)) <= len(encode_faces(G)):
+        return V, F, identity
     return V[perm], G, perm
