@@ -176,10 +176,10 @@ def main() -> None:
         if not rs:
             continue
         mean = {
-            c: float(np.nanmean([r[c] for r in rs]))
+            c: float(np.nanmedian([r[c] for r in rs]))
             for c in ("delta", "kept", "rcm", "reorder", "draco1")
         }
-        ratio = float(np.mean([r["kept"] / r["delta"] for r in rs]))
+        ratio = float(np.median([r["kept"] / r["delta"] for r in rs]))
         below = sum(r["kept"] <= r["bound"] for r in rs)
         lines.append(
             f"| {split} | {len(rs)} | {mean['delta']:.2f} | {mean['kept']:.2f} | {ratio:.2f} | "
