@@ -238,6 +238,44 @@ def test_cli_device_rejects_unknown(capsys, tmp_path, sheet_file):
     assert "--device" in err
 
 
+def test_cli_device_cuda_refused_for_sor_tiles_and_sequences(capsys, tmp_path, sheet_file):
+    """--device cuda where no GPU path exists: one clear line, exit 2, nothing written."""
+    from spectrageo.geometry import PointCloudSequence
+
+    out = tmp_path / "o.ply"
+    code = main(["outliers", str(sheet_file), str(out), "--tile", "300", "--method", "sor",
+                 "--device", "cuda"])  # fmt: skip
+    _, err = capsys.readouterr()
+    assert code == 2 and "--method rpca only" in err and "Traceback" not in err
+    assert not out.exists()
+    seq = tmp_path / "seq.npz"
+    io.write(seq, PointCloudSequence([_sheet(300), _sheet(300) + 0.01]))
+    code = main(["outliers", str(seq), str(tmp_path / "s.npz"), "--device", "cuda"])
+    _, err = capsys.readouterr()
+    assert code == 2 and "sequences are cleaned on the CPU" in err
+    assert not (tmp_path / "s.npz").exists()
+
+
+@pytest.mark.skipif(HAS_CUDA, reason="a CUDA GPU is visible")
+def test_cli_tiles_pass_the_device_on(capsys, tmp_path, sheet_file):
+    """--tile with --device auto runs every tile's RPCA there (the CPU here): same mask as cpu."""
+    pytest.importorskip("distributed")
+    masks = []
+    for dev in ("cpu", "auto"):
+        mask = tmp_path / f"k_{dev}.npy"
+        code = main(["outliers", str(sheet_file), str(tmp_path / f"t_{dev}.ply"), "--tile", "300",
+                     "--workers", "1", "--device", dev, "--mask", str(mask), "-q"])  # fmt: skip
+        capsys.readouterr()
+        assert code == 0
+        masks.append(np.load(mask))
+    np.testing.assert_array_equal(masks[0], masks[1])
+    code = main(["outliers", str(sheet_file), str(tmp_path / "t_cuda.ply"), "--tile", "300",
+                 "--workers", "1", "--device", "cuda", "-q"])  # fmt: skip
+    _, err = capsys.readouterr()
+    assert code == 2 and "no CUDA GPU" in err
+    assert not (tmp_path / "t_cuda.ply").exists()
+
+
 # --------------------------------------------------------------------------- CUDA
 @needs_cuda
 def test_resolve_device_cuda():

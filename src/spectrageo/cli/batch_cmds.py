@@ -115,6 +115,14 @@ def cmd_outliers_tiled(args) -> int:
     if args.tile is None or args.tile <= 0:
         raise InvalidInputError(f"`tile` must be a positive number of points; got {args.tile}.")
     want = bool(args.mask or args.scores)
+    device = getattr(args, "device", "cpu")
+    extra = {}
+    if args.method == "rpca" and device != "cpu":
+        extra["device"] = device  # each tile's RPCA iterations (rpca_scores's device)
+    elif args.method != "rpca" and device == "cuda":
+        raise InvalidInputError(
+            f"--device cuda applies to --method rpca only; --method {args.method} runs on the CPU."
+        )
     res = distributed.remove_outliers_tiled(
         args.input,
         args.output,
@@ -126,6 +134,7 @@ def cmd_outliers_tiled(args) -> int:
         scheduler=args.scheduler,
         return_arrays=want,
         progress=_progress.progress_enabled(),
+        **extra,
     )
     if args.mask:
         commands._save_npy(args.mask, np.asarray(res.keep))

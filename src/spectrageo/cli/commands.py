@@ -383,6 +383,8 @@ def cmd_outliers(args) -> int:
             raise _err("sequences are cleaned with --method rpca (Section 5.4.3).")
         if args.scores:
             raise _err("--scores is written for single point clouds, not for sequences.")
+        if getattr(args, "device", "cpu") == "cuda":
+            raise _err("sequences are cleaned on the CPU; --device cuda applies to single clouds.")
         res = outliers.clean_sequence(
             obj, k=args.k, **({"tau": args.threshold} if args.threshold else {})
         )
@@ -842,8 +844,8 @@ def register_all(sub) -> None:
         default="cpu",
         choices=["cpu", "cuda", "auto"],
         help="where the RPCA iterations run: cpu (numba, default), cuda (PyTorch on the GPU; "
-        "scores within 1e-3 spacings of cpu), auto (cuda when a GPU is visible). "
-        "--method sor/radius run on the CPU",
+        "scores within 1e-3 spacings of cpu), auto (cuda when a GPU is visible); also for "
+        "every tile with --tile. --method sor/radius and point-cloud sequences run on the CPU",
     )
     p.set_defaults(func=cmd_outliers)
 
