@@ -585,45 +585,52 @@ def _edge_table(F: np.ndarray, n_univ: int):
     return ukeys.astype(np.int64), eptr, face.astype(np.int64)
 
 
-def _face_neighbours(Fc: np.ndarray):
-    """Faces sharing an edge with each face (CSR, by edge then face index)."""
+@numba.njit(cache=True)
+def _face_neighbours_kernel(Fc, nd, n_vert):
     m = Fc.shape[0]
+    # faces of every vertex, ascending (counting sort over the non-degenerate faces)
+    deg = np.zeros(n_vert + 1, dtype=np.int64)
+    for f in range(m):
+        if nd[f]:
+            for k in range(3):
+                deg[Fc[f, k] + 1] += 1
+    for v in range(n_vert):
+        deg[v + 1] += deg[v]
+    vf = np.empty(deg[n_vert], dtype=np.int64)
+    fill = deg[:n_vert].copy()
+    for f in range(m):
+        if nd[f]:
+            for k in range(3):
+                v = Fc[f, k]
+                vf[fill[v]] = f
+                fill[v] += 1
+    cnt = np.zeros(m + 1, dtype=np.int64)
+    out = np.empty(max(1, 3 * deg[n_vert]), dtype=np.int64)
+    n_out = 0
+    for f in range(m):
+        if nd[f]:
+            for k in range(3):
+                a = Fc[f, k]
+                b = Fc[f, (k + 1) % 3]
+                x, y = (a, b) if deg[a + 1] - deg[a] <= deg[b + 1] - deg[b] else (b, a)
+                for q in range(deg[x], deg[x + 1]):
+                    g = vf[q]
+                    if g != f and (Fc[g, 0] == y or Fc[g, 1] == y or Fc[g, 2] == y):
+                        if n_out == out.size:
+                            grown = np.empty(2 * out.size, dtype=np.int64)
+                            grown[:n_out] = out[:n_out]
+                            out = grown
+                        out[n_out] = g
+                        n_out += 1
+        cnt[f + 1] = n_out
+    return cnt, out[:n_out]
+
+
+def _face_neighbours(Fc: np.ndarray):
+    """Faces sharing an edge with each face (CSR: by edge of the face, then face index)."""
     nd = (Fc[:, 0] != Fc[:, 1]) & (Fc[:, 1] != Fc[:, 2]) & (Fc[:, 0] != Fc[:, 2])
-    N = int(Fc.max()) + 1 if m else 1
-    fi = np.flatnonzero(nd)
-    G = Fc[fi]
-    a = np.concatenate([G[:, 0], G[:, 1], G[:, 2]])
-    b = np.concatenate([G[:, 1], G[:, 2], G[:, 0]])
-    slot = np.repeat(np.arange(3), fi.size)
-    face = np.tile(fi, 3)
-    key = np.minimum(a, b) * N + np.maximum(a, b)
-    o = np.lexsort((face, key))
-    key, face, slot = key[o], face[o], slot[o]
-    starts = np.r_[0, np.flatnonzero(np.diff(key)) + 1, key.size]
-    counts = np.diff(starts)
-    # every ordered pair (f, g) of distinct faces on the same edge
-    src, dst, sl = [], [], []
-    for k in range(2, int(counts.max()) + 1 if counts.size else 1):
-        sel = np.flatnonzero(counts == k)
-        if sel.size == 0:
-            continue
-        idx = starts[sel][:, None] + np.arange(k)[None, :]
-        f = face[idx]
-        s = slot[idx]
-        ii, jj = np.nonzero(~np.eye(k, dtype=bool))
-        src.append(f[:, ii].ravel())
-        dst.append(f[:, jj].ravel())
-        sl.append(s[:, ii].ravel())
-    if src:
-        src = np.concatenate(src)
-        dst = np.concatenate(dst)
-        sl = np.concatenate(sl)
-    else:
-        src = dst = sl = np.zeros(0, dtype=np.int64)
-    o = np.lexsort((dst, sl, src))
-    nbrs = dst[o].astype(np.int64)
-    nptr = np.r_[0, np.cumsum(np.bincount(src, minlength=m))].astype(np.int64)
-    return nptr, nbrs
+    n_vert = int(Fc.max()) + 1 if Fc.shape[0] else 1
+    return _face_neighbours_kernel(np.ascontiguousarray(Fc, dtype=np.int64), nd, n_vert)
 
 
 def _bitbuf(nbits_max: int) -> np.ndarray:

@@ -127,10 +127,10 @@ def decode_groups(buf: bytes, groups: np.ndarray, n_groups: int, what: str) -> n
 ZSTD_LEVEL = 19
 
 
-def zstd_compress(b: bytes) -> bytes:
+def zstd_compress(b: bytes, level: int = ZSTD_LEVEL) -> bytes:
     import zstandard
 
-    return zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress(b)
+    return zstandard.ZstdCompressor(level=level).compress(b)
 
 
 def zstd_decompress(b: bytes, max_size: int, what: str) -> bytes:
