@@ -319,12 +319,9 @@ def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits
                         s = 2 + i
                         break
                 if s == W_FAR and bcnt[cw] > 0:
-                    z = _zig(_fen_prefix(btree, cw) - _fen_prefix(btree, u))
-                    k = _bitlen(z)
-                    syms[3, cur[3]] = k
+                    d = _fen_prefix(btree, cw) - _fen_prefix(btree, u)
+                    syms[3, cur[3]], pos = _elias_put(bits, pos, d)
                     cur[3] += 1
-                    if k > 1:
-                        pos = _put(bits, pos, z, k - 1)
                 elif s == W_FAR:
                     s = W_ANY
                     pos = _put(bits, pos, cw, _bitlen(nv - 1))
@@ -345,16 +342,11 @@ def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits
             elif s == W_FAR:
                 if cur[3] >= lens[3]:
                     return 1, nv, pos
-                k = syms[3, cur[3]]
+                d, pos, ok = _elias_get(bits, pos, syms[3, cur[3]], nbits)
                 cur[3] += 1
-                if k <= 1:
-                    z = k
-                else:
-                    lo_bits, pos = _get(bits, pos, k - 1, nbits)
-                    if lo_bits < 0:
-                        return 1, nv, pos
-                    z = (1 << (k - 1)) | lo_bits
-                r = _fen_prefix(btree, u) + _unzig(z)
+                if not ok:
+                    return 1, nv, pos
+                r = _fen_prefix(btree, u) + d
                 if r < 0 or r >= _fen_prefix(btree, N):
                     return 1, nv, pos
                 cw = _fen_select(btree, r)
@@ -446,6 +438,27 @@ def _unzig(z):
     return z >> 1 if z % 2 == 0 else -((z + 1) >> 1)
 
 
+@numba.njit(cache=True, inline="always")
+def _elias_put(bits, pos, d):
+    """Signed step ``d`` as (length symbol, raw bits below the leading one); returns both."""
+    z = _zig(d)
+    k = _bitlen(z)
+    if k > 1:
+        pos = _put(bits, pos, z, k - 1)
+    return k, pos
+
+
+@numba.njit(cache=True, inline="always")
+def _elias_get(bits, pos, k, nbits):
+    """Inverse of :func:`_elias_put`; ``ok`` is False when the raw bits run out."""
+    if k <= 1:
+        return _unzig(k), pos, True
+    lo, pos = _get(bits, pos, k - 1, nbits)
+    if lo < 0:
+        return 0, pos, False
+    return _unzig((1 << (k - 1)) | lo), pos, True
+
+
 @numba.njit(cache=True)
 def _ranks(encode, n_items, seq, n_univ, sym, bits, pos, nbits):
     """Stage 2: a sequence of distinct items of ``range(n_univ)`` as Elias-coded rank steps."""
@@ -455,25 +468,13 @@ def _ranks(encode, n_items, seq, n_univ, sym, bits, pos, nbits):
     for c in range(n_items):
         p = _fen_prefix(tree, prev + 1)
         if encode:
-            d = _fen_prefix(tree, seq[c]) - p
-            z = _zig(d)
-            k = _bitlen(z)
-            sym[c] = k
-            if k > 1:
-                pos = _put(bits, pos, z, k - 1)
+            sym[c], pos = _elias_put(bits, pos, _fen_prefix(tree, seq[c]) - p)
             x = seq[c]
         else:
-            k = sym[c]
-            if k == 0:
-                z = 0
-            elif k == 1:
-                z = 1
-            else:
-                lo, pos = _get(bits, pos, k - 1, nbits)
-                if lo < 0:
-                    return 1, pos
-                z = (1 << (k - 1)) | lo
-            r = p + _unzig(z)
+            d, pos, ok = _elias_get(bits, pos, sym[c], nbits)
+            if not ok:
+                return 1, pos
+            r = p + d
             if r < 0 or r >= remaining:
                 return 1, pos
             x = _fen_select(tree, r)
@@ -528,12 +529,8 @@ def _face_order(encode, m, nptr, nbrs, inv, cls, sym, bits, pos, nbits):
             cls[t] = s
             if s == C_EXPLICIT:
                 d = _fen_prefix(tree, j) - _fen_prefix(tree, prev + 1)
-                z = _zig(d)
-                k = _bitlen(z)
-                sym[n_sym] = k
+                sym[n_sym], pos = _elias_put(bits, pos, d)
                 n_sym += 1
-                if k > 1:
-                    pos = _put(bits, pos, z, k - 1)
         else:
             s = cls[t]
             if s < nc:
@@ -543,18 +540,11 @@ def _face_order(encode, m, nptr, nbrs, inv, cls, sym, bits, pos, nbits):
             elif s == C_EXPLICIT:
                 if n_sym >= sym.size:
                     return 1, n_sym, pos
-                k = sym[n_sym]
+                d, pos, ok = _elias_get(bits, pos, sym[n_sym], nbits)
                 n_sym += 1
-                if k == 0:
-                    z = 0
-                elif k == 1:
-                    z = 1
-                else:
-                    lo, pos = _get(bits, pos, k - 1, nbits)
-                    if lo < 0:
-                        return 1, n_sym, pos
-                    z = (1 << (k - 1)) | lo
-                r = _fen_prefix(tree, prev + 1) + _unzig(z)
+                if not ok:
+                    return 1, n_sym, pos
+                r = _fen_prefix(tree, prev + 1) + d
                 if r < 0 or r >= m - t:
                     return 1, n_sym, pos
                 j = _fen_select(tree, r)
