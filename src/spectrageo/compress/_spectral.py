@@ -5,6 +5,15 @@ overlapped submeshes of ``submesh_size`` vertices (seeded, so deterministic), an
 the ``k`` lowest eigenvectors of its binary Laplacian ``L = D - C``: by subspace tracking with
 orthogonal iterations (``basis="oi"``, Algorithm 6, ``T^zeta U`` with ``T = (L + delta I)^-1``,
 Eq. 5.42), by a dense decomposition (``"exact"``) or with per-submesh sizes (``"doi"``, below).
+When ``k`` is at least the size of a submesh (the default ``k = submesh_size``), the orthogonal
+iteration runs on the whole space and its Rayleigh-Ritz step is the complete eigendecomposition of
+the submesh Laplacian, whatever the starting subspace; that decomposition is then computed directly
+and independently per submesh, in parallel threads, and coding and decoding apply it without
+forming ``U`` (only the rate control by ``error`` forms the bases, once;
+:mod:`spectrageo.compress._spectral_fast`). Such files carry the :data:`DIRECT_FULL` flag in their
+parameters; files without it (coded before the flag existed) are decoded with the orthogonal
+iterations they were coded with. With ``k`` below the submesh size the subspace tracking of
+Algorithm 6 runs submesh after submesh.
 The encoder sends the feature vectors ``U^T v`` (Eq. 5.45) quantised with one uniform step
 ``step`` (the rate knob) and entropy coded per frequency octave and coordinate; the decoder forms
 ``U c`` per submesh and averages the overlapping copies with the degree weights of Algorithm 8.
@@ -36,9 +45,20 @@ TAG_SIZES = 2
 TAG_LAYER = 3
 
 _P = struct.Struct("<HfIBBBHdf")
+#: flag in the basis byte of the parameters: the complete submesh eigenbases are computed directly
+#: (:mod:`spectrageo.compress._spectral_fast`, columns signed by their first entry); without it,
+#: by the orthogonal iterations of :func:`spectrageo.spectral.submesh_eigenbases` (columns signed
+#: by :func:`spectrageo.spectral.gft.fix_signs`), as in the files written before the flag existed
+DIRECT_FULL = 0x80
 
 
 class SpectralParams:
+    """Parameters of the spectral codec, stored in the ``.sgc`` header.
+
+    ``direct`` records which computation of the complete bases (``k`` at least the submesh size)
+    the file was coded with (:data:`DIRECT_FULL`); the encoder sets it whenever that case applies.
+    """
+
     def __init__(
         self,
         *,
@@ -51,6 +71,7 @@ class SpectralParams:
         k: int = 250,
         step: float = 1e-3,
         eps: float = 0.0,
+        direct: bool = False,
     ) -> None:
         self.submesh_size = int(submesh_size)
         self.overlap = float(np.float32(overlap))
@@ -61,13 +82,14 @@ class SpectralParams:
         self.k = int(k)
         self.step = float(step)
         self.eps = float(np.float32(eps))
+        self.direct = bool(direct)
 
     def to_bytes(self) -> bytes:
         return _P.pack(
             self.submesh_size,
             self.overlap,
             self.seed,
-            BASES.index(self.basis),
+            BASES.index(self.basis) | (DIRECT_FULL if self.direct else 0),
             self.zeta,
             self.n_iter,
             self.k,
@@ -80,6 +102,8 @@ class SpectralParams:
         if len(b) != _P.size:
             raise InvalidInputError(".sgc spectral parameters are malformed.")
         size, overlap, seed, basis, zeta, n_iter, k, step, eps = _P.unpack(b)
+        direct = bool(basis & DIRECT_FULL)
+        basis &= ~DIRECT_FULL
         if (
             basis >= len(BASES)
             or not 2 <= size <= 20000
@@ -100,6 +124,7 @@ class SpectralParams:
             k=k,
             step=step,
             eps=eps,
+            direct=direct,
         )
 
     def as_dict(self) -> dict:
@@ -115,11 +140,102 @@ class SpectralParams:
         }
 
 
+#: threads for the direct complete bases (:class:`_Full`); None: every CPU this process may use.
+#: The result does not depend on it.
+WORKERS: int | None = None
+
+
+class _Explicit:
+    """Dictionaries held as dense bases ``U_i`` (n_i, k_i): orthogonal iterations (``k`` below the
+    submesh size, or a file without :data:`DIRECT_FULL`) or the trivial basis of a one-vertex mesh."""
+
+    def __init__(self, bases: list[np.ndarray]) -> None:
+        self.bases = bases
+        self.sizes = np.array([U.shape[1] for U in bases], dtype=np.int64)
+
+    # many small products: a multithreaded BLAS only adds synchronisation cost
+    def analyse(self, X: np.ndarray, parts) -> list[np.ndarray]:
+        from ..linalg._common import single_thread_blas
+
+        with single_thread_blas():
+            return [U.T @ X[part] for U, part in zip(self.bases, parts)]
+
+    def synthesise(self, coefs) -> list[np.ndarray]:
+        from ..linalg._common import single_thread_blas
+
+        with single_thread_blas():
+            return [U[:, : c.shape[0]] @ c for U, c in zip(self.bases, coefs)]
+
+    def explicit(self) -> _Explicit:
+        return self
+
+
+class _Full:
+    """Complete eigenbases of every submesh Laplacian, applied without forming them.
+
+    Should the compiled decomposition fail on a submesh (an eigenvalue of the QL iteration not
+    converging; a property of the connectivity, so encoder and decoder fail alike), every submesh
+    falls back to LAPACK's dense decomposition (``basis="exact"``).
+    """
+
+    def __init__(self, C, subs) -> None:
+        from ._spectral_fast import FullBases
+
+        self.C, self.subs = C, subs
+        self.fb = FullBases(C, subs.parts, workers=WORKERS)
+        self.sizes = self.fb.sizes.copy()
+        self._explicit = None
+        self._fallback = None
+
+    def _dense(self) -> _Explicit:
+        from ..spectral import submesh_eigenbases
+
+        k = int(self.sizes.max())
+        bases = [U for _i, _w, U in submesh_eigenbases(self.C, self.subs, k, method="exact")]
+        return _Explicit(bases)
+
+    def analyse(self, X: np.ndarray, parts) -> list[np.ndarray]:
+        if self._fallback is None:
+            try:
+                return self.fb.analyse(X)
+            except np.linalg.LinAlgError:
+                self._fallback = self._dense()
+        return self._fallback.analyse(X, parts)
+
+    def synthesise(self, coefs) -> list[np.ndarray]:
+        if self._fallback is None:
+            try:
+                return self.fb.synthesise(coefs)
+            except np.linalg.LinAlgError:
+                self._fallback = self._dense()
+        return self._fallback.synthesise(coefs)
+
+    def explicit(self) -> _Explicit:
+        """The bases as dense matrices (formed once, for repeated synthesis)."""
+        if self._fallback is not None:
+            return self._fallback
+        if self._explicit is None:
+            try:
+                self._explicit = _Explicit(self.fb.explicit())
+            except np.linalg.LinAlgError:
+                self._fallback = self._dense()
+                return self._fallback
+        return self._explicit
+
+
 def dictionaries(F: np.ndarray, n: int, p: SpectralParams):
-    """Submeshes and their low-frequency bases from the connectivity (same on both sides)."""
+    """Submeshes and their low-frequency dictionaries from the connectivity (same on both sides).
+
+    When ``k`` covers every submesh, ``p.direct`` selects the direct computation of the complete
+    bases (:class:`_Full`); otherwise, and always when ``k`` is smaller, the orthogonal iterations.
+    Returns ``(subs, dic)``: ``dic.sizes`` is the number of basis vectors of every submesh,
+    ``dic.analyse(X, subs.parts)`` the coefficients ``U_i^T X[part_i]`` and
+    ``dic.synthesise(coefs)`` the per-submesh values ``U_i[:, :m_i] c_i``.
+    """
     from .._errors import ConvergenceWarning
     from ..graph import adjacency_matrix
-    from ..spectral import overlapped_submeshes, submesh_eigenbases
+    from ..spectral import submesh_eigenbases
+    from ._spectral_fast import overlapped_submeshes
 
     C = adjacency_matrix(F, n)
     size = min(p.submesh_size, n) if n >= 2 else 2
@@ -127,8 +243,13 @@ def dictionaries(F: np.ndarray, n: int, p: SpectralParams):
         from ..spectral import Submeshes
 
         allv = np.arange(n, dtype=np.int64)
-        return Submeshes([allv], [allv.copy()], n, [np.zeros(n, dtype=np.int64)]), [np.ones((n, 1))]
+        subs = Submeshes([allv], [allv.copy()], n, [np.zeros(n, dtype=np.int64)])
+        return subs, _Explicit([np.ones((n, 1))])
     subs = overlapped_submeshes(C, submesh_size=size, overlap=p.overlap, rng=p.seed)
+    k = min(p.k, size)
+    if p.direct and all(part.size <= k for part in subs.parts):
+        # the subspace is the whole space: the dictionary is the complete eigenbasis
+        return subs, _Full(C, subs)
     method = "exact" if p.basis == "exact" else "oi"
     bases = [None] * len(subs)
     with warnings.catch_warnings():
@@ -136,14 +257,14 @@ def dictionaries(F: np.ndarray, n: int, p: SpectralParams):
         for i, _w, U in submesh_eigenbases(
             C,
             subs,
-            min(p.k, size),
+            k,
             method=method,
             zeta=p.zeta,
             n_iter=p.n_iter,
             rng=p.seed,
         ):
             bases[i] = U
-    return subs, bases
+    return subs, _Explicit(bases)
 
 
 def _band(c: np.ndarray) -> np.ndarray:
@@ -194,15 +315,18 @@ class SpectralPlan:
     def __init__(self, X: np.ndarray, F: np.ndarray, p: SpectralParams) -> None:
         self.p = p
         self.n = X.shape[0]
-        self.subs, self.bases = dictionaries(F, self.n, p)
-        self.coef = [U.T @ X[part] for U, part in zip(self.bases, self.subs.parts)]
-        ks = np.array([U.shape[1] for U in self.bases], dtype=np.int64)
+        size = min(p.submesh_size, self.n) if self.n >= 2 else 2
+        # new files take the direct computation whenever the bases are complete
+        p.direct = self.n >= 2 and min(p.k, size) >= size
+        self.subs, self.dic = dictionaries(F, self.n, p)
+        self.coef = self.dic.analyse(X, self.subs.parts)
+        ks = self.dic.sizes.copy()
         if p.basis == "doi":
             ks = np.array(
                 [self._doi_size(c, X[part]) for c, part in zip(self.coef, self.subs.parts)]
             )
         self.sizes = ks
-        self.cuts = layer_cutoffs(int(max(U.shape[1] for U in self.bases)))
+        self.cuts = layer_cutoffs(int(self.dic.sizes.max()))
         self.layout = _layout(self.sizes, self.cuts)
         self.values = []
         for sub, col in self.layout:
@@ -241,8 +365,7 @@ class SpectralPlan:
 
         vals = [v if step is None else np.rint(v / step) * step for v in self.values]
         coefs = _scatter(self.layout, vals, self.sizes)
-        values = [U[:, : c.shape[0]] @ c for U, c in zip(self.bases, coefs)]
-        return reassemble(values, self.subs)
+        return reassemble(self.dic.explicit().synthesise(coefs), self.subs)
 
 
 _OPTIONS = ("submesh_size", "overlap", "seed", "basis", "zeta", "n_iter", "k", "eps")
@@ -303,18 +426,18 @@ def decode(
     from ..spectral import reassemble
 
     p = SpectralParams.from_bytes(params)
-    subs, bases = dictionaries(F, n, p)
-    sizes = np.array([U.shape[1] for U in bases], dtype=np.int64)
+    subs, dic = dictionaries(F, n, p)
+    sizes = dic.sizes.copy()
     rest = list(chunks)
     if p.basis == "doi":
         if not rest or rest[0][0] != TAG_SIZES:
             raise InvalidInputError(".sgc spectral stream lacks its subspace sizes.")
-        raw = zstd_decompress(rest.pop(0)[1], 2 * len(bases), "subspace sizes")
+        raw = zstd_decompress(rest.pop(0)[1], 2 * sizes.size, "subspace sizes")
         got = np.frombuffer(raw, dtype="<u2").astype(np.int64)
-        if got.size != len(bases) or (got < 1).any() or (got > sizes).any():
+        if got.size != sizes.size or (got < 1).any() or (got > sizes).any():
             raise InvalidInputError(".sgc subspace sizes do not match the connectivity.")
         sizes = got
-    layout = _layout(sizes, layer_cutoffs(int(max(U.shape[1] for U in bases))))
+    layout = _layout(sizes, layer_cutoffs(int(dic.sizes.max())))
     if len(rest) > len(layout) or any(t != TAG_LAYER for t, _ in rest):
         raise InvalidInputError(".sgc spectral stream has unexpected chunks.")
     vals = []
@@ -322,8 +445,7 @@ def decode(
         g, ng = _groups(col)
         vals.append(decode_groups(payload, g, ng, "spectral layer").reshape(-1, 3) * p.step)
     coefs = _scatter(layout[: len(vals)], vals, sizes)
-    values = [U[:, : c.shape[0]] @ c for U, c in zip(bases, coefs)]
-    return reassemble(values, subs)
+    return reassemble(dic.synthesise(coefs), subs)
 
 
 def _scatter(layout, vals, sizes) -> list[np.ndarray]:

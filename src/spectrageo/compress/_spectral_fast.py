@@ -1,0 +1,625 @@
+"""Full eigenbases of submesh Laplacians applied without forming them (spectral codec kernels).
+
+When the dictionary size ``k`` is at least the number of vertices ``n_i`` of a submesh, the
+orthogonal iteration of Algorithm 6 runs on the whole space: ``T^zeta U`` spans ``R^{n_i}``, and
+its Rayleigh-Ritz step is the eigendecomposition of the submesh Laplacian ``L = D - C`` itself,
+whatever the starting subspace. That decomposition is computed here directly, per submesh:
+
+* ``L = Q T Q^T``, Householder tridiagonalisation (LAPACK ``dsytrd``);
+* ``T = Z diag(w) Z^T`` by the implicit QL method with Wilkinson shifts, ``Z`` being the product of
+  the plane rotations of the iteration, which are recorded instead of accumulated into a matrix;
+* the basis is ``U = Q Z P S``: ``P`` orders the eigenvalues ascending (stable sort) and ``S``
+  scales every column so that its entry on the first vertex of the submesh is non-negative (the
+  first row of ``U`` is the first row of ``Z`` because ``Q`` leaves the first coordinate alone);
+  with a connected submesh this makes the constant (DC) vector positive.
+
+``U`` is never formed for coding: the coefficients are ``U^T x = S P^T Z^T (Q^T x)`` and the
+synthesis ``U c = Q (Z (P S c))``, where ``Q`` is applied by its ``n_i - 1`` reflectors and ``Z`` by
+its rotations, ``O(n_i^2)`` per coordinate instead of the ``O(n_i^3)`` of forming ``Q Z``. Encoder
+and decoder run the same operations on the same Laplacian, so they use the same basis bit for bit.
+
+The submeshes are independent, so they are processed in chunks by a pool of threads; the kernels
+are compiled with numba (``nogil``) and call LAPACK through SciPy's Cython bindings, one BLAS thread
+each. Every submesh is computed by the same sequence of operations whatever the number of threads,
+so the result does not depend on it. :func:`overlapped_submeshes` is the submesh construction of
+:mod:`spectrageo.spectral.partition` with its breadth-first growth compiled (same result).
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import llvmlite.binding as llvm
+import numpy as np
+from numba import njit, types
+from numba.extending import get_cython_function_address
+
+
+def _lapack(name: str, nargs: int):
+    """LAPACK routine ``name`` of SciPy's Cython bindings as a numba external function (all
+    arguments are pointers); bound by symbol name so that the compiled kernels can be cached."""
+    symbol = f"spectrageo_cython_lapack_{name}"
+    llvm.add_symbol(symbol, get_cython_function_address("scipy.linalg.cython_lapack", name))
+    return types.ExternalFunction(symbol, types.void(*([types.voidptr] * nargs)))
+
+
+_dsytrd = _lapack("dsytrd", 10)
+_dorgqr = _lapack("dorgqr", 9)
+
+#: submeshes handed to a worker thread at a time
+CHUNK = 16
+
+
+@njit(nogil=True, cache=True)
+def _dense_laplacian(indptr, indices, part, buf):
+    """Dense binary Laplacian ``D - C`` of the subgraph induced by the sorted vertex set ``part``,
+    in the first ``n^2`` entries of the scratch ``buf``."""
+    n = part.size
+    L = buf[: n * n].reshape(n, n)
+    L[:, :] = 0.0
+    for a in range(n):
+        g = part[a]
+        deg = 0.0
+        for p in range(indptr[g], indptr[g + 1]):
+            v = indices[p]
+            b = np.searchsorted(part, v)
+            if b < n and part[b] == v and b != a and L[a, b] == 0.0:
+                L[a, b] = -1.0
+                deg += 1.0
+        L[a, a] = deg
+    return L
+
+
+@njit(nogil=True, cache=True)
+def _tridiagonalise(L):
+    """``L = Q T Q^T`` in place (LAPACK ``dsytrd``): returns ``(A, tau, d, e, info)``.
+
+    ``A`` (the overwritten ``L``) holds the Householder vectors of ``Q`` in its rows (row ``i``,
+    columns ``i+2..``: LAPACK's lower storage seen from C order); ``d``, ``e`` are the diagonal and
+    off-diagonal of ``T``.
+    """
+    n = L.shape[0]
+    d = np.empty(n)
+    e = np.zeros(n)
+    tau = np.zeros(max(n - 1, 1))
+    ch = np.empty(1, np.uint8)
+    ch[0] = 76  # 'L'
+    nn = np.empty(1, np.int32)
+    nn[0] = n
+    lw = np.empty(1, np.int32)
+    lw[0] = -1
+    info = np.zeros(1, np.int32)
+    q = np.empty(1)
+    _dsytrd(
+        ch.ctypes,
+        nn.ctypes,
+        L.ctypes,
+        nn.ctypes,
+        d.ctypes,
+        e.ctypes,
+        tau.ctypes,
+        q.ctypes,
+        lw.ctypes,
+        info.ctypes,
+    )
+    lw[0] = max(int(q[0]), 1)
+    work = np.empty(lw[0])
+    _dsytrd(
+        ch.ctypes,
+        nn.ctypes,
+        L.ctypes,
+        nn.ctypes,
+        d.ctypes,
+        e.ctypes,
+        tau.ctypes,
+        work.ctypes,
+        lw.ctypes,
+        info.ctypes,
+    )
+    return L, tau, d, e, int(info[0])
+
+
+@njit(nogil=True, cache=True)
+def _ql(d, e, idx, cs, sn):
+    """Eigenvalues of the symmetric tridiagonal ``(d, e)`` by the implicit QL method with Wilkinson
+    shifts (in place into ``d``, unsorted), recording the plane rotations.
+
+    The eigenvectors are ``Z = G_1 G_2 ... G_M`` where ``G_t`` rotates coordinates ``(i_t, i_t + 1)``
+    by ``(c_t, s_t)``: ``(Z G)[:, i] = c Z[:, i] - s Z[:, i+1]``, ``(Z G)[:, i+1] = s Z[:, i] + c
+    Z[:, i+1]``. Returns ``(idx, cs, sn, M, info)``; ``info = 1`` if an eigenvalue needed more
+    than 60 iterations. ``idx``, ``cs``, ``sn`` are the scratch arrays for the rotations (grown
+    and returned when too short).
+    """
+    n = d.size
+    cap = idx.size
+    M = 0
+    if n > 0:
+        e[n - 1] = 0.0
+    for l in range(n):
+        it = 0
+        while True:
+            m = l
+            while m < n - 1:
+                dd = abs(d[m]) + abs(d[m + 1])
+                if abs(e[m]) + dd == dd:
+                    break
+                m += 1
+            if m == l:
+                break
+            it += 1
+            if it > 60:
+                return idx, cs, sn, M, 1
+            if M + (m - l) > cap:
+                cap = 2 * cap + (m - l)
+                idx2 = np.empty(cap, np.int32)
+                cs2 = np.empty(cap)
+                sn2 = np.empty(cap)
+                idx2[:M] = idx[:M]
+                cs2[:M] = cs[:M]
+                sn2[:M] = sn[:M]
+                idx, cs, sn = idx2, cs2, sn2
+            g = (d[l + 1] - d[l]) / (2.0 * e[l])
+            r = np.hypot(g, 1.0)
+            g = d[m] - d[l] + e[l] / (g + (r if g >= 0.0 else -r))
+            s = 1.0
+            c = 1.0
+            p = 0.0
+            i = m - 1
+            early = False
+            while i >= l:
+                f = s * e[i]
+                b = c * e[i]
+                r = np.sqrt(f * f + g * g)
+                e[i + 1] = r
+                if r == 0.0:
+                    d[i + 1] -= p
+                    e[m] = 0.0
+                    early = True
+                    break
+                ri = 1.0 / r
+                s = f * ri
+                c = g * ri
+                g = d[i + 1] - p
+                r = (d[i] - g) * s + 2.0 * c * b
+                p = s * r
+                d[i + 1] = g + p
+                g = c * r - b
+                idx[M] = i
+                cs[M] = c
+                sn[M] = s
+                M += 1
+                i -= 1
+            if early:
+                continue
+            d[l] -= p
+            e[l] = g
+            e[m] = 0.0
+    return idx, cs, sn, M, 0
+
+
+@njit(nogil=True, cache=True)
+def _rotate_t(idx, cs, sn, M, Y):
+    """``Y <- Z^T Y = G_M^T ... G_1^T Y`` (rows of ``Y`` are the coordinates)."""
+    k = Y.shape[1]
+    for t in range(M):
+        i = idx[t]
+        c = cs[t]
+        s = sn[t]
+        for col in range(k):
+            f = Y[i + 1, col]
+            y = Y[i, col]
+            Y[i + 1, col] = s * y + c * f
+            Y[i, col] = c * y - s * f
+
+
+@njit(nogil=True, cache=True)
+def _rotate(idx, cs, sn, M, Y):
+    """``Y <- Z Y = G_1 ... G_M Y``."""
+    k = Y.shape[1]
+    for t in range(M - 1, -1, -1):
+        i = idx[t]
+        c = cs[t]
+        s = sn[t]
+        for col in range(k):
+            f = Y[i + 1, col]
+            y = Y[i, col]
+            Y[i, col] = c * y + s * f
+            Y[i + 1, col] = c * f - s * y
+
+
+@njit(nogil=True, cache=True)
+def _workspace(offs, lo, hi):
+    """Scratch for the submeshes ``lo..hi-1``: a Laplacian buffer and rotation arrays."""
+    nmax = 1
+    for i in range(lo, hi):
+        nmax = max(nmax, offs[i + 1] - offs[i])
+    cap = 2 * nmax * nmax + 16
+    return np.empty(nmax * nmax), np.empty(cap, np.int32), np.empty(cap), np.empty(cap)
+
+
+@njit(nogil=True, cache=True)
+def _decompose(indptr, indices, part, ws):
+    """Everything that defines ``U = Q Z P S`` for one submesh.
+
+    ``ws`` is the scratch of :func:`_workspace`. Returns ``(A, tau, idx, cs, sn, M, order, sign,
+    info)``: the reflectors of ``Q``, the ``M`` rotations of ``Z``, ``order`` the eigenvalue
+    indices in ascending order (stable sort; column ``j`` of ``U`` is eigenvector ``order[j]``) and
+    ``sign`` (+-1 per eigenvector) making the first row of ``U`` non-negative. ``info != 0`` on
+    failure.
+    """
+    n = part.size
+    buf, idx, cs, sn = ws
+    A, tau, d, e, info = _tridiagonalise(_dense_laplacian(indptr, indices, part, buf))
+    if info != 0:
+        z = np.zeros(0, np.int64)
+        return A, tau, idx, cs, sn, 0, z, np.zeros(0), info
+    idx, cs, sn, M, info = _ql(d, e, idx, cs, sn)
+    order = np.argsort(d, kind="mergesort")
+    # first row of U = first row of Z (Q leaves the first coordinate alone) = (Z^T e_0)^T
+    r = np.zeros((n, 1))
+    r[0, 0] = 1.0
+    _rotate_t(idx, cs, sn, M, r)
+    sign = np.ones(n)
+    for j in range(n):
+        if r[j, 0] < 0.0:
+            sign[j] = -1.0
+    return A, tau, idx, cs, sn, M, order, sign, info
+
+
+@njit(nogil=True, cache=True)
+def _apply_qt(A, tau, Y):
+    """``Y <- Q^T Y`` (``Q = H_0 H_1 ... H_{n-2}``, reflectors in the rows of ``A``)."""
+    n, k = Y.shape
+    for i in range(n - 1):
+        t = tau[i]
+        if t == 0.0:
+            continue
+        for c in range(k):
+            s = Y[i + 1, c]
+            for r in range(i + 2, n):
+                s += A[i, r] * Y[r, c]
+            s *= t
+            Y[i + 1, c] -= s
+            for r in range(i + 2, n):
+                Y[r, c] -= s * A[i, r]
+
+
+@njit(nogil=True, cache=True)
+def _apply_q(A, tau, Y):
+    """``Y <- Q Y``."""
+    n, k = Y.shape
+    for i in range(n - 2, -1, -1):
+        t = tau[i]
+        if t == 0.0:
+            continue
+        for c in range(k):
+            s = Y[i + 1, c]
+            for r in range(i + 2, n):
+                s += A[i, r] * Y[r, c]
+            s *= t
+            Y[i + 1, c] -= s
+            for r in range(i + 2, n):
+                Y[r, c] -= s * A[i, r]
+
+
+@njit(nogil=True, cache=True)
+def _analyse_range(indptr, indices, flat, offs, lo, hi, X, out, status):
+    """``out[rows of submesh i] = U_i^T X[part_i]`` for the submeshes ``lo..hi-1``."""
+    d = X.shape[1]
+    ws = _workspace(offs, lo, hi)
+    for i in range(lo, hi):
+        part = flat[offs[i] : offs[i + 1]]
+        A, tau, idx, cs, sn, M, order, sign, info = _decompose(indptr, indices, part, ws)
+        ws = (ws[0], idx, cs, sn)
+        status[i] = info
+        if info != 0:
+            continue
+        Y = np.empty((part.size, d))
+        for a in range(part.size):
+            for c in range(d):
+                Y[a, c] = X[part[a], c]
+        _apply_qt(A, tau, Y)
+        _rotate_t(idx, cs, sn, M, Y)
+        o = offs[i]
+        for j in range(part.size):
+            q = order[j]
+            for c in range(d):
+                out[o + j, c] = sign[q] * Y[q, c]
+
+
+@njit(nogil=True, cache=True)
+def _synthesise_range(indptr, indices, flat, offs, lo, hi, coef, out, status):
+    """``out[rows of submesh i] = U_i coef[rows of submesh i]`` for the submeshes ``lo..hi-1``."""
+    d = coef.shape[1]
+    ws = _workspace(offs, lo, hi)
+    for i in range(lo, hi):
+        part = flat[offs[i] : offs[i + 1]]
+        A, tau, idx, cs, sn, M, order, sign, info = _decompose(indptr, indices, part, ws)
+        ws = (ws[0], idx, cs, sn)
+        status[i] = info
+        if info != 0:
+            continue
+        o = offs[i]
+        Y = np.empty((part.size, d))
+        for j in range(part.size):
+            q = order[j]
+            for c in range(d):
+                Y[q, c] = sign[q] * coef[o + j, c]
+        _rotate(idx, cs, sn, M, Y)
+        _apply_q(A, tau, Y)
+        out[o : offs[i + 1]] = Y
+
+
+@njit(nogil=True, cache=True)
+def _form_q(A, tau):
+    """The orthogonal ``Q`` (row-major) of :func:`_tridiagonalise` (LAPACK ``dorgqr``)."""
+    n = A.shape[0]
+    Q = np.zeros((n, n))
+    Q[0, 0] = 1.0
+    m = n - 1
+    if m == 0:
+        return Q, 0
+    # lower storage: Q = diag(1, Q'), with Q' the product of the reflectors held in the Fortran
+    # block A[1:, :n-1], which is the C-order block A[:n-1, 1:]
+    B = np.ascontiguousarray(A[:m, 1:])
+    mm = np.empty(1, np.int32)
+    mm[0] = m
+    lw = np.empty(1, np.int32)
+    lw[0] = -1
+    info = np.zeros(1, np.int32)
+    q = np.empty(1)
+    _dorgqr(
+        mm.ctypes,
+        mm.ctypes,
+        mm.ctypes,
+        B.ctypes,
+        mm.ctypes,
+        tau.ctypes,
+        q.ctypes,
+        lw.ctypes,
+        info.ctypes,
+    )
+    lw[0] = max(int(q[0]), 1)
+    work = np.empty(lw[0])
+    _dorgqr(
+        mm.ctypes,
+        mm.ctypes,
+        mm.ctypes,
+        B.ctypes,
+        mm.ctypes,
+        tau.ctypes,
+        work.ctypes,
+        lw.ctypes,
+        info.ctypes,
+    )
+    Q[1:, 1:] = B.T  # B in C order is Q'^T
+    return Q, int(info[0])
+
+
+@njit(nogil=True, cache=True)
+def _bases_range(indptr, indices, flat, offs, lo, hi, boffs, out, status):
+    """The explicit bases ``U_i`` of the submeshes ``lo..hi-1``, row-major into
+    ``out[boffs[i]:boffs[i + 1]]``."""
+    ws = _workspace(offs, lo, hi)
+    for i in range(lo, hi):
+        part = flat[offs[i] : offs[i + 1]]
+        n = part.size
+        A, tau, idx, cs, sn, M, order, sign, info = _decompose(indptr, indices, part, ws)
+        ws = (ws[0], idx, cs, sn)
+        if info == 0:
+            W = np.zeros((n, n))
+            for j in range(n):
+                W[order[j], j] = sign[order[j]]
+            _rotate(idx, cs, sn, M, W)
+            Q, info = _form_q(A, tau)
+            if info == 0:
+                out[boffs[i] : boffs[i + 1]] = np.dot(Q, W).ravel()
+        status[i] = info
+
+
+def default_workers() -> int:
+    """Threads used by default: the CPUs this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+class FullBases:
+    """The full Laplacian eigenbases ``U_i`` (``n_i x n_i``) of a set of submeshes, applied lazily.
+
+    Parameters
+    ----------
+    C : csr_matrix (n, n), adjacency of the mesh (only its sparsity pattern is used)
+    parts : list of sorted (n_i,) int arrays
+    workers : int, optional
+        Threads (default :func:`default_workers`); the result does not depend on it.
+    """
+
+    def __init__(self, C, parts, workers: int | None = None) -> None:
+        self.indptr = np.ascontiguousarray(C.indptr, dtype=np.int64)
+        self.indices = np.ascontiguousarray(C.indices, dtype=np.int64)
+        self.parts = parts
+        self.sizes = np.array([p.size for p in parts], dtype=np.int64)
+        self.offs = np.zeros(len(parts) + 1, dtype=np.int64)
+        np.cumsum(self.sizes, out=self.offs[1:])
+        self.flat = (
+            np.ascontiguousarray(np.concatenate(parts), dtype=np.int64)
+            if parts
+            else np.zeros(0, np.int64)
+        )
+        self.workers = default_workers() if workers is None else max(1, int(workers))
+
+    def _run(self, kernel, *args) -> None:
+        from ..linalg._common import single_thread_blas
+
+        m = len(self.parts)
+        status = np.zeros(m, dtype=np.int64)
+        ranges = [(a, min(a + CHUNK, m)) for a in range(0, m, CHUNK)]
+
+        def job(r):
+            kernel(self.indptr, self.indices, self.flat, self.offs, r[0], r[1], *args, status)
+
+        with single_thread_blas():
+            if self.workers == 1 or len(ranges) <= 1:
+                for r in ranges:
+                    job(r)
+            else:
+                with ThreadPoolExecutor(min(self.workers, len(ranges))) as ex:
+                    list(ex.map(job, ranges))
+        if status.any():
+            i = int(np.flatnonzero(status)[0])
+            raise np.linalg.LinAlgError(
+                f"the eigendecomposition of the Laplacian of submesh {i} failed (info={status[i]})."
+            )
+
+    def analyse(self, X: np.ndarray) -> list[np.ndarray]:
+        """Coefficients ``U_i^T X[parts[i]]`` of every submesh ((n_i, d) each)."""
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        out = np.empty((self.flat.size, X.shape[1]))
+        self._run(_analyse_range, X, out)
+        return np.split(out, self.offs[1:-1])
+
+    def synthesise(self, coefs) -> list[np.ndarray]:
+        """``U_i c_i`` of every submesh; ``coefs[i]`` has ``n_i`` rows (missing ones as zeros)."""
+        d = coefs[0].shape[1] if coefs else 3
+        flat = np.zeros((self.flat.size, d))
+        for i, c in enumerate(coefs):
+            flat[self.offs[i] : self.offs[i] + c.shape[0]] = c
+        out = np.empty_like(flat)
+        self._run(_synthesise_range, flat, out)
+        return np.split(out, self.offs[1:-1])
+
+    def explicit(self) -> list[np.ndarray]:
+        """The bases ``U_i`` as dense (n_i, n_i) arrays, columns in ascending eigenvalue order."""
+        boffs = np.zeros(len(self.parts) + 1, dtype=np.int64)
+        np.cumsum(self.sizes**2, out=boffs[1:])
+        out = np.empty(int(boffs[-1]))
+        self._run(_bases_range, boffs, out)
+        return [out[a:b].reshape(s, s) for a, b, s in zip(boffs[:-1], boffs[1:], self.sizes)]
+
+
+# ----------------------------------------------------------------------------- submeshes
+@njit(cache=True)
+def _grow_all(indptr, indices, cores_flat, cores_offs, size, n):
+    """Compiled equivalent of the breadth-first growth of
+    :func:`spectrageo.spectral.partition.overlapped_submeshes` for every core (same rings, same
+    truncation order, same restarts), with the in-submesh degrees.
+
+    Returns ``(parts, degrees)``, both (n_cores, size) (sorted vertex indices per row).
+    """
+    m = cores_offs.size - 1
+    parts = np.empty((m, size), np.int64)
+    degs = np.empty((m, size), np.int64)
+    marker = np.zeros(n, np.bool_)
+    inring = np.zeros(n, np.bool_)
+    buf = np.empty(size, np.int64)
+    ring = np.empty(n, np.int64)
+    for k in range(m):
+        core = cores_flat[cores_offs[k] : cores_offs[k + 1]]
+        cnt = core.size
+        for a in range(cnt):
+            buf[a] = core[a]
+            marker[core[a]] = True
+        f0 = 0
+        f1 = cnt
+        while cnt < size:
+            nr = 0
+            for a in range(f0, f1):
+                g = buf[a]
+                for p in range(indptr[g], indptr[g + 1]):
+                    v = indices[p]
+                    if not marker[v] and not inring[v]:
+                        inring[v] = True
+                        ring[nr] = v
+                        nr += 1
+            for a in range(nr):
+                inring[ring[a]] = False
+            if nr == 0:
+                # component exhausted: the unvisited vertex closest in index to the core
+                best = -1
+                bd = n + 1
+                for v in range(n):
+                    if not marker[v]:
+                        dv = abs(v - core[0])
+                        if dv < bd:
+                            bd = dv
+                            best = v
+                ring[0] = best
+                nr = 1
+            r = np.sort(ring[:nr])
+            need = size - cnt
+            if nr > need:
+                # most neighbours already inside first, then lower index
+                key = np.empty(nr, np.int64)
+                for a in range(nr):
+                    v = r[a]
+                    inside = 0
+                    for p in range(indptr[v], indptr[v + 1]):
+                        if marker[indices[p]]:
+                            inside += 1
+                    key[a] = -inside * (n + 1) + v
+                r = r[np.argsort(key, kind="mergesort")[:need]]
+            for a in range(r.size):
+                marker[r[a]] = True
+                buf[cnt + a] = r[a]
+            f0 = cnt
+            f1 = cnt + r.size
+            cnt += r.size
+        part = np.sort(buf)
+        parts[k] = part
+        for a in range(size):
+            marker[part[a]] = True
+        for a in range(size):
+            g = part[a]
+            dg = 0
+            for p in range(indptr[g], indptr[g + 1]):
+                if marker[indices[p]]:
+                    dg += 1
+            degs[k, a] = dg
+        for a in range(size):
+            marker[part[a]] = False
+    return parts, degs
+
+
+def overlapped_submeshes(C, *, submesh_size: int, overlap: float, rng):
+    """:func:`spectrageo.spectral.partition.overlapped_submeshes` (same METIS parts, same grown
+    submeshes and degrees) with the growth compiled; ``C`` as from
+    :func:`spectrageo.graph.adjacency_matrix`."""
+    import math
+
+    from .._errors import InvalidInputError
+    from .._validation import as_rng
+    from ..spectral import partition as P
+
+    C = P.as_adjacency(C)
+    n = C.shape[0]
+    size = int(submesh_size)
+    if n <= size:
+        return P.overlapped_submeshes(C, submesh_size=size, overlap=overlap, rng=rng)
+    pattern = C.copy()
+    pattern.data[:] = 1.0
+    seed = int(as_rng(rng).integers(0, 2**31 - 1))
+    n_parts = max(2, math.ceil(n / (size * (1.0 - float(overlap)))))
+    for _ in range(8):
+        cores = P._split(P._metis(pattern, n_parts, seed), n_parts)
+        biggest = max(c.size for c in cores)
+        if biggest <= size:
+            break
+        n_parts = math.ceil(n_parts * biggest / size) + 1
+    else:  # pragma: no cover - METIS keeps the imbalance within a few percent
+        raise InvalidInputError(
+            f"could not split the graph into parts of at most `submesh_size` = {size} vertices."
+        )
+    offs = np.zeros(len(cores) + 1, dtype=np.int64)
+    np.cumsum([c.size for c in cores], out=offs[1:])
+    parts, degs = _grow_all(
+        pattern.indptr.astype(np.int64),
+        pattern.indices.astype(np.int64),
+        np.concatenate(cores).astype(np.int64),
+        offs,
+        size,
+        n,
+    )
+    return P.Submeshes(list(parts), cores, n, list(degs))
