@@ -33,7 +33,8 @@ first.
 
 The third-vertex symbol is coded in one of 16 contexts, the classes (new, first candidate,
 second candidate, other) of the two symbols before it: Edgebreaker-like symbol sequences are
-strongly correlated (0.5-0.7 bits per vertex saved on the shared meshes). All symbol streams are
+strongly correlated (0.5-0.7 bits per vertex saved on the tuning meshes of
+``benchmarks/connectivity.py``). All symbol streams are
 coded with static categorical models (counts sent in the stream) by
 ``constriction``'s ANS coder; raw bits are packed. Both sides run the same compiled state machine
 (:func:`_topology`), so the candidate lists cannot drift apart. Decoding validates every symbol
@@ -57,9 +58,9 @@ W_ANY = KMAX + 2  # any old vertex, by its id; candidates are symbols 2 .. KMAX 
 W_ALPHA = KMAX + 3
 C_SEQ = 3
 C_EXPLICIT = 4
-#: alphabets of the categorical streams, in stream order
 #: contexts of the third-vertex symbol: the classes of the two previous ones
 N_CTX = 16
+#: alphabets of the categorical streams, in stream order
 ALPHABETS = (
     2,  # gate: a face lies across the open edge
     2,  # orient: 0 consistent with its neighbour, 1 flipped
