@@ -268,39 +268,33 @@ def _decompose(indptr, indices, part, ws):
 
 
 @njit(nogil=True, cache=True)
+def _apply_reflectors(A, tau, Y, transpose):
+    """``Y <- Q^T Y`` (``transpose``) or ``Y <- Q Y``, ``Q = H_0 H_1 ... H_{n-2}`` with the
+    reflectors in the rows of ``A`` (each ``H_i`` is symmetric: ``Q^T`` applies ``H_0`` first)."""
+    n, k = Y.shape
+    for j in range(n - 1):
+        i = j if transpose else n - 2 - j
+        t = tau[i]
+        if t == 0.0:
+            continue
+        for c in range(k):
+            s = Y[i + 1, c]
+            for r in range(i + 2, n):
+                s += A[i, r] * Y[r, c]
+            s *= t
+            Y[i + 1, c] -= s
+            for r in range(i + 2, n):
+                Y[r, c] -= s * A[i, r]
+
+
+@njit(nogil=True, cache=True, inline="always")
 def _apply_qt(A, tau, Y):
-    """``Y <- Q^T Y`` (``Q = H_0 H_1 ... H_{n-2}``, reflectors in the rows of ``A``)."""
-    n, k = Y.shape
-    for i in range(n - 1):
-        t = tau[i]
-        if t == 0.0:
-            continue
-        for c in range(k):
-            s = Y[i + 1, c]
-            for r in range(i + 2, n):
-                s += A[i, r] * Y[r, c]
-            s *= t
-            Y[i + 1, c] -= s
-            for r in range(i + 2, n):
-                Y[r, c] -= s * A[i, r]
+    _apply_reflectors(A, tau, Y, True)
 
 
-@njit(nogil=True, cache=True)
+@njit(nogil=True, cache=True, inline="always")
 def _apply_q(A, tau, Y):
-    """``Y <- Q Y``."""
-    n, k = Y.shape
-    for i in range(n - 2, -1, -1):
-        t = tau[i]
-        if t == 0.0:
-            continue
-        for c in range(k):
-            s = Y[i + 1, c]
-            for r in range(i + 2, n):
-                s += A[i, r] * Y[r, c]
-            s *= t
-            Y[i + 1, c] -= s
-            for r in range(i + 2, n):
-                Y[r, c] -= s * A[i, r]
+    _apply_reflectors(A, tau, Y, False)
 
 
 @njit(nogil=True, cache=True)
