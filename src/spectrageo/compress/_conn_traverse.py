@@ -13,8 +13,9 @@ This coder sends the three parts separately:
    face) the encoder says whether an undecoded face lies across it, that face's orientation
    relative to its neighbour, and its third vertex: *new* (the next canonical id), one of a short
    candidate list both sides build from the decoded neighbours of the edge's end points (border
-   neighbours first, as in Edgebreaker's L/R cases), another vertex of the decoded region's
-   border (Edgebreaker's S case) by the step from the gate's rank to its rank among the border
+   neighbours first, as in Edgebreaker's L/R cases) and the vertices up to :data:`WALK` border
+   edges further from each end point (most of Edgebreaker's S cases), another vertex of the
+   decoded region's border by the step from the gate's rank to its rank among the border
    vertices (Elias-gamma), or, for non-manifold contacts only, an explicit id. Faces the
    traversal cannot reach (other components, non-manifold and degenerate faces) are *seeds*
    sent corner by corner in the file's face order.
@@ -53,6 +54,9 @@ from ._container import Reader, varint
 KMAX = 30
 #: adjacency entries walked per end point when building the candidate list
 CAP = 32
+#: border steps walked from each end point of the gate for further candidates (4-6 best on the
+#: tuning meshes of ``benchmarks/connectivity.py``; 12 and 24 cost a little more, 2 clearly more)
+WALK = 6
 W_FAR = 1  # an old vertex on the decoded region's border, by its rank there
 W_ANY = KMAX + 2  # any old vertex, by its id; candidates are symbols 2 .. KMAX + 1
 W_ALPHA = KMAX + 3
@@ -171,6 +175,34 @@ def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to):
                     cand[nc] = y
                     nc += 1
             ent = nxt[ent]
+    # then further along the border, WALK steps from v and from u (Edgebreaker's S vertices
+    # are on the border, often a few edges away)
+    for p in range(2):
+        prev = u if p == 0 else v
+        cur = v if p == 0 else u
+        for _ in range(WALK):
+            if nc >= KMAX:
+                return nc
+            ent = head[cur]
+            steps = 0
+            y = -1
+            while ent != -1 and steps < CAP:
+                steps += 1
+                if ecnt[ent >> 1] == 1 and to[ent] != prev:
+                    y = to[ent]
+                    break
+                ent = nxt[ent]
+            if y == -1 or y == u or y == v:
+                break
+            dup = False
+            for i in range(nc):
+                if cand[i] == y:
+                    dup = True
+                    break
+            if not dup:
+                cand[nc] = y
+                nc += 1
+            prev, cur = cur, y
     return nc
 
 
@@ -186,7 +218,7 @@ def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits
     """
     N = np.int64(3 * m + 3)
     cap = 1
-    while cap < 2 * N:
+    while cap < 4 * m + 8:  # edges <= 3m: load <= 3/4, about 3/8 on closed meshes
         cap *= 2
     hkeys = np.full(cap, -1, dtype=np.int64)
     hval = np.zeros(cap, dtype=np.int64)
