@@ -62,6 +62,9 @@ W_ANY = KMAX + 2  # any old vertex, by its id; candidates are symbols 2 .. KMAX 
 W_ALPHA = KMAX + 3
 C_SEQ = 3
 C_EXPLICIT = 4
+C_VERTEX = 5
+#: faces around the previous face's corners offered as candidates for the next one
+VMAX = 24
 #: contexts of the third-vertex symbol: the classes of the two previous ones
 N_CTX = 16
 #: alphabets of the categorical streams, in stream order
@@ -72,7 +75,7 @@ ALPHABETS = (
     65,  # far border vertex: Elias length of its rank step
     *([W_ALPHA] * N_CTX),  # third vertex: new, far, candidate 1..KMAX, any; one per context
     65,  # vertex label: Elias length
-    5,  # face order: neighbour 0-2, next, explicit
+    C_VERTEX + VMAX,  # face order: edge neighbour 0-2, next, explicit, around a corner
     65,  # face order: Elias length
     3,  # rotation relative to smallest label first
 )
@@ -519,11 +522,17 @@ def _ranks(encode, n_items, seq, n_univ, sym, bits, pos, nbits):
 
 
 @numba.njit(cache=True)
-def _face_order(encode, m, nptr, nbrs, inv, cls, sym, bits, pos, nbits):
-    """Stage 3: the file's face order over the canonical faces (``inv[t]`` = canonical index)."""
+def _face_order(encode, m, Fc, nptr, nbrs, vptr, vf, inv, cls, sym, bits, pos, nbits):
+    """Stage 3: the file's face order over the canonical faces (``inv[t]`` = canonical index).
+
+    Candidates for the next face: the next canonical face (:data:`C_SEQ`), up to three unplaced
+    edge neighbours of the previous face (symbols 0-2), then up to :data:`VMAX` unplaced faces
+    around its corners (symbols ``C_VERTEX + i``); otherwise its rank step (:data:`C_EXPLICIT`).
+    """
     tree = _fen_init(m)
     placed = np.zeros(m, dtype=np.bool_)
     cand = np.zeros(3, dtype=np.int64)
+    vc = np.zeros(VMAX, dtype=np.int64)
     prev = -1
     n_sym = 0
     for t in range(m):
@@ -550,6 +559,25 @@ def _face_order(encode, m, nptr, nbrs, inv, cls, sym, bits, pos, nbits):
                 cand[k] = cand[i]
                 k += 1
         nc = k
+        nvc = 0
+        if prev >= 0:
+            for corner in range(3):
+                x = Fc[prev, corner]
+                lim = min(vptr[x + 1], vptr[x] + CAP)
+                for q in range(vptr[x], lim):
+                    g = vf[q]
+                    if placed[g] or g == seq or nvc == VMAX:
+                        continue
+                    dup = False
+                    for i in range(nc):
+                        if cand[i] == g:
+                            dup = True
+                    for i in range(nvc):
+                        if vc[i] == g:
+                            dup = True
+                    if not dup:
+                        vc[nvc] = g
+                        nvc += 1
         if encode:
             j = inv[t]
             s = C_EXPLICIT
@@ -559,6 +587,11 @@ def _face_order(encode, m, nptr, nbrs, inv, cls, sym, bits, pos, nbits):
                 for i in range(nc):
                     if cand[i] == j:
                         s = i
+                if s == C_EXPLICIT:
+                    for i in range(nvc):
+                        if vc[i] == j:
+                            s = C_VERTEX + i
+                            break
             cls[t] = s
             if s == C_EXPLICIT:
                 d = _fen_prefix(tree, j) - _fen_prefix(tree, prev + 1)
@@ -570,6 +603,8 @@ def _face_order(encode, m, nptr, nbrs, inv, cls, sym, bits, pos, nbits):
                 j = cand[s]
             elif s == C_SEQ and seq >= 0:
                 j = seq
+            elif C_VERTEX <= s < C_VERTEX + nvc:
+                j = vc[s - C_VERTEX]
             elif s == C_EXPLICIT:
                 if n_sym >= sym.size:
                     return 1, n_sym, pos
@@ -646,11 +681,12 @@ def _face_neighbours_kernel(Fc, nd, n_vert):
                         out[n_out] = g
                         n_out += 1
         cnt[f + 1] = n_out
-    return cnt, out[:n_out]
+    return cnt, out[:n_out], deg, vf
 
 
 def _face_neighbours(Fc: np.ndarray):
-    """Faces sharing an edge with each face (CSR: by edge of the face, then face index)."""
+    """Faces sharing an edge with each face (CSR: by edge of the face, then face index), and the
+    non-degenerate faces around every vertex (CSR, ascending)."""
     nd = (Fc[:, 0] != Fc[:, 1]) & (Fc[:, 1] != Fc[:, 2]) & (Fc[:, 0] != Fc[:, 2])
     n_vert = int(Fc.max()) + 1 if Fc.shape[0] else 1
     return _face_neighbours_kernel(np.ascontiguousarray(Fc, dtype=np.int64), nd, n_vert)
@@ -716,13 +752,13 @@ def encode(F: np.ndarray) -> bytes:
     vb = np.zeros(nv, dtype=np.int64)
     bitsB = _bitbuf(64 * nv + 64)
     st, posB = _ranks(True, nv, L, n_univ, vb, bitsB, 0, 0)
-    nptr, nbrs = _face_neighbours(Fc)
+    nptr, nbrs, vptr, vf = _face_neighbours(Fc)
     inv = np.empty(m, dtype=np.int64)
     inv[order] = np.arange(m)
     fc = np.zeros(m, dtype=np.int64)
     fb = np.zeros(m, dtype=np.int64)
     bitsC = _bitbuf(64 * m + 64)
-    st, n_fb, posC = _face_order(True, m, nptr, nbrs, inv, fc, fb, bitsC, 0, 0)
+    st, n_fb, posC = _face_order(True, m, Fc, nptr, nbrs, vptr, vf, inv, fc, fb, bitsC, 0, 0)
     rot = _rotation_symbols(F[order], L[Fc])
     streams = [syms[k, : lens[k]] for k in range(N_TOPO)] + [vb, fc, fb[:n_fb], rot]
     head = bytearray([MARKER]) + varint(n_univ) + varint(nv)
@@ -824,10 +860,10 @@ def decode(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
     st, _ = _ranks(False, nv, L, n_univ, streams[N_TOPO], bB, 0, nB)
     if st != 0:
         raise InvalidInputError(".sgc connectivity is malformed (vertex labels).")
-    nptr, nbrs = _face_neighbours(Fc)
+    nptr, nbrs, vptr, vf = _face_neighbours(Fc)
     inv = np.zeros(m, dtype=np.int64)
     cls, fb = streams[N_TOPO + 1], streams[N_TOPO + 2]
-    st, used, _ = _face_order(False, m, nptr, nbrs, inv, cls, fb, bC, 0, nC)
+    st, used, _ = _face_order(False, m, Fc, nptr, nbrs, vptr, vf, inv, cls, fb, bC, 0, nC)
     if st != 0 or used != sizes[N_TOPO + 2]:
         raise InvalidInputError(".sgc connectivity is malformed (face order).")
     G = L[Fc]
