@@ -210,7 +210,25 @@ def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to):
 
 
 @numba.njit(cache=True)
-def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits, Fc, order, L):
+def _topology(
+    encode,
+    m,
+    F,
+    ekeys,
+    eptr,
+    efaces,
+    n_univ,
+    syms,
+    wsym,
+    wctx,
+    woff,
+    lens,
+    bits,
+    nbits,
+    Fc,
+    order,
+    L,
+):
     """Stage 1, run identically by encoder (``encode``) and decoder.
 
     Encoder inputs: ``F`` (file faces), ``ekeys/eptr/efaces`` (undirected file edges of the
@@ -361,14 +379,15 @@ def _topology(encode, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, nbits
                 elif s == W_FAR:
                     s = W_ANY
                     pos = _put(bits, pos, cw, _bitlen(nv - 1))
-            syms[4 + ctx, cur[4 + ctx]] = s
-            cur[4 + ctx] += 1
+            wsym[cur[4]] = s  # all contexts in one array, split by ``wctx`` afterwards
+            wctx[cur[4]] = ctx
+            cur[4] += 1
             done[f] = True
             order[t] = f
         else:
             if cur[4 + ctx] >= lens[4 + ctx]:
                 return 1, nv, pos
-            s = syms[4 + ctx, cur[4 + ctx]]
+            s = wsym[woff[ctx] + cur[4 + ctx]]
             cur[4 + ctx] += 1
             if s == 0:
                 if nv >= N:
@@ -711,18 +730,26 @@ def _traverse(F: np.ndarray):
     m = F.shape[0]
     n_univ = int(F.max()) + 1
     ekeys, eptr, efaces = _edge_table(F, n_univ)
-    syms = np.zeros((N_TOPO, 3 * m + 3), dtype=np.int64)
+    syms = np.zeros((4, 3 * m + 3), dtype=np.int32)  # gate, orient, seed, far border
+    wsym = np.zeros(m + 1, dtype=np.int32)  # third vertices of all contexts, in order
+    wctx = np.zeros(m + 1, dtype=np.int8)
     lens = np.zeros(N_TOPO, dtype=np.int64)
     bits = _bitbuf(64 * (3 * m + 3))
     Fc = np.zeros((m, 3), dtype=np.int64)
     order = np.zeros(m, dtype=np.int64)
     L = np.zeros(3 * m + 3, dtype=np.int64)
+    z = np.zeros(1, dtype=np.int64)
     st, nv, pos = _topology(
-        True, m, F, ekeys, eptr, efaces, n_univ, syms, lens, bits, 0, Fc, order, L
+        True, m, F, ekeys, eptr, efaces, n_univ, syms, wsym, wctx, z, lens, bits, 0, Fc, order, L
     )
     if st != 0:  # pragma: no cover - the encoder's own state machine cannot fail
         raise RuntimeError("connectivity traversal failed")
-    return n_univ, syms, lens, bits, pos, Fc, order, L[:nv]
+    nw = int(lens[4])
+    streams = [syms[k, : lens[k]] for k in range(4)]
+    by_ctx = np.argsort(wctx[:nw], kind="stable")
+    splits = np.cumsum(np.bincount(wctx[:nw], minlength=N_CTX))[:-1]
+    streams += np.split(wsym[:nw][by_ctx], splits)
+    return n_univ, streams, bits, pos, Fc, order, L[:nv]
 
 
 def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
@@ -732,7 +759,7 @@ def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     (orientation kept), so that :func:`encode` spends almost nothing on the two orders.
     """
     F = np.ascontiguousarray(F, dtype=np.int64)
-    _, _, _, _, _, Fc, _, L = _traverse(F)
+    _, _, _, _, Fc, _, L = _traverse(F)
     unused = np.ones(n_vertices, dtype=bool)
     unused[L] = False
     perm = np.r_[L, np.flatnonzero(unused)].astype(np.int64)
@@ -747,7 +774,7 @@ def encode(F: np.ndarray) -> bytes:
 
     F = np.ascontiguousarray(F, dtype=np.int64)
     m = F.shape[0]
-    n_univ, syms, lens, bitsA, posA, Fc, order, L = _traverse(F)
+    n_univ, topo, bitsA, posA, Fc, order, L = _traverse(F)
     nv = L.size
     vb = np.zeros(nv, dtype=np.int64)
     bitsB = _bitbuf(64 * nv + 64)
@@ -760,7 +787,7 @@ def encode(F: np.ndarray) -> bytes:
     bitsC = _bitbuf(64 * m + 64)
     st, n_fb, posC = _face_order(True, m, Fc, nptr, nbrs, vptr, vf, inv, fc, fb, bitsC, 0, 0)
     rot = _rotation_symbols(F[order], L[Fc])
-    streams = [syms[k, : lens[k]] for k in range(N_TOPO)] + [vb, fc, fb[:n_fb], rot]
+    streams = [*topo, vb, fc, fb[:n_fb], rot]
     head = bytearray([MARKER]) + varint(n_univ) + varint(nv)
     coder = stream.stack.AnsCoder()
     for s, alpha in zip(streams, ALPHABETS, strict=True):
@@ -845,15 +872,20 @@ def decode(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
                 streams.append(np.zeros(0, dtype=np.int64))
     except (ValueError, RuntimeError, OverflowError) as exc:
         raise InvalidInputError(f".sgc connectivity is malformed ({exc}).") from None
-    syms = np.zeros((N_TOPO, max(1, max(sizes[:N_TOPO]))), dtype=np.int64)
-    for k in range(N_TOPO):
+    syms = np.zeros((4, max(1, max(sizes[:4]))), dtype=np.int32)
+    for k in range(4):
         syms[k, : sizes[k]] = streams[k]
+    wsym = np.concatenate([np.zeros(0, dtype=np.int32), *streams[4:N_TOPO]]).astype(np.int32)
+    woff = np.r_[0, np.cumsum(sizes[4:N_TOPO])].astype(np.int64)
     lens = np.array(sizes[:N_TOPO], dtype=np.int64)
     Fc = np.zeros((m, 3), dtype=np.int64)
     dummyF = np.zeros((1, 3), dtype=np.int64)
     z = np.zeros(1, dtype=np.int64)
     (bA, nA), (bB, nB), (bC, nC) = bits
-    st, nv2, _ = _topology(False, m, dummyF, z, z, z, n_univ, syms, lens, bA, nA, Fc, z, z)
+    w8 = np.zeros(1, dtype=np.int8)
+    st, nv2, _ = _topology(
+        False, m, dummyF, z, z, z, n_univ, syms, wsym, w8, woff, lens, bA, nA, Fc, z, z
+    )
     if st != 0 or nv2 != nv:
         raise InvalidInputError(".sgc connectivity is malformed (topology stream).")
     L = np.zeros(nv, dtype=np.int64)
