@@ -155,6 +155,16 @@ def _add_edge(a, b, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree):
     return ne
 
 
+@numba.njit(cache=True, inline="always")
+def _push_unique(cand, nc, y):
+    """Append ``y`` to ``cand[:nc]`` unless it is there; returns the new length."""
+    for i in range(nc):
+        if cand[i] == y:
+            return nc
+    cand[nc] = y
+    return nc + 1
+
+
 @numba.njit(cache=True)
 def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to):
     """Decoded neighbours of v, then u: border edges first (one face), then the others."""
@@ -169,14 +179,7 @@ def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to):
             y = to[ent]
             steps += 1
             if y != excl and (ecnt[ent >> 1] == 1) == want_border:
-                dup = False
-                for i in range(nc):
-                    if cand[i] == y:
-                        dup = True
-                        break
-                if not dup:
-                    cand[nc] = y
-                    nc += 1
+                nc = _push_unique(cand, nc, y)
             ent = nxt[ent]
     # then further along the border, WALK steps from v and from u (Edgebreaker's S vertices
     # are on the border, often a few edges away)
@@ -197,14 +200,7 @@ def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to):
                 ent = nxt[ent]
             if y == -1 or y == u or y == v:
                 break
-            dup = False
-            for i in range(nc):
-                if cand[i] == y:
-                    dup = True
-                    break
-            if not dup:
-                cand[nc] = y
-                nc += 1
+            nc = _push_unique(cand, nc, y)
             prev, cur = cur, y
     return nc
 
