@@ -156,11 +156,18 @@ def _add_edge(a, b, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree):
 
 
 @numba.njit(cache=True, inline="always")
-def _push_unique(cand, nc, y):
-    """Append ``y`` to ``cand[:nc]`` unless it is there; returns the new length."""
+def _contains(cand, nc, y):
     for i in range(nc):
         if cand[i] == y:
-            return nc
+            return True
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def _push_unique(cand, nc, y):
+    """Append ``y`` to ``cand[:nc]`` unless it is there; returns the new length."""
+    if _contains(cand, nc, y):
+        return nc
     cand[nc] = y
     return nc + 1
 
@@ -554,17 +561,10 @@ def _face_order(encode, m, Fc, nptr, nbrs, vptr, vf, inv, cls, sym, bits, pos, n
         nc = 0
         if prev >= 0:
             for q in range(nptr[prev], nptr[prev + 1]):
-                g = nbrs[q]
-                if not placed[g]:
-                    dup = False
-                    for i in range(nc):
-                        if cand[i] == g:
-                            dup = True
-                    if not dup:
-                        cand[nc] = g
-                        nc += 1
-                        if nc == 3:
-                            break
+                if not placed[nbrs[q]]:
+                    nc = _push_unique(cand, nc, nbrs[q])
+                    if nc == 3:
+                        break
         seq = prev + 1
         if seq >= m or placed[seq]:
             seq = -1
@@ -583,16 +583,8 @@ def _face_order(encode, m, Fc, nptr, nbrs, vptr, vf, inv, cls, sym, bits, pos, n
                     g = vf[q]
                     if placed[g] or g == seq or nvc == VMAX:
                         continue
-                    dup = False
-                    for i in range(nc):
-                        if cand[i] == g:
-                            dup = True
-                    for i in range(nvc):
-                        if vc[i] == g:
-                            dup = True
-                    if not dup:
-                        vc[nvc] = g
-                        nvc += 1
+                    if not _contains(cand, nc, g):  # not already an edge candidate
+                        nvc = _push_unique(vc, nvc, g)
         if encode:
             j = inv[t]
             s = C_EXPLICIT

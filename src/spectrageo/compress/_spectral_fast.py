@@ -298,9 +298,10 @@ def _apply_q(A, tau, Y):
 
 
 @njit(nogil=True, cache=True)
-def _analyse_range(indptr, indices, flat, offs, lo, hi, X, out, status):
-    """``out[rows of submesh i] = U_i^T X[part_i]`` for the submeshes ``lo..hi-1``."""
-    d = X.shape[1]
+def _transform_range(indptr, indices, flat, offs, lo, hi, src, out, status, synthesise):
+    """``out[rows of submesh i] = U_i^T src[part_i]`` (analysis) or ``U_i src[rows of submesh
+    i]`` (``synthesise``) for the submeshes ``lo..hi-1``."""
+    d = src.shape[1]
     ws = _workspace(offs, lo, hi)
     for i in range(lo, hi):
         part = flat[offs[i] : offs[i + 1]]
@@ -309,40 +310,38 @@ def _analyse_range(indptr, indices, flat, offs, lo, hi, X, out, status):
         status[i] = info
         if info != 0:
             continue
-        Y = np.empty((part.size, d))
-        for a in range(part.size):
-            for c in range(d):
-                Y[a, c] = X[part[a], c]
-        _apply_qt(A, tau, Y)
-        _rotate_t(idx, cs, sn, M, Y)
         o = offs[i]
-        for j in range(part.size):
-            q = order[j]
-            for c in range(d):
-                out[o + j, c] = sign[q] * Y[q, c]
+        Y = np.empty((part.size, d))
+        if synthesise:
+            for j in range(part.size):
+                q = order[j]
+                for c in range(d):
+                    Y[q, c] = sign[q] * src[o + j, c]
+            _rotate(idx, cs, sn, M, Y)
+            _apply_q(A, tau, Y)
+            out[o : offs[i + 1]] = Y
+        else:
+            for a in range(part.size):
+                for c in range(d):
+                    Y[a, c] = src[part[a], c]
+            _apply_qt(A, tau, Y)
+            _rotate_t(idx, cs, sn, M, Y)
+            for j in range(part.size):
+                q = order[j]
+                for c in range(d):
+                    out[o + j, c] = sign[q] * Y[q, c]
+
+
+@njit(nogil=True, cache=True)
+def _analyse_range(indptr, indices, flat, offs, lo, hi, X, out, status):
+    """``out[rows of submesh i] = U_i^T X[part_i]`` for the submeshes ``lo..hi-1``."""
+    _transform_range(indptr, indices, flat, offs, lo, hi, X, out, status, False)
 
 
 @njit(nogil=True, cache=True)
 def _synthesise_range(indptr, indices, flat, offs, lo, hi, coef, out, status):
     """``out[rows of submesh i] = U_i coef[rows of submesh i]`` for the submeshes ``lo..hi-1``."""
-    d = coef.shape[1]
-    ws = _workspace(offs, lo, hi)
-    for i in range(lo, hi):
-        part = flat[offs[i] : offs[i + 1]]
-        A, tau, idx, cs, sn, M, order, sign, info = _decompose(indptr, indices, part, ws)
-        ws = (ws[0], idx, cs, sn)
-        status[i] = info
-        if info != 0:
-            continue
-        o = offs[i]
-        Y = np.empty((part.size, d))
-        for j in range(part.size):
-            q = order[j]
-            for c in range(d):
-                Y[q, c] = sign[q] * coef[o + j, c]
-        _rotate(idx, cs, sn, M, Y)
-        _apply_q(A, tau, Y)
-        out[o : offs[i + 1]] = Y
+    _transform_range(indptr, indices, flat, offs, lo, hi, coef, out, status, True)
 
 
 @njit(nogil=True, cache=True)
@@ -581,9 +580,6 @@ def overlapped_submeshes(C, *, submesh_size: int, overlap: float, rng):
     """:func:`spectrageo.spectral.partition.overlapped_submeshes` (same METIS parts, same grown
     submeshes and degrees) with the growth compiled; ``C`` as from
     :func:`spectrageo.graph.adjacency_matrix`."""
-    import math
-
-    from .._errors import InvalidInputError
     from .._validation import as_rng
     from ..spectral import partition as P
 
@@ -594,18 +590,7 @@ def overlapped_submeshes(C, *, submesh_size: int, overlap: float, rng):
         return P.overlapped_submeshes(C, submesh_size=size, overlap=overlap, rng=rng)
     pattern = C.copy()
     pattern.data[:] = 1.0
-    seed = int(as_rng(rng).integers(0, 2**31 - 1))
-    n_parts = max(2, math.ceil(n / (size * (1.0 - float(overlap)))))
-    for _ in range(8):
-        cores = P._split(P._metis(pattern, n_parts, seed), n_parts)
-        biggest = max(c.size for c in cores)
-        if biggest <= size:
-            break
-        n_parts = math.ceil(n_parts * biggest / size) + 1
-    else:  # pragma: no cover - METIS keeps the imbalance within a few percent
-        raise InvalidInputError(
-            f"could not split the graph into parts of at most `submesh_size` = {size} vertices."
-        )
+    cores = P.metis_cores(pattern, size, overlap, int(as_rng(rng).integers(0, 2**31 - 1)))
     offs = np.zeros(len(cores) + 1, dtype=np.int64)
     np.cumsum([c.size for c in cores], out=offs[1:])
     parts, degs = _grow_all(

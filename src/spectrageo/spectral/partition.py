@@ -247,20 +247,7 @@ def overlapped_submeshes(
         deg = np.diff(pattern.indptr).astype(np.int64)
         return Submeshes([allv], [allv.copy()], n, [deg])
 
-    seed = int(gen.integers(0, 2**31 - 1))
-    n_parts = max(2, math.ceil(n / (submesh_size * (1.0 - float(overlap)))))
-    for _ in range(8):
-        membership = _metis(pattern, n_parts, seed)
-        cores = _split(membership, n_parts)
-        biggest = max(c.size for c in cores)
-        if biggest <= submesh_size:
-            break
-        n_parts = math.ceil(n_parts * biggest / submesh_size) + 1
-    else:  # pragma: no cover - METIS keeps the imbalance within a few percent
-        raise InvalidInputError(
-            f"could not split the graph into parts of at most `submesh_size` = {submesh_size} vertices."
-        )
-
+    cores = metis_cores(pattern, submesh_size, overlap, int(gen.integers(0, 2**31 - 1)))
     marker = np.zeros(n, dtype=bool)
     parts, degrees = [], []
     for core in cores:
@@ -268,6 +255,22 @@ def overlapped_submeshes(
         parts.append(part)
         degrees.append(np.diff(induced_subgraph(pattern, part).indptr).astype(np.int64))
     return Submeshes(parts, cores, n, degrees)
+
+
+def metis_cores(pattern: sp.csr_matrix, size: int, overlap: float, seed: int) -> list[np.ndarray]:
+    """METIS parts of at most ``size`` vertices, as many as the overlap leaves room for (the
+    cores of :func:`overlapped_submeshes`; the count grows until the largest part fits)."""
+    n = pattern.shape[0]
+    n_parts = max(2, math.ceil(n / (size * (1.0 - float(overlap)))))
+    for _ in range(8):
+        cores = _split(_metis(pattern, n_parts, seed), n_parts)
+        biggest = max(c.size for c in cores)
+        if biggest <= size:
+            return cores
+        n_parts = math.ceil(n_parts * biggest / size) + 1
+    raise InvalidInputError(  # pragma: no cover - METIS keeps the imbalance within a few percent
+        f"could not split the graph into parts of at most `submesh_size` = {size} vertices."
+    )
 
 
 def _metis(pattern: sp.csr_matrix, n_parts: int, seed: int) -> np.ndarray:
