@@ -16,7 +16,10 @@ modes, and uniform quantisation of the coordinates + zstd (level 19) of vertices
 
 Splits are fixed here: :data:`TUNING_SPLIT` (fandisk, partLp), on which the defaults of the
 codecs (``submesh_size=300``, ``k=300``, ``overlap=0.1``; ``feature_fraction=0.15``,
-``ratio=4``) were chosen, and :data:`VALIDATION_SPLIT`, never used for choices. The full
+``ratio=4``) were chosen, and :data:`VALIDATION_SPLIT`, never used for the geometry codecs'
+choices. The connectivity coder's constants (:mod:`spectrageo.compress._conn_traverse`) were
+chosen on the tuning meshes of ``benchmarks/connectivity.py``, which include every mesh of both
+splits here, so the validation rows are not held out for the connectivity part. The full
 437k-vertex dragon is in :data:`LARGE` and runs only with ``large=True``.
 """
 
@@ -281,8 +284,10 @@ def format_markdown(rows: list[dict]) -> str:
         + "). `bpv` counts the whole file, connectivity included; `rms` and `hausdorff` "
         "(symmetric, surface samples) are fractions of the bounding-box diagonal; `theta_deg` and "
         "`nmsve` only where the vertex order is kept. `draco` lets Draco reorder vertices, "
-        "`draco-ordered` keeps the order; `quant-zstd` is uniform quantisation + zstd. Defaults "
-        "were chosen on the tuning split (fandisk, partLp) only.",
+        "`draco-ordered` keeps the order; `quant-zstd` is uniform quantisation + zstd. The "
+        "geometry codecs' defaults were chosen on the tuning split (fandisk, partLp) only; the "
+        "connectivity coder's constants on the tuning meshes of benchmarks/connectivity.py, "
+        "which include every mesh here, so the validation rows are not held out for it.",
         "",
         "",
         "### Size at Draco's error",
