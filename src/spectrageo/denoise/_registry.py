@@ -151,14 +151,14 @@ def denoise(
     # leaves isolated triangles)
     sigma = None
     if min_noise > 0 and not is_soup(F, V.shape[0]):
-        sigma, level = noise_sigma(V)
+        sigma, level = noise_sigma(V, F=F)
         if level < min_noise:
             return V.copy()  # no noise found: nothing to remove
     w = weld_mesh(V, F) if weld else None
     if w is not None and w.n_merged:
         Vw, Fw = w.vertices, w.faces
         if sigma is None and min_noise > 0:
-            sigma, level = noise_sigma(Vw)
+            sigma, level = noise_sigma(Vw, F=Fw)
             if level < min_noise:
                 return V.copy()
     else:
@@ -181,7 +181,7 @@ def _run(info, V, F, *, pre, trust, sigma, options) -> np.ndarray:
     if info.name not in _TRUSTED or trust is None:
         return out
     if sigma is None:
-        sigma = noise_sigma(V0)[0]
+        sigma = noise_sigma(V0, F=F)[0]
     return apply_trust(V0, out, float(trust) * sigma)
 
 
