@@ -121,6 +121,23 @@ def test_denoise_mesh_and_animation_keep_layout(capsys, sphere_file, tmp_path):
     assert a.n_frames == 2 and a.n_vertices == len(V) and np.array_equal(a.faces, F)
 
 
+def test_denoise_says_when_the_gate_found_no_noise(capsys, sphere_file, tmp_path):
+    """A clean sphere comes back unchanged from tsgsp's gate and the CLI says so; a noisy one
+    is denoised without that message."""
+    path, V, F = sphere_file
+    out = tmp_path / "den.ply"
+    code, out_s, err = run_cli(capsys, "denoise", path, out)
+    assert code == 0, err
+    assert "no noise found" in out_s + err
+    assert np.allclose(io.read_mesh(out).vertices, V)
+    rng = np.random.default_rng(0)
+    noisy = tmp_path / "noisy.ply"
+    io.write(noisy, Mesh(V + 0.01 * rng.standard_normal(V.shape), F))
+    code, out_s, err = run_cli(capsys, "denoise", noisy, out)
+    assert code == 0, err
+    assert "no noise found" not in out_s + err
+
+
 @pytest.mark.parametrize(
     ("argv", "match"),
     [

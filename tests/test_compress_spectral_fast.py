@@ -138,6 +138,9 @@ def test_files_without_the_direct_flag_decode_with_orthogonal_iterations(fandisk
     assert not _spectral.SpectralParams.from_bytes(compress._container.parse(data).params).direct
     new = compress.encode(V, F, step=1e-3)
     assert _spectral.SpectralParams.from_bytes(compress._container.parse(new).params).direct
+    # info says which bases a file was coded with
+    assert compress.info(new)["parameters"]["direct"] is True
+    assert compress.info(data)["parameters"]["direct"] is False
     diag = np.linalg.norm(V.max(0) - V.min(0))
     for d in (data, new):
         V2, _ = compress.decode(d)

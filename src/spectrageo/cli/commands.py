@@ -325,6 +325,9 @@ def cmd_denoise(args) -> int:
                 obj.vertices, obj.faces, method=args.method, weld=not args.no_weld, **opts
             )
         out = obj.with_vertices(Vd)
+        if np.array_equal(Vd, obj.vertices):
+            # the do-no-harm gate (spectrageo.denoise._guard) found no noise, or only detail
+            _status("no noise found: the vertices are written unchanged")
     elif isinstance(obj, MeshAnimation):
         dyn = getattr(denoise, "dynamic_methods", lambda: [])()
         if args.method == "dae" and args.train_frames is not None:

@@ -137,6 +137,8 @@ class SpectralParams:
             "k": self.k,
             "step": self.step,
             **({"eps": round(self.eps, 6)} if self.basis == "doi" else {}),
+            # complete bases computed directly (DIRECT_FULL): the limit of the iterations
+            "direct": self.direct,
         }
 
 

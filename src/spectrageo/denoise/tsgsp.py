@@ -20,7 +20,9 @@ Eq. (5.16)-(5.19). The binary neighbourhood matrix is weighted with bilateral we
 vertices are moved to the filtered normals (Eq. 4.28-4.29). In the first round the filtered
 normals and the starting positions are those of a blend of the coarse and the noisy mesh, the
 weights coming from the coarse mesh (``input_weight`` of :func:`tsgsp`; reading choice (e) of
-:func:`fine`), so that acute ridges rounded off by the low-pass are recovered.
+:func:`fine`), so that acute ridges rounded off by the low-pass are recovered; the part of that
+blend along the surface is weighted by :func:`tangent_weight` (Eqs. T1-T2), because noise along
+the surface put back there is never removed by the normal-driven vertex update.
 
 Reading choices (where the text leaves room) are documented on each function.
 """
@@ -767,7 +769,9 @@ def fine(
     (classification, ideal neighbourhoods, the spatial and range weights of Eq. 5.20-5.22,
     i.e. the coarse mesh is the guidance of a joint bilateral filter) but filters the normals
     of ``source`` and starts the vertex update from it; later rounds are unchanged.
-    :func:`tsgsp` passes ``V_c + 0.7 (V_noisy - V_c)``. Measured (mean theta, degrees; coarse
+    :func:`tsgsp` passes ``V_c + 0.7 (V_noisy - V_c)``, with the tangential part of
+    ``V_noisy - V_c`` weighted by :func:`tangent_weight` (1, i.e. this blend, unless the noise
+    has a large component along the surface; the figures below predate that weight). Measured (mean theta, degrees; coarse
     and noisy weight 0 / 1 / 0.7): 8 shared pairs 5.236 / 5.013 / 5.014, every pair better
     with 0.7 (SharpSphere0.3 8.72 -> 8.04, Fandisk0.3 2.79 -> 2.52, Block0.4 3.70 -> 3.52,
     Twelve0.5Impulsive 3.55 -> 3.30, Bunny0.2 5.81 -> 5.75); seven clean meshes with Gaussian
