@@ -73,16 +73,25 @@ def test_warm_up_runs_each_method_on_a_reindexed_piece(monkeypatch):
 
     m = fandisk()
     calls = []
+    pieces = []
 
     def spy(V, F, *, method):
         calls.append((method, V.shape[0], F.shape[0], int(F.max())))
+        pieces.append(F)
         if method == "bad":
             raise RuntimeError("fails")
         return V
 
     monkeypatch.setattr(_registry, "denoise", spy)
-    _registry.warm_up(["bad", "taubin"], m.vertices, m.faces, n_faces=300)
+    # faces shuffled: the first 300 of the file are scattered, the piece must still be connected
+    F = m.faces[np.random.default_rng(0).permutation(m.faces.shape[0])]
+    _registry.warm_up(["bad", "taubin"], m.vertices, F, n_faces=300)
     assert [c[0] for c in calls] == ["bad", "taubin"]  # a failing method does not stop the rest
     for _, nv, nf, fmax in calls:
         assert nf == 300 and fmax == nv - 1  # every kept vertex is used, indices re-numbered
-        assert nv == np.unique(m.faces[:300]).size
+    from scipy.sparse.csgraph import connected_components
+
+    from spectrageo.graph import face_adjacency
+
+    assert connected_components(face_adjacency(pieces[0]), directed=False)[0] == 1
+    _registry.warm_up(["taubin"], m.vertices, np.zeros((0, 3), dtype=int))  # nothing to run
