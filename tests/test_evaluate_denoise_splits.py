@@ -311,3 +311,28 @@ def test_cli_split_options(capsys, shared_data, tmp_path):
     code = main(["evaluate", "outliers", "--data", str(shared_data), "--split", "both"])
     _, err = capsys.readouterr()
     assert code != 0 and "applies to `evaluate denoise` only" in err
+
+
+def test_time_ratios_where_both_denoised_leave_out_gate_only_cases():
+    """A case where the gate returned the input for both methods (theta == input theta) times
+    the gate twice; the '... where both changed the mesh' ratios leave it out."""
+
+    def row(case, method, n, theta, t):
+        return {
+            "split": "validation", "case": case, "method": method, "n_vertices": n,
+            "theta_deg": theta, "input_theta": 10.0, "above_input": theta > 10.0,
+            "time_s": t, "error": "",
+        }  # fmt: skip
+
+    rows = [
+        row("a", "tsgsp", 6000, 4.0, 1.0),
+        row("a", "gnf", 6000, 5.0, 4.0),
+        row("b", "tsgsp", 8000, 10.0, 0.3),  # gate only: both unchanged
+        row("b", "gnf", 8000, 10.0, 0.2),
+        row("c", "tsgsp", 9000, 6.0, 2.0),
+        row("c", "gnf", 9000, 6.5, 5.0),
+    ]
+    s = ev.generality_summary(rows)["validation"]
+    assert s["time_ratio_max_5k"] == pytest.approx(1.5)  # the gate-only case
+    assert s["time_ratio_max_5k_denoised"] == pytest.approx(0.4)
+    assert s["time_ratio_median_denoised"] == pytest.approx(0.325)
