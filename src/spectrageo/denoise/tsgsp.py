@@ -1008,7 +1008,7 @@ def tsgsp(
     input_tangent : float in [0, 1] or "auto"
         Weight of the part of ``V - V_c`` tangent to the coarse surface in that blend (the part
         along the coarse vertex normals always gets weight 1): ``V_c + input_weight (R_n +
-        beta R_t)``. ``"auto"`` sets ``beta`` from the measured ratio (Eq. T1 of
+        beta R_t)``. ``"auto"`` sets ``beta`` from the measured ratio (Eqs. T1-T2 of
         :func:`tangent_weight`); ``1`` is the plain blend of earlier versions.
     trust : float or None
         Do-no-harm bound, in units of the estimated noise standard deviation ``sigma_z``
