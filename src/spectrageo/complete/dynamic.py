@@ -359,9 +359,7 @@ def _complete_frames(A, K, C, method, *, tol, max_iter, rng, F=None, wrli=None, 
         return out
 
     def step_motion(prev, cur, kt):
-        m, reached = _satellites(
-            C, prev, cur - np.where(kt[:, None], prev, 0.0), kt, sweeps=sweeps
-        )
+        m, reached = _satellites(C, prev, cur - np.where(kt[:, None], prev, 0.0), kt, sweeps=sweeps)
         m[~reached] = 0.0
         return prev + m
 
