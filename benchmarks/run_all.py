@@ -68,6 +68,7 @@ SECTIONS = [
     ("complete", _evaluate("complete", "complete")),
     ("register", _evaluate("register", "register")),
     ("identify", _evaluate("identify", "identify")),
+    ("identify_speed", _script("identify_speed")),
     ("learned_denoise", _script("learned_denoise")),
     ("viewer", _script("viewer")),
 ]

@@ -354,3 +354,20 @@ def test_cli_identify_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "file not found" in err and "Traceback" not in err
     assert not (tmp_path / "r.json").exists()
+
+
+def test_ransac_inlier_count_kernel_matches_numpy():
+    """The compiled hypothesis scoring equals the dense numpy count."""
+    from spectrageo.register._common import random_rotation
+    from spectrageo.register._kernels import count_inliers
+
+    g = np.random.default_rng(4)
+    A = g.normal(size=(700, 3))
+    B = A + 0.05 * g.normal(size=A.shape)
+    R = np.stack([np.eye(3)] + [random_rotation(g) for _ in range(9)])
+    t = np.concatenate([np.zeros((1, 3)), 0.1 * g.normal(size=(9, 3))])
+    thr2 = 0.08**2
+    ref = ((np.einsum("hij,nj->hni", R, A) + t[:, None] - B) ** 2).sum(axis=2) <= thr2
+    got = count_inliers(R, t, A, B, thr2)
+    np.testing.assert_array_equal(got, ref.sum(axis=1))
+    assert got[0] > 600 and got[1:].max() < 100

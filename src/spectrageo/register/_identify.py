@@ -54,8 +54,8 @@ Pipeline (defaults of Table 6.7 unless stated):
    ``h < zeta = 0.4``. When two found models claim mostly the same scene points (more than half
    of the smaller set), only the one with the smaller ``h`` stays found.
 
-The result is deterministic for a given ``rng``; memory is O(n) (k-d trees, RANSAC scored in
-chunks).
+The result is deterministic for a given ``rng``; memory is O(n) (k-d trees, RANSAC scored by a
+compiled kernel without an (hypotheses x correspondences) temporary).
 """
 
 from __future__ import annotations
@@ -69,6 +69,7 @@ from scipy.spatial import cKDTree
 
 from .._errors import InvalidInputError
 from ._common import WORKERS, apply_transform, knn_normals, make_transform, voxel_downsample
+from ._kernels import count_inliers
 from ._segment import adaptive_dbscan, remove_planes
 
 DEFAULTS: dict[str, Any] = {
@@ -327,10 +328,10 @@ def _ransac_poses(
         return []
     R, t = _kabsch_batch(a[ok], b[ok])
     thr2 = (2.0 * voxel) ** 2
-    score = np.empty(R.shape[0])
-    for c in range(0, R.shape[0], 128):
-        AR = np.einsum("hij,nj->hni", R[c : c + 128], A) + t[c : c + 128, None, :]
-        score[c : c + 128] = (((AR - B) ** 2).sum(axis=2) <= thr2).sum(axis=1)
+    score = count_inliers(
+        np.ascontiguousarray(R), np.ascontiguousarray(t), np.ascontiguousarray(A),
+        np.ascontiguousarray(B), thr2,
+    ).astype(np.float64)  # fmt: skip
     # re-rank the best hypotheses by the fraction of segment points the moved model explains
     top = np.argsort(-score, kind="stable")[:64]
     step = max(1, seg.P.shape[0] // 400)
