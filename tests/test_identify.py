@@ -368,6 +368,44 @@ def test_ransac_inlier_count_kernel_matches_numpy():
     t = np.concatenate([np.zeros((1, 3)), 0.1 * g.normal(size=(9, 3))])
     thr2 = 0.15**2
     ref = ((np.einsum("hij,nj->hni", R, A) + t[:, None] - B) ** 2).sum(axis=2) <= thr2
-    got = count_inliers(R, t, A, B, thr2)
+    N = g.normal(size=A.shape)
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    got = count_inliers(R, t, A, B, thr2, N, N, 0.0)  # no normal test
     np.testing.assert_array_equal(got, ref.sum(axis=1))
     assert got[0] > 600 and got[1:].max() < 100
+    # with the normal test: the rotated model normal must agree with the segment normal
+    NB = N.copy()
+    NB[:350] = np.cross(N[:350], [0.0, 0.0, 1.0])  # orthogonal to the model normal
+    NB[:350] /= np.linalg.norm(NB[:350], axis=1, keepdims=True)
+    agree = np.abs(np.einsum("hij,nj,ni->hn", R, N, NB)) >= 0.8
+    got_n = count_inliers(R, t, A, B, thr2, N, NB, 0.8)
+    np.testing.assert_array_equal(got_n, (ref & agree).sum(axis=1))
+    assert got_n[0] <= got[0] - 300
+
+
+def test_guided_sampling_lists_are_the_compatible_pairs():
+    """The compiled compatibility lists equal a dense numpy evaluation of the same rule."""
+    from spectrageo.register._kernels import compatible_lists
+
+    g = np.random.default_rng(7)
+    A = g.normal(size=(300, 3))
+    B = A + 0.02 * g.normal(size=A.shape)
+    B[::3] = g.normal(size=(100, 3))  # a third of the correspondences wrong
+    NA = g.normal(size=A.shape)
+    NA /= np.linalg.norm(NA, axis=1, keepdims=True)
+    NB = NA + 0.1 * g.normal(size=A.shape)
+    NB /= np.linalg.norm(NB, axis=1, keepdims=True)
+    anchors = g.choice(300, 40, replace=False).astype(np.int64)
+    voxel, max_d, sep, cos_tol = 0.02, 2.5, 0.2, 0.25
+    cnt, flat = compatible_lists(A, B, NA, NB, anchors, voxel, max_d, sep, cos_tol)
+    dA = np.linalg.norm(A[None] - A[anchors][:, None], axis=2)
+    dB = np.linalg.norm(B[None] - B[anchors][:, None], axis=2)
+    ok = (np.abs(dA - dB) <= 0.1 * np.maximum(dA, dB) + voxel) & (dB <= max_d) & (dB >= sep)
+    ok &= np.abs(np.abs(NA @ NA[anchors].T).T - np.abs(NB @ NB[anchors].T).T) <= cos_tol
+    np.testing.assert_array_equal(cnt, ok.sum(axis=1))
+    np.testing.assert_array_equal(flat, np.nonzero(ok)[1])
+    # wrong correspondences are rarely compatible with a right anchor
+    right = anchors % 3 != 0
+    wrong_share = np.mean([np.mean(flat[o : o + c] % 3 == 0)
+                           for o, c in zip(np.r_[0, np.cumsum(cnt)[:-1]][right], cnt[right])])  # fmt: skip
+    assert wrong_share < 0.2

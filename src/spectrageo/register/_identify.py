@@ -27,10 +27,17 @@ Pipeline (defaults of Table 6.7 unless stated):
    ``|n_j . d|`` over its ``desc_k = 48`` neighbours, averaged over the neighbourhood as in FPFH),
    which do not depend on the pose; the 3 nearest model descriptors of every segment point give
    putative correspondences (Eq. 6.37 without the coordinates). A vectorised RANSAC draws
-   ``n_hypotheses`` triples (the second and third correspondence within 0.6 model diagonals of
-   the first, so that a segment holding several touching objects still yields triples on one of
-   them), keeps those that preserve their pairwise distances, fits them all at once (batched
-   Kabsch) and scores them by the correspondences within ``2 voxel``; the best 64 are re-ranked
+   ``n_hypotheses`` triples by guided sampling: the first correspondence among 500 random
+   anchors, the second and third among the correspondences *compatible* with it (their model
+   and segment distances to it agree within 10 % + ``voxel``, the segment distance lies between
+   a minimum separation and 0.6 model diagonals -- a segment holding several touching objects
+   still yields triples on one of them -- and the unoriented angle between the two normals
+   agrees within ``PAIR_COS_TOL``), so that a triple needs only its first pick right at the low
+   inlier ratios of occluded objects (2-5 % of the correspondences). It keeps the triples that
+   preserve their pairwise distances, fits them all at once (batched Kabsch) and scores them by
+   the correspondences within ``2 voxel`` whose normals also agree within ~37 degrees
+   (``INLIER_COS``; without the normal test, wrong poses collect more chance inliers than the
+   right one); the best 64 are re-ranked
    by the fraction of segment points that lie within ``1.5 voxel`` of the moved model with a
    normal within ~37 degrees of the model's. The ``n_refine = 3`` best distinct poses are refined
    by the Tukey-weighted ICP :func:`~spectrageo.register.narrow_phase` (Eq. 6.39-6.41),
@@ -69,8 +76,13 @@ from scipy.spatial import cKDTree
 
 from .._errors import InvalidInputError
 from ._common import WORKERS, apply_transform, knn_normals, make_transform, voxel_downsample
-from ._kernels import count_inliers
+from ._kernels import compatible_lists, count_inliers
 from ._segment import adaptive_dbscan, remove_planes
+
+#: RANSAC inliers also need normals within ~37 degrees (unoriented), as in the re-ranking
+INLIER_COS = 0.8
+#: guided sampling: largest change of ``|n_i . n_j|`` between the model and the segment pair
+PAIR_COS_TOL = 0.25
 
 DEFAULTS: dict[str, Any] = {
     "zeta": 0.4,  # Table 6.7
@@ -308,30 +320,39 @@ def _ransac_poses(
     A, B = model.P[cm], seg.P[cq]  # correspondence: model point -> segment point
     nc = cm.size
     nh = o["n_hypotheses"]
-    # first correspondence anywhere, the other two among the ones whose segment points are
-    # nearest to it (a segment may hold several objects: keep the triple on one of them)
+    A, B = np.ascontiguousarray(A), np.ascontiguousarray(B)
+    NA, NB = np.ascontiguousarray(model.N[cm]), np.ascontiguousarray(seg.N[cq])
+    # guided sampling: the first correspondence of a triple among n1 anchors, the other two among
+    # the correspondences compatible with it -- pairwise distance kept (as in the triple check
+    # below), segment distance between `sep` and 0.6 model diagonals (a segment may hold several
+    # objects), unoriented angle between the two normals kept -- so that a triple needs only its
+    # first pick right, not all three
     n1 = min(nc, 500)
     anchors = g.choice(nc, n1, replace=False)
-    balls = cKDTree(B).query_ball_point(B[anchors], 0.6 * model.diag, workers=WORKERS)
-    cnt = np.array([len(b) for b in balls])
+    sep = max(0.1 * min(model.diag, seg.diag), 2 * voxel)
+    cnt, flat = compatible_lists(
+        A, B, NA, NB, anchors.astype(np.int64), float(voxel), 0.6 * model.diag, float(sep),
+        PAIR_COS_TOL,
+    )  # fmt: skip
+    usable = np.flatnonzero(cnt >= 2)
+    if usable.size == 0:
+        return []
     off = np.r_[0, np.cumsum(cnt)[:-1]]
-    flat = np.concatenate([np.asarray(b, dtype=np.int64) for b in balls])
-    ai = g.integers(0, n1, size=nh)
+    ai = usable[g.integers(0, usable.size, size=nh)]
     pick = off[ai, None] + (g.random((nh, 2)) * cnt[ai, None]).astype(np.int64)
     s = np.c_[anchors[ai], flat[pick]]
     a, b = A[s], B[s]
     da = np.linalg.norm(a[:, [0, 1, 2]] - a[:, [1, 2, 0]], axis=2)
     db = np.linalg.norm(b[:, [0, 1, 2]] - b[:, [1, 2, 0]], axis=2)
     ok = (np.abs(da - db) <= 0.1 * np.maximum(da, db) + voxel).all(axis=1)
-    ok &= db.min(axis=1) >= max(0.1 * min(model.diag, seg.diag), 2 * voxel)
+    ok &= db.min(axis=1) >= sep
     if not ok.any():
         return []
     R, t = _kabsch_batch(a[ok], b[ok])
     thr2 = (2.0 * voxel) ** 2
     score = count_inliers(
-        np.ascontiguousarray(R), np.ascontiguousarray(t), np.ascontiguousarray(A),
-        np.ascontiguousarray(B), thr2,
-    ).astype(np.float64)  # fmt: skip
+        np.ascontiguousarray(R), np.ascontiguousarray(t), A, B, thr2, NA, NB, INLIER_COS
+    ).astype(np.float64)
     # re-rank the best hypotheses by the fraction of segment points the moved model explains
     top = np.argsort(-score, kind="stable")[:64]
     step = max(1, seg.P.shape[0] // 400)

@@ -7,9 +7,11 @@ from numba import njit, prange
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def count_inliers(R, t, A, B, thr2):  # pragma: no cover - compiled
+def count_inliers(R, t, A, B, thr2, NA, NB, cos_min):  # pragma: no cover - compiled
     """Per hypothesis ``h``: how many correspondences ``(A[c], B[c])`` satisfy
-    ``||R[h] A[c] + t[h] - B[c]||^2 <= thr2``. ``R`` (H, 3, 3), ``t`` (H, 3), ``A``/``B`` (C, 3).
+    ``||R[h] A[c] + t[h] - B[c]||^2 <= thr2`` and ``|(R[h] NA[c]) . NB[c]| >= cos_min``
+    (unoriented normals; ``cos_min <= 0`` disables the normal test). ``R`` (H, 3, 3), ``t``
+    (H, 3), ``A``/``B``/``NA``/``NB`` (C, 3).
 
     The same sum of squares as ``((R A + t - B) ** 2).sum()`` over the three coordinates, without
     the (H, C, 3) temporary; hypotheses run in parallel.
@@ -29,6 +31,57 @@ def count_inliers(R, t, A, B, thr2):  # pragma: no cover - compiled
             d1 = r10 * a0 + r11 * a1 + r12 * a2 + t1 - B[c, 1]
             d2 = r20 * a0 + r21 * a1 + r22 * a2 + t2 - B[c, 2]
             if d0 * d0 + d1 * d1 + d2 * d2 <= thr2:
-                cnt += 1
+                if cos_min <= 0.0:
+                    cnt += 1
+                else:
+                    n0, n1, n2 = NA[c, 0], NA[c, 1], NA[c, 2]
+                    dot = (
+                        (r00 * n0 + r01 * n1 + r02 * n2) * NB[c, 0]
+                        + (r10 * n0 + r11 * n1 + r12 * n2) * NB[c, 1]
+                        + (r20 * n0 + r21 * n1 + r22 * n2) * NB[c, 2]
+                    )
+                    if abs(dot) >= cos_min:
+                        cnt += 1
         out[h] = cnt
     return out
+
+
+@njit(cache=True, nogil=True)
+def _compatible(A, B, NA, NB, a, c, voxel, max_d, sep, cos_tol):  # pragma: no cover - compiled
+    dA = np.sqrt((A[c, 0] - A[a, 0]) ** 2 + (A[c, 1] - A[a, 1]) ** 2 + (A[c, 2] - A[a, 2]) ** 2)
+    dB = np.sqrt((B[c, 0] - B[a, 0]) ** 2 + (B[c, 1] - B[a, 1]) ** 2 + (B[c, 2] - B[a, 2]) ** 2)
+    if dB > max_d or dB < sep or abs(dA - dB) > 0.1 * max(dA, dB) + voxel:
+        return False
+    cA = abs(NA[c, 0] * NA[a, 0] + NA[c, 1] * NA[a, 1] + NA[c, 2] * NA[a, 2])
+    cB = abs(NB[c, 0] * NB[a, 0] + NB[c, 1] * NB[a, 1] + NB[c, 2] * NB[a, 2])
+    return abs(cA - cB) <= cos_tol
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def compatible_lists(A, B, NA, NB, anchors, voxel, max_d, sep, cos_tol):  # pragma: no cover
+    """For every anchor correspondence ``a``, the correspondences ``c`` (increasing index)
+    compatible with it: ``|d_A - d_B| <= 0.1 max(d_A, d_B) + voxel`` for the model and segment
+    distances of the pair, ``sep <= d_B <= max_d``, and ``| |NA_c . NA_a| - |NB_c . NB_a| | <=
+    cos_tol``. Returns ``(counts (n_anchors,), flat)``, the lists one after the other."""
+    n1 = anchors.shape[0]
+    C = A.shape[0]
+    counts = np.zeros(n1, dtype=np.int64)
+    for i in prange(n1):
+        a = anchors[i]
+        k = 0
+        for c in range(C):
+            if _compatible(A, B, NA, NB, a, c, voxel, max_d, sep, cos_tol):
+                k += 1
+        counts[i] = k
+    off = np.zeros(n1 + 1, dtype=np.int64)
+    for i in range(n1):
+        off[i + 1] = off[i] + counts[i]
+    flat = np.empty(off[n1], dtype=np.int64)
+    for i in prange(n1):
+        a = anchors[i]
+        k = off[i]
+        for c in range(C):
+            if _compatible(A, B, NA, NB, a, c, voxel, max_d, sep, cos_tol):
+                flat[k] = c
+                k += 1
+    return counts, flat
