@@ -350,3 +350,20 @@ def test_update_vertices_validation():
         update_vertices(V, F, N, fixed=np.ones(3, bool))
     with pytest.raises(InvalidInputError, match="`n_iter` must be"):
         update_vertices(V, F, N, n_iter=-1)
+
+
+@pytest.mark.parametrize("shape", [(400, 30), (30, 400)])
+def test_completion_svt_from_gram_equals_svd(shape):
+    """Eq. 5.85-5.86 from the Gram matrix equal the SVD form on tall and wide matrices."""
+    from spectrageo.linalg.completion import _svt_gram
+
+    g = np.random.default_rng(3)
+    X = g.normal(size=(shape[0], 6)) @ g.normal(size=(6, shape[1])) + 0.01 * g.normal(size=shape)
+    U, s, Vt = np.linalg.svd(X, full_matrices=False)
+    for k, tau in ((10, 0.5), (4, 2.0), (10, 1e9)):
+        shr = np.maximum(s[:k] - tau, 0.0)
+        ref = (U[:, :k] * shr) @ Vt[:k]
+        E, lam, r = _svt_gram(X, k, tau)
+        np.testing.assert_allclose(lam, s[:k], rtol=1e-8)
+        assert r == int(np.count_nonzero(shr))
+        np.testing.assert_allclose(E, ref, atol=1e-9 * s[0])

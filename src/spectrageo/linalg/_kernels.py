@@ -98,3 +98,27 @@ def soft_inplace(R: np.ndarray, t: float) -> None:
     """``R <- sign(R) max(|R| - t, 0)`` chunk-friendly (numpy; called once per solve)."""
     c = np.clip(R, -t, t)
     R -= c
+
+
+@njit(cache=True)
+def completion_update(D, mask, E, Y, mu, mu_next, X):  # pragma: no cover - compiled
+    """One pass of the completion ALM after ``E`` (Eq. 5.84 and 5.87), in place.
+
+    On observed entries: ``Z = D - E``, ``Y += mu Z``, next SVT argument ``X = D + Y / mu_next``;
+    elsewhere ``S = -E`` so ``X = D - S + Y / mu_next = E`` (``D`` and ``Y`` vanish there).
+    Returns ``||Z||_F^2``.
+    """
+    m, n = D.shape
+    res = 0.0
+    inv = 1.0 / mu_next
+    for i in range(m):
+        for j in range(n):
+            if mask[i, j]:
+                z = D[i, j] - E[i, j]
+                y = Y[i, j] + mu * z
+                Y[i, j] = y
+                res += z * z
+                X[i, j] = D[i, j] + y * inv
+            else:
+                X[i, j] = E[i, j]
+    return res
