@@ -320,6 +320,18 @@ def test_cli_round_trip_mesh_and_animation(tmp_path, sphere, capsys):
                  str(tmp_path / "k.npy"), "-q"]) == 0  # fmt: skip
     anim = io.read_animation(out3)
     assert isinstance(anim, MeshAnimation) and np.array_equal(anim.frames[K], A[K])
+    np.testing.assert_array_equal(
+        anim.frames, complete_animation(np.where(K[..., None], A, np.nan), Fa, K)
+    )
+    out4 = tmp_path / "done0.npz"
+    assert main(["complete", str(tmp_path / "anim.npz"), str(out4), "--known",
+                 str(tmp_path / "k.npy"), "--sweeps", "0", "-q"]) == 0  # fmt: skip
+    np.testing.assert_array_equal(
+        io.read_animation(out4).frames,
+        complete_animation(np.where(K[..., None], A, np.nan), Fa, K, sweeps=0),
+    )
+    assert main(["complete", str(tmp_path / "anim.npz"), str(out4), "--known",
+                 str(tmp_path / "k.npy"), "--sweeps", "0", "--method", "lia"]) == 2  # fmt: skip
 
     # user mistakes: one line, exit 2, no output file
     np.save(tmp_path / "short.npy", known[:-3])

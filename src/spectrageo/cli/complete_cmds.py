@@ -4,7 +4,8 @@ hole filling (thesis Section 5.3).
 - ``spectrageo complete IN OUT --known KNOWN.npy [--method mc|li|lsm]`` (meshes; the unknown rows
   of IN may hold anything, NaN included);
 - ``spectrageo complete IN OUT --fill-holes [--method li|lsm|mc]`` (meshes with holes);
-- ``spectrageo complete IN.npz OUT.npz --known KNOWN.npy [--method motion|li|lia|mc|gmc]``
+- ``spectrageo complete IN.npz OUT.npz --known KNOWN.npy [--method motion|li|lia|mc|gmc]
+  [--sweeps N]``
   (animations with ``vertices`` + ``faces``; point-cloud sequences with ``points`` (T, n, 3), where
   ``motion`` is Algorithm 13's WRLI).
 
@@ -129,8 +130,11 @@ def cmd_complete(args) -> int:
                 f"`--method` must be one of {', '.join(ANIM_METHODS)} for animations; got {method!r}."
             )
         A, F = _read_partial_frames(src)
+        if args.sweeps is not None and (F is None or method != "motion"):
+            raise InvalidInputError("`--sweeps` applies to mesh animations with --method motion.")
         if F is not None:
-            X = complete.complete_animation(A, F, known, method=method)
+            kw = {} if args.sweeps is None else {"sweeps": args.sweeps}
+            X = complete.complete_animation(A, F, known, method=method, **kw)
             io.write(args.output, MeshAnimation(X, F))
         else:
             X = complete.complete_sequence(
@@ -172,6 +176,11 @@ def register(sub) -> None:
         choices=sorted(set(MESH_METHODS + ANIM_METHODS)),
         help="meshes: li (default) | lsm | mc; animations: motion (default) | li | lia | mc",
     )
+    p.add_argument(
+        "--sweeps", type=int, default=None,
+        help="animations, --method motion: filtering sweeps after the satellite generations "
+        "(default 20; 0 = Algorithm 12 as printed)",
+    )  # fmt: skip
     p.add_argument("--fill-holes", dest="fill_holes", action="store_true", help="close every hole")
     p.add_argument(
         "--max-hole", dest="max_hole", type=int, default=None,
