@@ -35,6 +35,10 @@ GMC_TAU = 1e-2
 #: filtering sweeps of ``"motion"`` after the satellite generations of Algorithm 12 (chosen on
 #: the tuning animation, see :func:`complete_animation`)
 MOTION_SWEEPS = 20
+#: per-frame switch of ``"motion"``: below this leave-one-out ratio the motion step is kept
+#: without testing static interpolation (tuning: horse-gallop 0.15-0.34 per frame; the pose set
+#: cat-poses 0.47-1.39)
+SWITCH_SCREEN = 0.45
 
 
 # --------------------------------------------------------------------------------- validation
@@ -106,6 +110,34 @@ def _satellites(
     if sweeps > 0:
         m = _refine(W, wp, m, known, cur, sweeps)
     return m, cur
+
+
+def _loo_ratio(C: sp.csr_matrix, prev: np.ndarray, cur: np.ndarray, known: np.ndarray) -> float:
+    """Cheap screen of the per-frame switch of ``complete_animation(method="motion")``.
+
+    Leave-one-out at the anchors of frame ``t``, from their known neighbours only, with the
+    weights ``w_d`` of Eq. 5.92: RMS error of predicting an anchor's motion from its neighbours'
+    motions, divided by the RMS error of predicting its position from its neighbours'
+    positions. The second overstates what Laplacian interpolation does (with few known
+    neighbours the mean position is off along the surface), so a small ratio says "motion" for
+    sure while a ratio near 1 only says "test both". ``inf`` when too few anchors have a known
+    neighbour.
+    """
+    Cc = C.tocoo()
+    d2 = np.sum((prev[Cc.row] - prev[Cc.col]) ** 2, axis=1)
+    pos = d2[d2 > 0]
+    ref = float(np.median(pos)) if pos.size else 1.0
+    w = np.minimum(ref / np.maximum(d2, ref * 1e-12), 1e12) * known[Cc.col]
+    Wk = sp.csr_matrix((w, (Cc.row, Cc.col)), shape=C.shape)
+    den = np.asarray(Wk.sum(axis=1)).ravel()
+    ok = known & (den > 0)
+    if ok.sum() < 3:
+        return np.inf
+    curk = np.where(known[:, None], cur, 0.0)
+    m = np.where(known[:, None], cur - prev, 0.0)
+    e_motion = float(np.sum((m[ok] - (Wk @ m)[ok] / den[ok, None]) ** 2))
+    e_static = float(np.sum((curk[ok] - (Wk @ curk)[ok] / den[ok, None]) ** 2))
+    return np.sqrt(e_motion / e_static) if e_static > 0 else np.inf
 
 
 def _refine(
@@ -261,6 +293,7 @@ def complete_animation(
     tol: float = 1e-4,
     max_iter: int = 200,
     sweeps: int = MOTION_SWEEPS,
+    static_switch: bool = True,
     rng: Any = None,
 ) -> np.ndarray:
     r"""Recover missing vertices of a mesh animation with fixed connectivity (Sec. 5.3.2).
@@ -283,9 +316,10 @@ def complete_animation(
     with all its neighbours. ``sweeps=0`` is Algorithm 12 as printed. The default,
     :data:`MOTION_SWEEPS` = 20, was chosen on the tuning animation (horse-gallop, 25 frames,
     30 % known, seed 1; mean NMSVE over frames 1-24): 0 sweeps 1.08e-5, 10 sweeps 1.08e-6, 20
-    1.01e-6, 50 0.99e-6 at 1.4x the time of 20; LIA 1.68e-6. Limit: on pose sets, whose frames
-    are unrelated poses (the shared cat-poses and lion-poses), every motion-based method (this
-    one and ``"lia"``) is less accurate than ``"li"`` frame by frame.
+    1.01e-6, 50 0.99e-6 at 1.4x the time of 20; LIA 1.68e-6. On pose sets, whose frames are
+    unrelated poses (the shared cat-poses and lion-poses), every motion step is less accurate
+    than ``"li"`` frame by frame; ``static_switch`` (default on) lets the anchors of each frame
+    choose between the two (see the parameter).
 
     Baselines: ``"li"`` Laplacian interpolation of every frame on its own (binary ``L = D - C``,
     Eq. 4.24-4.27), ``"lia"`` Laplacian interpolation of the motion vectors from the previous
@@ -312,6 +346,14 @@ def complete_animation(
     sweeps : int
         Filtering sweeps of ``"motion"`` after the satellite generations (see above; 0 =
         Algorithm 12 as printed).
+    static_switch : bool
+        ``"motion"`` only, not in the thesis; it serves pose sets, whose frames are unrelated
+        poses. Per frame, a cheap leave-one-out screen at the anchors (:func:`_loo_ratio`)
+        keeps the motion step when it is clearly better (ratio below :data:`SWITCH_SCREEN`);
+        otherwise every tenth anchor is held out, the frame is completed both by the motion step
+        and by static Laplacian interpolation, and the way with the smaller error at the held-out
+        anchors completes the frame (from all anchors). Online still. False: every frame by the
+        motion step.
     rng : int, Generator or None
 
     Returns
@@ -329,11 +371,22 @@ def complete_animation(
     _check_known_rows(A, K)
     C = adjacency_matrix(F, n)
     return _complete_frames(
-        A, K, C, method, tol=tol, max_iter=max_iter, rng=rng, F=F, sweeps=int(sweeps)
+        A,
+        K,
+        C,
+        method,
+        tol=tol,
+        max_iter=max_iter,
+        rng=rng,
+        F=F,
+        sweeps=int(sweeps),
+        switch=bool(static_switch),
     )
 
 
-def _complete_frames(A, K, C, method, *, tol, max_iter, rng, F=None, wrli=None, sweeps=0):
+def _complete_frames(
+    A, K, C, method, *, tol, max_iter, rng, F=None, wrli=None, sweeps=0, switch=False
+):
     T, n, _ = A.shape
     if method in ("mc", "gmc"):
         if not K.any(axis=0).all():
@@ -360,10 +413,37 @@ def _complete_frames(A, K, C, method, *, tol, max_iter, rng, F=None, wrli=None, 
                 out[t] = laplacian_interpolation(L, idx, A[t][idx])
         return out
 
-    def step_motion(prev, cur, kt):
+    def motion_step(prev, cur, kt):
         m, reached = _satellites(C, prev, cur - np.where(kt[:, None], prev, 0.0), kt, sweeps=sweeps)
         m[~reached] = 0.0
         return prev + m
+
+    def static_step(cur, kt):
+        idx = np.flatnonzero(kt)
+        try:
+            return laplacian_interpolation(L, idx, cur[idx])
+        except InvalidInputError:  # a component without anchor: only the motion step works
+            return None
+
+    def step_motion(prev, cur, kt):
+        if not switch or _loo_ratio(C, prev, cur, kt) < SWITCH_SCREEN:
+            return motion_step(prev, cur, kt)
+        # hold out every tenth anchor, complete the frame both ways, keep the better way
+        idx = np.flatnonzero(kt)
+        held = idx[::10]
+        kh = kt.copy()
+        kh[held] = False
+        xs = static_step(cur, kh)
+        if xs is None or held.size == 0:
+            return motion_step(prev, cur, kt)
+        xm = motion_step(prev, cur, kh)
+        e_s = float(np.sum((xs[held] - cur[held]) ** 2))
+        e_m = float(np.sum((xm[held] - cur[held]) ** 2))
+        if e_s < e_m:
+            out = static_step(cur, kt)
+            if out is not None:
+                return out
+        return motion_step(prev, cur, kt)
 
     def step_lia(prev, cur, kt):
         motion = np.where(kt[:, None], cur - prev, 0.0)
