@@ -18,7 +18,7 @@ Split: the defaults of the methods (``k`` automatic, ALM ``tol``/``max_iter``/``
 filler's ``li`` completion) were chosen on :data:`TUNING` (fandisk, seed 1); the tables report
 :data:`VALIDATION` (seed 0, every mesh). For animations, the motion method's ``sweeps`` and its
 per-frame switch were chosen on horse-gallop (25 frames, seed 1) and, for the switch's screen,
-the pose set cat-poses (seed 0, the seed of these tables: its row is not held out); GMC's
+the pose set cat-poses (looked at with seeds 1 and 0: its rows here are not held out); GMC's
 threshold on horse-gallop. Used by ``spectrageo evaluate complete``.
 """
 
