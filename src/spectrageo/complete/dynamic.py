@@ -140,6 +140,39 @@ def _loo_ratio(C: sp.csr_matrix, prev: np.ndarray, cur: np.ndarray, known: np.nd
     return np.sqrt(e_motion / e_static) if e_static > 0 else np.inf
 
 
+def _with_static_switch(step, C: sp.csr_matrix, L: sp.csr_matrix):
+    """Wrap an online step ``step(prev, cur, known_t)`` with the per-frame switch to static
+    Laplacian interpolation (``static_switch`` of :func:`complete_animation`): the screen
+    :func:`_loo_ratio` keeps ``step`` below :data:`SWITCH_SCREEN`; otherwise every tenth anchor
+    is held out, the frame is completed by ``step`` and by interpolation, and the way with the
+    smaller error at the held-out anchors completes it from all anchors."""
+
+    def static(cur, kt):
+        idx = np.flatnonzero(kt)
+        try:
+            return laplacian_interpolation(L, idx, cur[idx])
+        except InvalidInputError:  # a component without anchor: only the motion step works
+            return None
+
+    def switched(prev, cur, kt):
+        if _loo_ratio(C, prev, cur, kt) < SWITCH_SCREEN:
+            return step(prev, cur, kt)
+        held = np.flatnonzero(kt)[::10]
+        kh = kt.copy()
+        kh[held] = False
+        xs = static(cur, kh) if held.size else None
+        if xs is None:
+            return step(prev, cur, kt)
+        xm = step(prev, cur, kh)
+        if np.sum((xs[held] - cur[held]) ** 2) < np.sum((xm[held] - cur[held]) ** 2):
+            out = static(cur, kt)
+            if out is not None:
+                return out
+        return step(prev, cur, kt)
+
+    return switched
+
+
 def _refine(
     W: sp.csr_matrix,
     wp: np.ndarray,
@@ -413,37 +446,10 @@ def _complete_frames(
                 out[t] = laplacian_interpolation(L, idx, A[t][idx])
         return out
 
-    def motion_step(prev, cur, kt):
+    def step_motion(prev, cur, kt):
         m, reached = _satellites(C, prev, cur - np.where(kt[:, None], prev, 0.0), kt, sweeps=sweeps)
         m[~reached] = 0.0
         return prev + m
-
-    def static_step(cur, kt):
-        idx = np.flatnonzero(kt)
-        try:
-            return laplacian_interpolation(L, idx, cur[idx])
-        except InvalidInputError:  # a component without anchor: only the motion step works
-            return None
-
-    def step_motion(prev, cur, kt):
-        if not switch or _loo_ratio(C, prev, cur, kt) < SWITCH_SCREEN:
-            return motion_step(prev, cur, kt)
-        # hold out every tenth anchor, complete the frame both ways, keep the better way
-        idx = np.flatnonzero(kt)
-        held = idx[::10]
-        kh = kt.copy()
-        kh[held] = False
-        xs = static_step(cur, kh)
-        if xs is None or held.size == 0:
-            return motion_step(prev, cur, kt)
-        xm = motion_step(prev, cur, kh)
-        e_s = float(np.sum((xs[held] - cur[held]) ** 2))
-        e_m = float(np.sum((xm[held] - cur[held]) ** 2))
-        if e_s < e_m:
-            out = static_step(cur, kt)
-            if out is not None:
-                return out
-        return motion_step(prev, cur, kt)
 
     def step_lia(prev, cur, kt):
         motion = np.where(kt[:, None], cur - prev, 0.0)
@@ -459,6 +465,8 @@ def _complete_frames(
         return prev + mv
 
     step = {"motion": step_motion, "lia": step_lia, "wrli": wrli}[method]
+    if switch and method in ("motion", "wrli"):
+        step = _with_static_switch(step, C, L)
     return _run_online(A, K, C, method, step)
 
 
@@ -538,6 +546,7 @@ def complete_sequence(
     gamma: float = 0.01,
     max_iter: int = 500,
     tol: float = 1e-4,
+    static_switch: bool = True,
     rng: Any = None,
 ) -> np.ndarray:
     r"""Recover missing points of a point-cloud sequence with point correspondence (Sec. 5.3.3).
@@ -571,6 +580,9 @@ def complete_sequence(
         Relative LASSO weight (see above).
     max_iter, tol : int, float
         ADMM iterations of ``"wrli"``; ``tol`` and ``max_iter`` also drive ``"mc"`` and ``"gmc"``.
+    static_switch : bool
+        ``"wrli"`` only, not in the thesis: the per-frame switch to static Laplacian
+        interpolation of :func:`complete_animation` (for sequences of unrelated shapes).
     rng : int, Generator or None
 
     Returns
@@ -611,4 +623,6 @@ def complete_sequence(
     Cc = C.tocoo()
     sigma = float(np.sqrt(np.sum((A0[Cc.row] - A0[Cc.col]) ** 2, axis=1)).mean()) or 1.0
     step = _wrli_step(C, sigma, gamma, max_iter) if method == "wrli" else None
-    return _complete_frames(A, K, C, method, tol=tol, max_iter=max_iter, rng=rng, wrli=step)
+    return _complete_frames(
+        A, K, C, method, tol=tol, max_iter=max_iter, rng=rng, wrli=step, switch=bool(static_switch)
+    )
