@@ -176,8 +176,8 @@ def test_motion_filtering_sweeps_refine_algorithm_12():
 
 def test_motion_static_switch_on_unrelated_poses_only():
     """On a smooth animation the per-frame switch never fires (same result as without it); on
-    frames that are unrelated shapes it picks static interpolation where the held-out anchors
-    favour it, and beats the motion step alone."""
+    frames that are unrelated shapes it blends in static interpolation as far as the held-out
+    anchors favour it, keeps the anchors exactly and beats the motion step alone."""
     A, F = _animation()
     K = np.random.default_rng(4).random(A.shape[:2]) < 0.3
     K[0] = True
@@ -196,7 +196,9 @@ def test_motion_static_switch_on_unrelated_poses_only():
     P[0] = V
     Pin = np.where(K[..., None], P, np.nan)
     u = ~K.ravel()
-    e_sw = _rms(complete_animation(Pin, F, K).reshape(-1, 3), P.reshape(-1, 3), u)
+    X = complete_animation(Pin, F, K)
+    assert np.array_equal(X[K], P[K]) and np.isfinite(X).all()  # the blend keeps the anchors
+    e_sw = _rms(X.reshape(-1, 3), P.reshape(-1, 3), u)
     e_m = _rms(
         complete_animation(Pin, F, K, static_switch=False).reshape(-1, 3), P.reshape(-1, 3), u
     )

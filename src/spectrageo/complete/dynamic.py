@@ -39,6 +39,10 @@ MOTION_SWEEPS = 20
 #: without testing static interpolation (tuning: horse-gallop 0.15-0.34 per frame; the pose set
 #: cat-poses 0.47-1.39)
 SWITCH_SCREEN = 0.45
+#: per-frame switch: anchors are held out in strides of ``SWITCH_STRIDE`` at these offsets (three
+#: disjoint folds of a tenth of the anchors each) to fit the blend weight of the two completions
+SWITCH_STRIDE = 10
+SWITCH_FOLDS = (0, 3, 6)
 
 
 # --------------------------------------------------------------------------------- validation
@@ -141,11 +145,21 @@ def _loo_ratio(C: sp.csr_matrix, prev: np.ndarray, cur: np.ndarray, known: np.nd
 
 
 def _with_static_switch(step, C: sp.csr_matrix, L: sp.csr_matrix):
-    """Wrap an online step ``step(prev, cur, known_t)`` with the per-frame switch to static
-    Laplacian interpolation (``static_switch`` of :func:`complete_animation`): the screen
-    :func:`_loo_ratio` keeps ``step`` below :data:`SWITCH_SCREEN`; otherwise every tenth anchor
-    is held out, the frame is completed by ``step`` and by interpolation, and the way with the
-    smaller error at the held-out anchors completes it from all anchors."""
+    r"""Wrap an online step ``step(prev, cur, known_t)`` with the per-frame blend with static
+    Laplacian interpolation (``static_switch`` of :func:`complete_animation`).
+
+    The screen :func:`_loo_ratio` keeps ``step`` alone below :data:`SWITCH_SCREEN`. Otherwise
+    the frame is completed both ways with held-out anchors: for each fold ``f`` of
+    :data:`SWITCH_FOLDS` (every :data:`SWITCH_STRIDE`-th anchor from offset ``f``) the held-out
+    anchors ``H_f`` are predicted by the step (``m``) and by interpolation (``s``) from the other
+    anchors, and the blend weight is the least-squares fit over all folds,
+
+        (S1)  a = clip( sum_f sum_{i in H_f} <v_i - s_i, m_i - s_i>
+                        / sum_f sum_{i in H_f} ||m_i - s_i||^2 , 0, 1 ),
+
+    after which the frame is ``a * step + (1 - a) * interpolation``, both from all anchors (anchors
+    are returned exactly by both, so by the blend). ``a = 1`` or ``0`` runs one way only.
+    """
 
     def static(cur, kt):
         idx = np.flatnonzero(kt)
@@ -157,18 +171,30 @@ def _with_static_switch(step, C: sp.csr_matrix, L: sp.csr_matrix):
     def switched(prev, cur, kt):
         if _loo_ratio(C, prev, cur, kt) < SWITCH_SCREEN:
             return step(prev, cur, kt)
-        held = np.flatnonzero(kt)[::10]
-        kh = kt.copy()
-        kh[held] = False
-        xs = static(cur, kh) if held.size else None
-        if xs is None:
+        anchors = np.flatnonzero(kt)
+        num = den = 0.0
+        for off in SWITCH_FOLDS:
+            held = anchors[off::SWITCH_STRIDE]
+            if not held.size:
+                continue
+            kh = kt.copy()
+            kh[held] = False
+            xs = static(cur, kh)
+            if xs is None:
+                return step(prev, cur, kt)
+            xm = step(prev, cur, kh)
+            d = xm[held] - xs[held]
+            num += float(np.sum((cur[held] - xs[held]) * d))
+            den += float(np.sum(d * d))
+        a = float(np.clip(num / den, 0.0, 1.0)) if den > 0 else 1.0
+        if a >= 1.0:
             return step(prev, cur, kt)
-        xm = step(prev, cur, kh)
-        if np.sum((xs[held] - cur[held]) ** 2) < np.sum((xm[held] - cur[held]) ** 2):
-            out = static(cur, kt)
-            if out is not None:
-                return out
-        return step(prev, cur, kt)
+        out = static(cur, kt)
+        if out is None:
+            return step(prev, cur, kt)
+        if a <= 0.0:
+            return out
+        return a * step(prev, cur, kt) + (1.0 - a) * out
 
     return switched
 
@@ -352,7 +378,7 @@ def complete_animation(
     1.01e-6, 50 0.99e-6 at 1.4x the time of 20; LIA 1.68e-6. On pose sets, whose frames are
     unrelated poses (the shared cat-poses and lion-poses), every motion step is less accurate
     than ``"li"`` frame by frame; ``static_switch`` (default on) lets the anchors of each frame
-    choose between the two (see the parameter).
+    choose a blend of the two (see the parameter).
 
     Baselines: ``"li"`` Laplacian interpolation of every frame on its own (binary ``L = D - C``,
     Eq. 4.24-4.27), ``"lia"`` Laplacian interpolation of the motion vectors from the previous
@@ -383,10 +409,11 @@ def complete_animation(
         ``"motion"`` only, not in the thesis; it serves pose sets, whose frames are unrelated
         poses. Per frame, a cheap leave-one-out screen at the anchors (:func:`_loo_ratio`)
         keeps the motion step when it is clearly better (ratio below :data:`SWITCH_SCREEN`);
-        otherwise every tenth anchor is held out, the frame is completed both by the motion step
-        and by static Laplacian interpolation, and the way with the smaller error at the held-out
-        anchors completes the frame (from all anchors). Online still. False: every frame by the
-        motion step.
+        otherwise three disjoint tenths of the anchors are held out in turn, the frame is
+        completed both by the motion step and by static Laplacian interpolation, and the blend
+        ``a * motion + (1 - a) * interpolation`` whose weight fits the held-out anchors best
+        (least squares, clipped to [0, 1]; Eq. S1 of ``_with_static_switch``) completes the
+        frame from all anchors. Online still. False: every frame by the motion step.
     rng : int, Generator or None
 
     Returns
@@ -581,7 +608,7 @@ def complete_sequence(
     max_iter, tol : int, float
         ADMM iterations of ``"wrli"``; ``tol`` and ``max_iter`` also drive ``"mc"`` and ``"gmc"``.
     static_switch : bool
-        ``"wrli"`` only, not in the thesis: the per-frame switch to static Laplacian
+        ``"wrli"`` only, not in the thesis: the per-frame screen and blend with static Laplacian
         interpolation of :func:`complete_animation` (for sequences of unrelated shapes).
     rng : int, Generator or None
 
