@@ -404,6 +404,10 @@ def batch(
         ) as client:
             n_workers = len(client.scheduler_info().get("workers", {}))
             budget = thread_budget(n_workers, scheduler)
+            # largest inputs first (longest-processing-time-first list scheduling: a big file
+            # started last would leave the other workers idle at the end); records keep input
+            # order
+            rank = {i: r for r, i in enumerate(sorted(todo, key=lambda i: _size(files[i])))}
             futs = [
                 client.submit(
                     run_file,
@@ -414,6 +418,7 @@ def batch(
                     budget,
                     key=f"spectrageo-{command}-{i}-{files[i].name}",
                     pure=False,
+                    priority=rank[i],
                 )
                 for i in todo
             ]
@@ -431,6 +436,16 @@ def batch(
     done = [r for r in records if r is not None]
     _write_summary(summary_path, command, options, done, n_workers, scheduler, t0)
     return done
+
+
+def _size(path: Path) -> int:
+    """Bytes of an input file (a frame folder: of its files), the cost proxy of the task order."""
+    try:
+        if path.is_dir():
+            return sum(p.stat().st_size for p in path.iterdir() if p.is_file())
+        return path.stat().st_size
+    except OSError:
+        return 0
 
 
 def _previous_records(path: Path) -> dict[str, dict]:
