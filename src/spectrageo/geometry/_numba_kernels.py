@@ -234,3 +234,41 @@ def patch_quadric_residual(P, idx, dirs, res, spread):  # pragma: no cover - jit
                 e -= A[q, r] * coef[r]
             rss += e * e
         res[i] = rss / (k - 6)
+
+
+@numba.njit(cache=True)
+def neighbour_median_residual(indptr, indices, r, s):  # pragma: no cover - jitted
+    """``s[i] = r[i] - median(r[j] for j in N(i))`` over the CSR adjacency (Eq. N6 of
+    :mod:`spectrageo.denoise._guard`); ``s[i] = 0`` for isolated vertices."""
+    n = r.shape[0]
+    for i in range(n):
+        a, b = indptr[i], indptr[i + 1]
+        if b == a:
+            s[i] = 0.0
+            continue
+        vals = np.empty(b - a)
+        for t in range(a, b):
+            vals[t - a] = r[indices[t]]
+        s[i] = r[i] - np.median(vals)
+
+
+@numba.njit(cache=True)
+def isolated_spikes(indptr, indices, s, thr, iso, flag):  # pragma: no cover - jitted
+    """``flag[i]``: ``|s[i]| > thr``, larger than every neighbour's ``|s[j]|``, and every
+    neighbour with the sign of ``s[i]`` below ``iso * |s[i]|`` (Eq. N7 of
+    :mod:`spectrageo.denoise._guard`). Returns the number flagged."""
+    n = s.shape[0]
+    cnt = 0
+    for i in range(n):
+        a = abs(s[i])
+        ok = a > thr and indptr[i + 1] > indptr[i]
+        if ok:
+            for t in range(indptr[i], indptr[i + 1]):
+                b = s[indices[t]]
+                if abs(b) >= a or (b * s[i] > 0 and abs(b) >= iso * a):
+                    ok = False
+                    break
+        flag[i] = ok
+        if ok:
+            cnt += 1
+    return cnt
