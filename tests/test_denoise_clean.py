@@ -389,3 +389,16 @@ def test_denoise_repairs_sparse_impulses_instead_of_smoothing(shared_data):
         denoise.denoise(Vg, F, method="tsgsp"),
         denoise.denoise(Vg, F, method="tsgsp", impulses=False),
     )
+
+
+def test_impulse_repair_hands_creased_parts_to_the_filter():
+    """A subdivided cube with impulses (six seeds): spikes on creases are not isolated (N7), the
+    repaired mesh is still noisy for the gate, and tsgsp finishes it; the mean theta is below
+    the filter's alone (1.35 vs 1.71 degrees when written)."""
+    V, F = cube(4)
+    new, old = [], []
+    for seed in range(6):
+        Vn = noise.generate(V, F, kind="impulsive", level=0.3, rng=seed).vertices
+        new.append(theta_deg(denoise.denoise(Vn, F), V, F))
+        old.append(theta_deg(denoise.denoise(Vn, F, impulses=False), V, F))
+    assert np.mean(new) < 0.9 * np.mean(old), (new, old)

@@ -10,7 +10,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
-from ._guard import MIN_NOISE, SPIKE_DROP, SPIKE_SHARE, TRUST, apply_trust, despike, noise_sigma
+from ._guard import MIN_NOISE, SPIKE_SHARE, TRUST, apply_trust, despike, noise_sigma
 
 
 @dataclass(frozen=True)
@@ -118,9 +118,9 @@ def denoise(
     impulses : bool
         Sparse impulses (:func:`spectrageo.denoise._guard.despike`, Eqs. N5-N8, not in the
         thesis): on a mesh the gate calls noisy, isolated spikes are pulled back first when at
-        least 2 % of the vertices are such spikes; if the noise level then falls below
-        ``min_noise`` or to less than half, the repaired mesh is returned without running the
-        method, otherwise the method runs on it. False: the method sees the input as before.
+        least 1 % of the vertices are such spikes; if the noise level then falls below
+        ``min_noise`` the repaired mesh is returned without running the method, otherwise the
+        method runs on it. False: the method sees the input as before.
     **options
         Keyword options of the method. ``trust`` (noise standard deviations of Eq. 5.15, default
         6; None disables it) bounds every vertex displacement of the feature-preserving
@@ -173,10 +173,8 @@ def denoise(
     if impulses and min_noise > 0 and sigma is not None:
         rep = despike(Vw, Fw)
         if rep.share >= SPIKE_SHARE:
-            if w is not None and w.n_merged:
-                level = noise_sigma(Vw, F=Fw)[1]  # the level before, on the same (welded) mesh
             sigma_r, level_r = noise_sigma(rep.vertices, F=Fw)
-            if level_r < min_noise or level_r < SPIKE_DROP * level:
+            if level_r < min_noise:
                 out = rep.vertices  # the impulses were the noise
                 return w.expand(out) if w is not None and w.n_merged else out
             Vw, sigma = rep.vertices, sigma_r
