@@ -36,6 +36,43 @@ def cube(subdiv: int = 4):
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
 
 
+def irregular_cube(n_edge: int = 5, n_inner: int = 40, seed: int = 0):
+    """Closed unit cube [0, 1]^3 whose faces are Delaunay triangulations of ``n_edge + 1`` evenly
+    spaced points per cube edge (shared by both faces) and ``n_inner`` random interior points:
+    creases with irregular vertex rings, as CAD meshers make them. Outward faces."""
+    from scipy.spatial import Delaunay
+
+    g = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, n_edge + 1)
+    ids: dict = {}
+    V: list = []
+    F: list = []
+    for axis in range(3):
+        u_ax, v_ax = [a for a in range(3) if a != axis]
+        for side in (0.0, 1.0):
+            uv = [(a, b) for a in t for b in t if a in (0.0, 1.0) or b in (0.0, 1.0)]
+            uv = np.array(uv + [tuple(x) for x in g.uniform(0.03, 0.97, (n_inner, 2))])
+            face_ids = []
+            for a, b in uv:
+                p = np.zeros(3)
+                p[axis], p[u_ax], p[v_ax] = side, a, b
+                key = tuple(np.round(p, 9))
+                if key not in ids:
+                    ids[key] = len(V)
+                    V.append(p)
+                face_ids.append(ids[key])
+            face_ids = np.array(face_ids)
+            out = np.zeros(3)
+            out[axis] = 1.0 if side == 1.0 else -1.0
+            for tri in Delaunay(uv).simplices:
+                f = face_ids[tri]
+                P = np.array([V[i] for i in f])
+                if np.cross(P[1] - P[0], P[2] - P[0]) @ out < 0:
+                    f = f[[0, 2, 1]]
+                F.append(f)
+    return np.array(V), np.array(F, dtype=np.int64)
+
+
 def grid(nx: int = 10, ny: int = 10):
     """Flat triangulated grid in the z = 0 plane, (V, F)."""
     x, y = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, ny), indexing="ij")

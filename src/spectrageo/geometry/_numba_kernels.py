@@ -272,3 +272,35 @@ def isolated_spikes(indptr, indices, s, thr, iso, flag):  # pragma: no cover - j
         if ok:
             cnt += 1
     return cnt
+
+
+@numba.njit(cache=True)
+def few_face_planes(vf_ptr, vf_idx, FN, sel, cos_tol, max_planes, out):  # pragma: no cover - jitted
+    """``out[t]``: the faces around vertex ``sel[t]`` (CSR ``vf_ptr``/``vf_idx`` into the unit
+    face normals ``FN``) have at most ``max_planes`` distinct normals (greedy clusters, cosine
+    above ``cos_tol``) while there are more faces than that: the vertex sits exactly on a crease
+    or corner of planar parts (Eq. N7 of :mod:`spectrageo.denoise._guard`)."""
+    reps = np.empty((max_planes + 1, 3))
+    for t in range(sel.shape[0]):
+        i = sel[t]
+        a, b = vf_ptr[i], vf_ptr[i + 1]
+        if b - a <= max_planes:
+            out[t] = False
+            continue
+        nr = 0
+        for q in range(a, b):
+            f = vf_idx[q]
+            found = False
+            for c in range(nr):
+                if FN[f, 0] * reps[c, 0] + FN[f, 1] * reps[c, 1] + FN[f, 2] * reps[c, 2] > cos_tol:
+                    found = True
+                    break
+            if not found:
+                if nr == max_planes:
+                    nr += 1
+                    break
+                reps[nr, 0] = FN[f, 0]
+                reps[nr, 1] = FN[f, 1]
+                reps[nr, 2] = FN[f, 2]
+                nr += 1
+        out[t] = nr <= max_planes
