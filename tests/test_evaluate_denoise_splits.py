@@ -315,7 +315,9 @@ def test_cli_split_options(capsys, shared_data, tmp_path):
 
 def test_time_ratios_where_both_denoised_leave_out_gate_only_cases():
     """A case where the gate returned the input for both methods (theta == input theta) times
-    the gate twice; the '... where both changed the mesh' ratios leave it out."""
+    the gate twice, and one where both returned the same repaired mesh (impulse repair) times
+    the guard twice; the '... where both filters ran' ratios leave both out and the second
+    counts as a tie."""
 
     def row(case, method, n, theta, t):
         return {
@@ -331,8 +333,11 @@ def test_time_ratios_where_both_denoised_leave_out_gate_only_cases():
         row("b", "gnf", 8000, 10.0, 0.2),
         row("c", "tsgsp", 9000, 6.0, 2.0),
         row("c", "gnf", 9000, 6.5, 5.0),
+        row("d", "tsgsp", 7000, 3.0, 0.25),  # impulse repair: the same mesh from both
+        row("d", "gnf", 7000, 3.0, 0.2),
     ]
     s = ev.generality_summary(rows)["validation"]
+    assert s["tsgsp_ties_gnf"] == 2 and s["tsgsp_beats_gnf_pct"] == pytest.approx(50.0)
     assert s["time_ratio_max_5k"] == pytest.approx(1.5)  # the gate-only case
     assert s["time_ratio_max_5k_denoised"] == pytest.approx(0.4)
     assert s["time_ratio_median_denoised"] == pytest.approx(0.325)
