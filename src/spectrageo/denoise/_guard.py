@@ -1,5 +1,6 @@
 """Do-no-harm guard shared by the static denoisers: a curvature-robust noise level that decides
-whether a mesh carries noise at all, and the trust region that bounds every displacement.
+whether a mesh carries noise at all, the repair of sparse impulses before a filter runs, and the
+trust region that bounds every displacement.
 
 Why. Users run denoisers on files that are already clean (CAD exports, finished scans). The
 filters of Sections 4.7 and 5.1.1 then blend normals across features and, on CAD tessellations
