@@ -343,8 +343,8 @@ def _spiked_sphere(frac=0.08, height=0.05, seed=0):
 def test_despike_pulls_isolated_spikes_back_and_leaves_the_rest():
     """Eqs. N5-N8: on a sphere with spikes on 8 % of the vertices, the spikes are pulled back
     (RMS position error down by > 2x; at spikes with no spiked neighbour by > 5x), vertices
-    away from every spike (almost all) do not move or move little, and a clean sphere, a clean subdivided cube (creases,
-    corners) and Gaussian noise flag (almost) nothing."""
+    away from every spike (almost all) do not move or move little, and a clean sphere, a clean
+    subdivided cube (creases, corners) and Gaussian noise flag (almost) nothing."""
     from spectrageo.denoise._guard import SPIKE_SHARE, despike
     from spectrageo.graph.adjacency import adjacency_matrix
 

@@ -172,7 +172,7 @@ from scipy.stats import chi2
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
-from ..geometry import face_normals, vertex_normals
+from ..geometry import face_normals, mean_edge_length, vertex_face_matrix, vertex_normals
 from ..geometry._numba_kernels import (
     few_face_planes,
     isolated_spikes,
@@ -461,15 +461,15 @@ class DespikeResult:
     n_moved: int
 
 
-def _spike_offsets(V: np.ndarray, F: np.ndarray, C: sp.csr_matrix) -> tuple:
-
+def _spike_offsets(V: np.ndarray, F: np.ndarray, C: sp.csr_matrix, deg: np.ndarray) -> tuple:
+    """Eqs. (N5)-(N6): ``(s, N)``, the ring-median-corrected umbrella offsets and the vertex
+    normals they are measured along (``C`` the CSR adjacency, ``deg`` its row counts)."""
     N = vertex_normals(V, F)
-    deg = np.diff(C.indptr).astype(np.float64)
     mean = (C @ V) / np.maximum(deg, 1.0)[:, None]
     r = np.einsum("ij,ij->i", V - mean, N)
     s = np.empty_like(r)
     neighbour_median_residual(C.indptr, C.indices, r, s)
-    return s, N, deg
+    return s, N
 
 
 def despike(V, F, *, threshold: float = SPIKE_THRESHOLD, isolation: float = SPIKE_ISOLATION,
@@ -505,18 +505,17 @@ def despike(V, F, *, threshold: float = SPIKE_THRESHOLD, isolation: float = SPIK
     n = X.shape[0]
     if n == 0 or F.shape[0] == 0:
         return DespikeResult(X, 0.0, 0)
-    C = adjacency_matrix(F, n).tocsr()
+    C = adjacency_matrix(F, n)
     C.sort_indices()
-    m = F.shape[0]
-    VF = sp.csr_matrix((np.ones(3 * m), (F.ravel(), np.repeat(np.arange(m), 3))), shape=(n, m))
+    deg = np.diff(C.indptr).astype(np.float64)
+    VF = vertex_face_matrix(F, n)
     flag = np.zeros(n, dtype=np.bool_)
     plane_cos = float(np.cos(np.radians(SPIKE_PLANE_DEG)))
-    Cu = sp.triu(C).tocoo()
-    edge = float(np.linalg.norm(X[Cu.row] - X[Cu.col], axis=1).mean()) if Cu.nnz else 0.0
+    edge = mean_edge_length(X, F)
     share = 0.0
     moved = 0
     for p in range(int(passes)):
-        s, N, deg = _spike_offsets(X, F, C)
+        s, N = _spike_offsets(X, F, C, deg)
         sig = 1.4826 * float(np.median(np.abs(s)))
         thr = max(threshold * sig, SPIKE_FLOOR * edge)
         if not thr > 0:

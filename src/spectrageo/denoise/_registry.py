@@ -120,7 +120,8 @@ def denoise(
         thesis): on a mesh the gate calls noisy, isolated spikes are pulled back first when at
         least 1 % of the vertices are such spikes; if the noise level then falls below
         ``min_noise`` the repaired mesh is returned without running the method, otherwise the
-        method runs on it. False: the method sees the input as before.
+        method runs on it (and ``trust`` bounds the displacements from the repaired mesh, with
+        the noise deviation measured on it). False: the method sees the input as before.
     **options
         Keyword options of the method. ``trust`` (noise standard deviations of Eq. 5.15, default
         6; None disables it) bounds every vertex displacement of the feature-preserving
