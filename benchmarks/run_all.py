@@ -67,6 +67,7 @@ SECTIONS = [
     ("compress_animation", _evaluate("compress-animation", "compress_animation")),
     ("complete", _evaluate("complete", "complete")),
     ("register", _evaluate("register", "register")),
+    ("narrow_phase", _script("narrow_phase")),
     ("identify", _evaluate("identify", "identify")),
     ("identify_speed", _script("identify_speed")),
     ("learned_denoise", _script("learned_denoise")),

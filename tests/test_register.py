@@ -77,6 +77,52 @@ def test_narrow_phase_recovers_small_rigid_motion(model, seed):
     assert res.inlier_rmse < 1e-3 * diag
 
 
+def test_narrow_phase_coarse_iterations_reach_the_full_set_answer(bunny, bunny_gt, monkeypatch):
+    """The strided coarse iterations only speed the start up: the pose equals the one found
+    with every iteration on the full source (coarse stage disabled) to a small fraction of the
+    noise, and the coarse stage really ran (fewer full-size queries)."""
+    import spectrageo.register._narrow as nw
+
+    rng = np.random.default_rng(5)
+    init = _small_motion(rng, 10.0, 0.004) @ bunny_gt
+    sizes = []
+    query = nw._query
+
+    def counting(index, P, bound, eps=0.0):
+        sizes.append(P.shape[0])
+        return query(index, P, bound, eps)
+
+    monkeypatch.setattr(nw, "_query", counting)
+    fast = narrow_phase(bunny["bun045"], bunny["bun000"], init)
+    n_fast = list(sizes)
+    sizes.clear()
+    monkeypatch.setattr(nw, "COARSE_MIN", 10**9)
+    full = narrow_phase(bunny["bun045"], bunny["bun000"], init)
+    assert min(n_fast) < max(n_fast) == max(sizes) and min(sizes) == max(sizes)
+    assert fast.converged and full.converged
+    assert rm.rotation_error_deg(fast.transformation, full.transformation) < 0.05
+    assert rm.translation_error(fast.transformation, full.transformation) < 2e-4
+    assert rm.rotation_error_deg(fast.transformation, bunny_gt) < 0.5
+
+
+def test_target_index_normals_on_demand_equal_the_whole_computation(model):
+    """Normals computed lazily for the paired target points, in any order and with repeats,
+    are bit for bit those of one computation over the whole target."""
+    from spectrageo.register._common import knn_normals
+    from spectrageo.register._narrow import TargetIndex
+
+    V = model.vertices
+    index = TargetIndex(V)
+    full = knn_normals(V, 10, index.tree)[0]
+    rng = np.random.default_rng(0)
+    for size in (1, 50, 3000, 3000):
+        j = rng.integers(0, V.shape[0], size=size)
+        np.testing.assert_array_equal(index.normals_at(j), full[j])
+    bare = TargetIndex(V, need_normals=False)
+    with pytest.raises(RuntimeError, match="without normals"):
+        bare.normals_at(np.array([0]))
+
+
 def test_narrow_phase_point_to_point_and_init(model):
     rng = np.random.default_rng(7)
     V = model.vertices

@@ -27,7 +27,8 @@ plane ICP from the identity, correspondence distance 5 % of the diagonal).
 
 Errors: rotation error in degrees (Eq. 4.34) and translation error divided by the target's
 bounding-box diagonal (Eq. 4.35); success = rotation error < 5 degrees and translation error <
-5 % of the diagonal; time in seconds (wall clock, one thread for our KD-tree queries).
+5 % of the diagonal; time in seconds (wall clock; our KD-tree queries use all cores, as
+Open3D's do).
 
 Splits (fixed in code): the defaults of :mod:`spectrageo.register` (voxel = 1/45 diagonal,
 kernel radius 3 voxels, 600 samples x 15 matches, 15 verified peaks, Tukey annealing down to 2

@@ -16,8 +16,9 @@ from scipy.spatial import cKDTree
 from .._errors import InvalidInputError
 from .._validation import as_points
 
-#: Threads used by the kNN queries (the machines this runs on are often shared).
-WORKERS = 1
+#: Threads used by the kNN queries (-1: all cores, as Open3D's searches do; the answers do not
+#: depend on the thread count).
+WORKERS = -1
 
 
 def points_of(x: Any, name: str) -> np.ndarray:
@@ -170,10 +171,18 @@ def knn_normals(
     """Unoriented unit normals and neighbour indices from the covariance of each point's ``k``
     nearest neighbours (self included; Eq. 6.31 with the patch mean as centre, which is the
     least-squares plane). Returns ``(normals (n, 3), idx (n, k))``."""
-    n = P.shape[0]
-    k = int(min(k, n))
     tree = tree if tree is not None else cKDTree(P)
-    _, idx = tree.query(P, k=k, workers=WORKERS)
+    return knn_normals_at(P, P, k, tree)
+
+
+def knn_normals_at(
+    P: np.ndarray, X: np.ndarray, k: int, tree: cKDTree
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`knn_normals` of the cloud ``P`` (``tree`` its KD-tree) evaluated at the points
+    ``X`` (rows of ``P``: each row's value does not depend on which other rows are asked)."""
+    n = X.shape[0]
+    k = int(min(k, P.shape[0]))
+    _, idx = tree.query(X, k=k, workers=WORKERS)
     idx = np.asarray(idx).reshape(n, k)
     Q = P[idx]
     Q = Q - Q.mean(axis=1, keepdims=True)

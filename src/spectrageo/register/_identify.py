@@ -403,7 +403,9 @@ def _refine(model: _Cloud, seg: _Cloud, T0: np.ndarray, o: dict) -> np.ndarray:
     src = seg.P[near] if near.sum() >= 10 else seg.P
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = narrow_phase(src, model.P, init=np.linalg.inv(T0), max_iter=30, tol=1e-4)
+        res = narrow_phase(
+            src, model.P, init=np.linalg.inv(T0), max_iter=30, tol=1e-4, coarse=False
+        )
     return np.linalg.inv(res.transformation)
 
 

@@ -18,7 +18,7 @@ from ._common import (
     apply_transform,
     bbox_diagonal,
     downsample_to,
-    knn_normals,
+    knn_normals_at,
     make_transform,
     orthonormalize,
     rotvec_to_matrix,
@@ -29,16 +29,44 @@ from ._common import (
 TUKEY_C = 4.685
 #: per-iteration annealing factor of the Tukey scale (coarse-to-fine down to ``gamma_min``)
 SHRINK = 0.85
+#: coarse iterations use every COARSE_STRIDE-th source point (at least COARSE_MIN of them) while
+#: the Tukey scale is above COARSE_UNTIL times its floor: the strided subset of a surface sample
+#: has about sqrt(stride) times its spacing, and the floor is two spacings
+COARSE_STRIDE = 4
+COARSE_MIN = 2000
+COARSE_UNTIL = COARSE_STRIDE**0.5
+#: approximate nearest neighbours in the coarse iterations (KD-tree ``eps``)
+COARSE_EPS = 1.0
 
 
 class TargetIndex:
-    """Reusable state of a target cloud: its KD-tree, unoriented normals and point spacing."""
+    """Reusable state of a target cloud: its KD-tree, point spacing and unoriented normals.
+
+    The normals (:func:`knn_normals` of the ``normal_k`` nearest neighbours) are computed on
+    first use and only for the target points that some source point is paired with
+    (:meth:`normals_at`): each is a function of its own neighbourhood in the whole target, so
+    the values equal a computation over every point."""
 
     def __init__(self, T: np.ndarray, *, normal_k: int = 10, need_normals: bool = True):
         self.points = T
         self.tree = cKDTree(T)
         self.spacing = spacing(T, self.tree)
-        self.normals = knn_normals(T, normal_k, self.tree)[0] if need_normals else None
+        self.normal_k = int(normal_k)
+        self.has_normals = bool(need_normals)
+        self._normals = np.zeros((T.shape[0], 3)) if need_normals else None
+        self._known = np.zeros(T.shape[0], dtype=bool) if need_normals else None
+
+    def normals_at(self, j: np.ndarray) -> np.ndarray:
+        """Unit normals (unoriented) of the target points ``j``."""
+        if self._normals is None:
+            raise RuntimeError("this TargetIndex was built without normals")
+        new = np.unique(j[~self._known[j]])
+        if new.size:
+            self._normals[new] = knn_normals_at(
+                self.points, self.points[new], self.normal_k, self.tree
+            )[0]
+            self._known[new] = True
+        return self._normals[j]
 
 
 def tukey_weights(r: np.ndarray, gamma: float) -> np.ndarray:
@@ -81,10 +109,13 @@ def _plane_step(P: np.ndarray, Q: np.ndarray, N: np.ndarray, w: np.ndarray, scal
     return make_transform(R, c - R @ c + x[3:] * scale)
 
 
-def _query(index: TargetIndex, P: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
+def _query(
+    index: TargetIndex, P: np.ndarray, bound: float, eps: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Nearest target point of every row of ``P`` within ``bound`` (``d = inf`` and index 0
-    beyond: such pairs get zero weight)."""
-    d, j = index.tree.query(P, k=1, distance_upper_bound=bound, workers=WORKERS)
+    beyond: such pairs get zero weight); ``eps > 0``: a point within ``(1 + eps)`` times the
+    nearest distance (the KD-tree's approximate search)."""
+    d, j = index.tree.query(P, k=1, eps=eps, distance_upper_bound=bound, workers=WORKERS)
     j = np.where(np.isfinite(d), j, 0)
     return d, j
 
@@ -108,11 +139,20 @@ def icp(
     gamma0: float | None,
     gamma_min: float,
     inlier_distance: float,
+    coarse: bool = False,
 ) -> RegistrationResult:
-    """Tukey-weighted ICP on prepared data (see :func:`narrow_phase`)."""
+    """Tukey-weighted ICP on prepared data (see :func:`narrow_phase`). ``coarse``: start on a
+    strided subset of the source (the narrow phase's coarse-to-fine schedule; off for the broad
+    phase's fixed-budget peak verification, whose scores it would change)."""
     t0 = time.perf_counter()
     scale = max(bbox_diagonal(S), 1e-300)
     T = T0.copy()
+    S_full = S
+    # coarse to fine: while the Tukey window is wide the pose is far from its final value, and a
+    # strided quarter of the source (at least COARSE_MIN points) determines the step as well
+    coarse = coarse and S.shape[0] >= 2 * COARSE_MIN
+    if coarse:
+        S = S_full[:: max(2, min(COARSE_STRIDE, S.shape[0] // COARSE_MIN))]
     P = apply_transform(T, S)
     if gamma0 is None:
         # robust scale of the initial distances, on a strided subset (a nearest-neighbour query
@@ -122,7 +162,7 @@ def icp(
     else:
         gamma = float(gamma0)
     gamma = max(gamma, gamma_min)
-    d, j = _query(index, P, gamma)
+    d, j = _query(index, P, gamma, COARSE_EPS if coarse else 0.0)
     converged = False
     it = 0
     while it < max_iter:
@@ -132,18 +172,20 @@ def icp(
             gamma *= 2.0
             if gamma > scale:
                 break
-            d, j = _query(index, P, gamma)
+            d, j = _query(index, P, gamma, COARSE_EPS if coarse else 0.0)
             continue
         Q = index.points[j]
         inc = None
         if method == "point_to_plane":
-            inc = _plane_step(P, Q, index.normals[j], w, scale)
+            inc = _plane_step(P, Q, index.normals_at(j), w, scale)
         if inc is None:
             inc = _kabsch(P, Q, w)
         T = inc @ T
         T[:3, :3] = orthonormalize(T[:3, :3])
+        if coarse and gamma <= COARSE_UNTIL * gamma_min:
+            S, coarse = S_full, False
         P = apply_transform(T, S)
-        d, j = _query(index, P, gamma)
+        d, j = _query(index, P, gamma, COARSE_EPS if coarse else 0.0)
         # robust scale of the current inliers; gamma only shrinks (annealing towards the noise)
         inl = d[d < gamma]
         new_gamma = gamma
@@ -154,10 +196,10 @@ def icp(
         step = max(ang * scale, float(np.linalg.norm(inc[:3, 3])))
         gamma_stable = new_gamma > 0.99 * gamma
         gamma = new_gamma
-        if step < tol * scale and gamma_stable:
+        if step < tol * scale and gamma_stable and not coarse:
             converged = True
             break
-    fit, rmse = _score(S, index, T, inlier_distance)
+    fit, rmse = _score(S_full, index, T, inlier_distance)
     return RegistrationResult(
         transformation=T,
         fitness=fit,
@@ -165,7 +207,7 @@ def icp(
         n_iter=it,
         converged=converged,
         inlier_distance=inlier_distance,
-        info={"gamma": gamma, "time_s": time.perf_counter() - t0, "n_source": S.shape[0]},
+        info={"gamma": gamma, "time_s": time.perf_counter() - t0, "n_source": S_full.shape[0]},
     )
 
 
@@ -188,6 +230,7 @@ def run_narrow(
     max_points: int = 20000,
     index: TargetIndex | None = None,
     warn: bool = True,
+    coarse: bool = True,
 ) -> RegistrationResult:
     check_icp_options(max_iter, tol, method)
     check_positive(max_points, "max_points", integer=True)
@@ -213,6 +256,7 @@ def run_narrow(
         gamma0=gamma,
         gamma_min=2.0 * h,
         inlier_distance=dist,
+        coarse=bool(coarse),
     )
     if warn and not res.converged:
         warnings.warn(
