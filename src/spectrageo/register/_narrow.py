@@ -223,7 +223,7 @@ def run_narrow(
     T0: np.ndarray,
     *,
     max_iter: int = 60,
-    tol: float = 1e-6,
+    tol: float = 1e-5,
     method: str = "point_to_plane",
     gamma: float | None = None,
     inlier_distance: float | None = None,
