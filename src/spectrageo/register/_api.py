@@ -81,8 +81,8 @@ def narrow_phase(
       until convergence, which is only declared on the full set. On the 26 shared scan pairs
       started 5-15 degrees off (``benchmarks/narrow_phase.py``) this, multi-threaded queries
       and target normals computed only where needed cut the median time of a call from 0.43
-      to 0.20 s (0.15 s with the tolerance below), with 71 instead of 72 of 78 starts within
-      0.5 degrees.
+      to 0.20 s (0.14-0.15 s with the tolerance above), with 71 instead of 72 of 78 starts
+      within 0.5 degrees.
       Identification's short fixed-budget refinements pass ``coarse=False``.
 
     Parameters

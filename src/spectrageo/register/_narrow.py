@@ -52,7 +52,6 @@ class TargetIndex:
         self.tree = cKDTree(T)
         self.spacing = spacing(T, self.tree)
         self.normal_k = int(normal_k)
-        self.has_normals = bool(need_normals)
         self._normals = np.zeros((T.shape[0], 3)) if need_normals else None
         self._known = np.zeros(T.shape[0], dtype=bool) if need_normals else None
 
