@@ -172,7 +172,7 @@ from scipy.stats import chi2
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
-from ..geometry import face_normals, mean_edge_length, vertex_face_matrix, vertex_normals
+from ..geometry import face_normals, mean_edge_length, vertex_face_matrix
 from ..geometry._numba_kernels import (
     few_face_planes,
     isolated_spikes,
@@ -180,6 +180,7 @@ from ..geometry._numba_kernels import (
     patch_min_variance,
     patch_quadric_residual,
 )
+from ..geometry.primitives import _normalize_rows
 from ..graph.adjacency import adjacency_matrix, knn
 
 #: default gate (relative noise level below which a mesh counts as clean); see the module notes
@@ -461,10 +462,14 @@ class DespikeResult:
     n_moved: int
 
 
-def _spike_offsets(V: np.ndarray, F: np.ndarray, C: sp.csr_matrix, deg: np.ndarray) -> tuple:
+def _spike_offsets(
+    V: np.ndarray, FN: np.ndarray, VF: sp.csr_matrix, C: sp.csr_matrix, deg: np.ndarray
+) -> tuple:
     """Eqs. (N5)-(N6): ``(s, N)``, the ring-median-corrected umbrella offsets and the vertex
-    normals they are measured along (``C`` the CSR adjacency, ``deg`` its row counts)."""
-    N = vertex_normals(V, F)
+    normals they are measured along (``FN`` the unit face normals, ``VF`` the vertex-face
+    matrix: ``N`` is :func:`~spectrageo.geometry.vertex_normals`' mean of the incident face
+    normals; ``C`` the CSR adjacency, ``deg`` its row counts)."""
+    N = _normalize_rows(np.asarray(VF @ FN))
     mean = (C @ V) / np.maximum(deg, 1.0)[:, None]
     r = np.einsum("ij,ij->i", V - mean, N)
     s = np.empty_like(r)
@@ -515,7 +520,8 @@ def despike(V, F, *, threshold: float = SPIKE_THRESHOLD, isolation: float = SPIK
     share = 0.0
     moved = 0
     for p in range(int(passes)):
-        s, N = _spike_offsets(X, F, C, deg)
+        FN = face_normals(X, F)
+        s, N = _spike_offsets(X, FN, VF, C, deg)
         sig = 1.4826 * float(np.median(np.abs(s)))
         thr = max(threshold * sig, SPIKE_FLOOR * edge)
         if not thr > 0:
@@ -525,7 +531,7 @@ def despike(V, F, *, threshold: float = SPIKE_THRESHOLD, isolation: float = SPIK
         sel = np.flatnonzero(flag)
         # vertices exactly on a crease or corner of planar parts are features, not spikes
         ex = np.zeros(sel.size, dtype=np.bool_)
-        few_face_planes(VF.indptr, VF.indices, face_normals(X, F), sel, plane_cos, 3, ex)
+        few_face_planes(VF.indptr, VF.indices, FN, sel, plane_cos, 3, ex)
         sel = sel[~ex]
         if p == 0:
             share = sel.size / n
