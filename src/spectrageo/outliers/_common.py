@@ -78,8 +78,10 @@ def morton_codes(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     n = P.shape[0]
     if n == 0:
         return np.zeros(0, dtype=np.uint64), np.zeros(3), 0.0
-    lo = P.min(axis=0)
-    ext = float(np.max(P.max(axis=0) - lo))
+    # per column: a reduction over axis 0 of an (n, 3) array is strided and ~20x slower
+    lo = np.array([P[:, j].min() for j in range(3)])
+    hi = np.array([P[:, j].max() for j in range(3)])
+    ext = float(np.max(hi - lo))
     scale = (2**21 - 1) / ext if ext > 0 else 0.0
     codes = np.empty(n, dtype=np.uint64)
     step = 1 << 20
@@ -98,7 +100,22 @@ def morton_order(P: np.ndarray) -> np.ndarray:
     """
     if P.shape[0] < 2:
         return np.arange(P.shape[0])
-    return np.argsort(morton_codes(P)[0], kind="stable")
+    return sort_codes(morton_codes(P)[0])
+
+
+def sort_codes(codes: np.ndarray) -> np.ndarray:
+    """``np.argsort(codes, kind="stable")``, faster: numpy's quicksort of integers (vectorised,
+    several times faster than its stable sort here), then the stable order restored inside runs
+    of equal codes (points within one quantum of each other, rare), so the permutation is the
+    same on every machine whatever sorting kernel numpy dispatches to."""
+    order = np.argsort(codes)
+    sc = codes[order]
+    tie = sc[1:] == sc[:-1]
+    if tie.any():
+        # equal codes are adjacent: within each run, sort the original indices
+        run = np.concatenate(([0], np.cumsum(~tie)))
+        order = order[np.lexsort((order, run))]
+    return order
 
 
 @dataclass(frozen=True)
@@ -195,7 +212,7 @@ class SortedCloud:
     @classmethod
     def of(cls, P: np.ndarray) -> SortedCloud:
         codes, lo, scale = morton_codes(P)
-        order = np.argsort(codes, kind="stable")
+        order = sort_codes(codes)
         return cls(np.ascontiguousarray(P[order]), order, codes[order], lo, scale)
 
 

@@ -82,6 +82,7 @@ def patch_ialm_torch(
     want_e0: bool,
     vec: np.ndarray,
     device: Any,
+    record: list | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None, int, bool, float]:
     """:func:`.rpca._patch_ialm` on the torch device ``device`` (same arguments and returns).
 
@@ -117,7 +118,7 @@ def patch_ialm_torch(
         for a, b in bounds:
             Md = M[a:b].to(f64)
             G_t += Md.T @ Md
-        G = G_t.cpu().numpy()
+        G = G_t.cpu().numpy().copy()  # not a view of G_t (reused below; recorded steps)
         fro = float(np.sqrt(max(np.trace(G), 0.0)))
         if fro == 0.0:
             if want_v:
@@ -137,16 +138,20 @@ def patch_ialm_torch(
         converged, residual, it = False, np.inf, 0
         inv_width = 1.0 / RANK_BIN
         for it in range(1, max_iter + 1):  # noqa: B007 - `it` is returned
-            W, A, B = (
-                torch.from_numpy(x.astype(np_dt)).to(dev) for x in _svt_operator(G, 1.0 / mu)
-            )
+            ops = [x.astype(np_dt) for x in _svt_operator(G, 1.0 / mu)]
+            W, A, B = (torch.from_numpy(x).to(dev) for x in ops)
             low = 2 * A.shape[1] < K
             mu_next = min(mu * rho, mu_max)
             # the scalars rounded to the state's dtype, as in the numba kernel
-            tp = float(np_dt(lam / mu_prev))
-            fp = float(np_dt(mu_prev / mu))
-            t = float(np_dt(lam / mu))
-            f1 = float(np_dt(1.0 + mu / mu_next))
+            scal = (
+                np_dt(lam / mu_prev),
+                np_dt(mu_prev / mu),
+                np_dt(lam / mu),
+                np_dt(1.0 + mu / mu_next),
+            )
+            if record is not None:  # the same step as :func:`.rpca._patch_ialm` records
+                record.append((G, mu, (*ops, *scal)))
+            tp, fp, t, f1 = (float(x) for x in scal)
             G_t.zero_()
             res2 = torch.zeros((), dtype=f64, device=dev)
             for a, b in bounds:
