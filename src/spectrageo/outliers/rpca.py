@@ -83,6 +83,8 @@ RANK_TOL = 3e-3
 BLOCK_SIZE = 1_000_000
 #: Fewest points per thread of the fused kernels (smaller blocks run on the calling thread).
 _MIN_PER_THREAD = 10_000
+#: Most point ranges per block of the fused kernels (see :class:`_Ranges`).
+_MAX_PARTS = 16
 
 
 @dataclass(frozen=True)
@@ -327,7 +329,9 @@ def rpca_scores(
         Policy when a block reaches ``max_iter`` first.
     workers : int
         Threads of the neighbour search and the other numba kernels and of the solver (-1: all
-        cores; blocks of fewer than ``2 * 10000`` points run the solver on one thread).
+        cores; blocks of fewer than ``2 * 10000`` points run the solver on one thread). The
+        scores are bit for bit the same for every value (the solver's point ranges and the
+        order of their partial sums follow the block size, not the threads).
     refine : bool
         Second pass over rebuilt patches and local baseline (steps 5-6).
     tangent_weight : float
@@ -725,19 +729,26 @@ def _svt_operator(G: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray, np
 
 
 class _Ranges:
-    """Disjoint point ranges of one block, run on a thread pool (the kernels release the GIL)."""
+    """Disjoint point ranges of one block, run on a thread pool (the kernels release the GIL).
+
+    The ranges depend on the block size only (a power of two, at most :data:`_MAX_PARTS`, of at
+    least ``_MIN_PER_THREAD`` points each), never on the thread count: their partial Gram
+    matrices are summed in a fixed order, so the scores are bit for bit the same whatever
+    ``workers`` is (a tiled run on 1 or 2 Dask workers, a CLI run with ``--workers 1``).
+    """
 
     def __init__(self, m: int, K: int, pool: ThreadPoolExecutor | None, n_threads: int):
-        n_parts = 1 if pool is None else max(1, min(n_threads, m // _MIN_PER_THREAD))
+        fit = max(1, m // _MIN_PER_THREAD)
+        n_parts = min(_MAX_PARTS, 1 << (fit.bit_length() - 1))
         self.bounds = np.linspace(0, m, n_parts + 1).astype(np.int64)
         self.G = np.empty((n_parts, K, K))
-        self.pool = pool if n_parts > 1 else None
+        self.pool = pool if n_parts > 1 and n_threads > 1 else None
 
     def run(self, fn: Any, *args: Any) -> tuple[np.ndarray, float]:
         """``fn(*args, G_part, lo, hi)`` over the ranges; the summed ``G`` and return values."""
         b = self.bounds
         if self.pool is None:
-            out = [fn(*args, self.G[0], 0, int(b[1]))]
+            out = [fn(*args, self.G[p], int(b[p]), int(b[p + 1])) for p in range(len(b) - 1)]
         else:
             futs = [
                 self.pool.submit(fn, *args, self.G[p], int(b[p]), int(b[p + 1]))
