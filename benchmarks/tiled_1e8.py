@@ -35,6 +35,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -156,7 +157,9 @@ def run_cli(args: list[str], *, task_log: Path | None = None) -> dict:
         cmd = [sys.executable, str(Path(__file__).resolve()), "_timed", str(task_log), *args]
     else:
         cmd = [sys.executable, "-m", "spectrageo.cli.main", *args]
-    timef = Path("/tmp/t1e8/.time.txt")
+    fd, name = tempfile.mkstemp(suffix=".time.txt")  # /usr/bin/time's report (any --dir)
+    os.close(fd)
+    timef = Path(name)
     full = ["/usr/bin/time", "-o", str(timef), "-f", "%e s %M KB", *cmd]
     t0 = time.perf_counter()
     p = subprocess.Popen(full, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -166,9 +169,11 @@ def run_cli(args: list[str], *, task_log: Path | None = None) -> dict:
     wall = time.perf_counter() - t0
     sampler.stop.set()
     sampler.join()
+    report = timef.read_text()
+    timef.unlink()
     if p.returncode != 0:
         raise SystemExit(f"failed: {' '.join(args)}\n{out}\n{err}")
-    e, _, m, _ = timef.read_text().split()[-4:]
+    e, _, m, _ = report.split()[-4:]
     return {
         "cmd": "spectrageo " + " ".join(args),
         "time_s": float(e),

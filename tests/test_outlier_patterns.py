@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 from spectrageo._errors import InvalidInputError
 from spectrageo.noise import OUTLIER_PATTERNS, add_outliers, corrupt_outliers
 from spectrageo.noise._core import mean_spacing
-from spectrageo.outliers import remove_outliers
+from spectrageo.outliers import remove_outliers, sor_scores
 
 
 def _plane(n_side=50, seed=0):
@@ -169,6 +169,14 @@ def test_evaluate_splits_on_real_scan(shared_data, monkeypatch):
         assert ("clean", m) in by and 0.0 <= by["clean", m]["flagged"] <= 0.2
         assert by["mixed", f"{m}-oracle"]["f1"] >= by["mixed", m]["f1"]
     assert by["mixed", "rpca-oracle"]["f1"] >= 0.8
+    # the PCL-style peer is statistical removal with 50 neighbours and std_ratio 1, exactly
+    from spectrageo import io
+
+    P = io.read(shared_data / "scans/registration/open3d/cloud_bin_1.pcd", kind="points").points
+    Q, lab = corrupt_outliers(P, pattern="mixed", fraction=0.1, rng=0)
+    removed = sor_scores(Q, 50) > 1.0
+    assert by["mixed", "pcl-sor"]["f1"] == pytest.approx(_f1(removed, lab), abs=5e-5)  # 4 digits
+    assert ("clean", "pcl-sor") in by
     md = ev.format_markdown(rows)
     assert "validation split" in md and "| mixed | 10% | fragment cloud_bin_1 |" in md
     with pytest.raises(InvalidInputError, match="split"):

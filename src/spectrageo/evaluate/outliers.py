@@ -271,8 +271,10 @@ def evaluate_splits(
     automatic threshold), ``rpca-oracle``, ``sor`` (k = 10, std_ratio 1), ``sor-oracle`` (k = 10,
     the std_ratio of best F1 chosen with the labels), ``radius`` (k = 10, default radius),
     ``radius-oracle`` (best radius chosen with the labels) and, when ``open3d`` imports,
-    ``open3d-sor`` / ``open3d-radius`` at the same default parameters. On the unmodified scan a
-    ``clean`` row per method gives the fraction of points flagged (``flagged``).
+    ``open3d-sor`` / ``open3d-radius`` at the same default parameters, and ``pcl-sor``
+    (statistical removal at PCL's tutorial setting, 50 neighbours, std_ratio 1). On the
+    unmodified scan a ``clean`` row per method gives the fraction of points flagged
+    (``flagged``).
     """
     from .. import io, noise
     from ..outliers import remove_outliers
@@ -316,6 +318,11 @@ def evaluate_splits(
                         rows.append(
                             _row(base, f"{m}-oracle", f"k=10, {tau:.3g}", s >= tau, lab, dt)
                         )
+                # PCL's tutorial setting: setMeanK(50), setStddevMulThresh(1.0)
+                t0 = time.perf_counter()
+                rp = remove_outliers(Q, method="sor", k=PCL_MEAN_K, return_points=False)
+                dt = time.perf_counter() - t0
+                rows.append(_row(base, "pcl-sor", "meanK=50, std=1", ~rp.keep, lab, dt))
                 if o3d_ok:
                     for m, fn in (("open3d-sor", _open3d_sor), ("open3d-radius", _open3d_radius)):
                         t0 = time.perf_counter()
@@ -730,7 +737,11 @@ _SPLIT_METHODS = (
     "radius-oracle",
     "open3d-sor",
     "open3d-radius",
+    "pcl-sor",
 )
+#: ``pcl-sor``: the statistical filter at the setting of PCL's outlier-removal tutorial
+#: (``setMeanK(50)``, ``setStddevMulThresh(1.0)``; the algorithm of our ``sor``, exactly).
+PCL_MEAN_K = 50
 
 
 def _split_summary(rows: list[dict], methods: list[str]) -> str:
@@ -747,7 +758,7 @@ def _split_summary(rows: list[dict], methods: list[str]) -> str:
             cells.append(f"{np.mean(f):.3f} / {min(f):.3f}" if f else "-")
         lines.append(f"| {pat} | {int(round(100 * frac))}% | " + " | ".join(cells) + " |")
     speed = []
-    for m in ("rpca", "sor", "radius", "open3d-sor", "open3d-radius"):
+    for m in ("rpca", "sor", "radius", "open3d-sor", "open3d-radius", "pcl-sor"):
         rs = [r for r in rows if r["method"] == m and r["time_s"] > 0]
         if rs:
             pps = sum(r["n_points"] for r in rs) / sum(r["time_s"] for r in rs)
@@ -846,6 +857,7 @@ def _write(rows: list[dict], out: Any) -> tuple[Path, Path]:
         "the labels (how much the automatic threshold loses). The split sections run the outlier "
         "patterns of `spectrageo.noise.corrupt_outliers` on the fixed tuning and validation "
         "splits; `sor-oracle` / `radius-oracle` are the best std_ratio / radius chosen with the "
-        "labels per case.\n\n" + format_markdown(rows),
+        "labels per case; `pcl-sor` is statistical removal at PCL's tutorial setting (50 "
+        "neighbours, std_ratio 1).\n\n" + format_markdown(rows),
         rows_to_csv(rows, _COLS),
     )

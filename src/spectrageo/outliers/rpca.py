@@ -272,7 +272,7 @@ def rpca_scores(
     Measured on the shared scans with 10 % injected outliers (``spectrageo evaluate outliers``),
     these raise the far-outlier F1 at the best threshold from 0.934-0.985 to 0.943-0.997 and the
     near-surface F1 from 0.59-0.85 to 0.70-0.91 (measured with ``second_pass="full"``, twice
-    the solver time; ``"replay"`` adds about a tenth of it).
+    the solver time; ``"replay"`` adds about 15 % of it at 110k points).
 
     7. *Residual measured along the surface normal* (``tangent_weight < 1``, default 0.5). The
        residual vector ``s_i`` (the first-column entries of the three rows of ``v_i``) is split
