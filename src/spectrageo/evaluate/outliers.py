@@ -113,6 +113,9 @@ VALIDATION_SPLIT = {
 SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
 SPLIT_FRACTIONS = (0.05, 0.1, 0.2, 0.3)
 _SOR_GRID = ((10, 20, 30), (0.5, 1.0, 1.5, 2.0, 2.5, 3.0))
+#: ``pcl-sor``: the statistical filter at the setting of PCL's outlier-removal tutorial
+#: (``setMeanK(50)``, ``setStddevMulThresh(1.0)``; the algorithm of our ``sor``, exactly).
+PCL_MEAN_K = 50
 
 
 def _prf(removed: np.ndarray, labels: np.ndarray) -> tuple[float, float, float]:
@@ -739,9 +742,6 @@ _SPLIT_METHODS = (
     "open3d-radius",
     "pcl-sor",
 )
-#: ``pcl-sor``: the statistical filter at the setting of PCL's outlier-removal tutorial
-#: (``setMeanK(50)``, ``setStddevMulThresh(1.0)``; the algorithm of our ``sor``, exactly).
-PCL_MEAN_K = 50
 
 
 def _split_summary(rows: list[dict], methods: list[str]) -> str:

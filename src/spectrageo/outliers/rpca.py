@@ -553,10 +553,7 @@ def _solve_blocks(
     with pool_cm as pool, single_thread_blas():
         for b in range(n_blocks):
             lo, hi = int(bounds[b]), int(bounds[b + 1])
-            centre = Xs[lo:hi].mean(axis=0)
-            for c0 in range(0, n, KNN_CHUNK):  # rounded once from float64 (no drift over blocks)
-                c1 = min(n, c0 + KNN_CHUNK)
-                Pn[c0:c1] = (Xs[c0:c1] - centre) * inv_h
+            centre = _normalise(Xs, lo, hi, inv_h, Pn)
             centers = np.arange(lo, hi, dtype=idx.dtype)
             args = (Pn, centers, idx[lo:hi], lam, rho, tol, rank_tol, max_iter, smoothed)
             vec = S_s[lo:hi] if vectors else S_s
@@ -577,6 +574,18 @@ def _solve_blocks(
             converged = converged and out[3]
             residual = max(residual, out[4])
     return scores_s, E0_s, (S_s if vectors else None), n_iter, converged, residual, n_blocks
+
+
+def _normalise(Xs: np.ndarray, lo: int, hi: int, inv_h: float, Pn: np.ndarray) -> np.ndarray:
+    """``Pn = (Xs - c) / h`` for the whole cloud, ``c`` the centroid of the block ``lo .. hi``
+    (returned); rounded once from float64 into ``Pn``'s dtype, in chunks. Shared by both passes
+    of step 5, whose replay must see the first pass's coordinates bit for bit."""
+    centre = Xs[lo:hi].mean(axis=0)
+    n = Xs.shape[0]
+    for c0 in range(0, n, KNN_CHUNK):
+        c1 = min(n, c0 + KNN_CHUNK)
+        Pn[c0:c1] = (Xs[c0:c1] - centre) * inv_h
+    return centre
 
 
 def _replay_blocks(
@@ -608,10 +617,7 @@ def _replay_blocks(
             sel = rows[inb]
             if sel.size == 0:
                 continue
-            centre = Xs[lo:hi].mean(axis=0)
-            for c0 in range(0, n, KNN_CHUNK):  # the rounding of _solve_blocks
-                c1 = min(n, c0 + KNN_CHUNK)
-                Pn[c0:c1] = (Xs[c0:c1] - centre) * inv_h
+            centre = _normalise(Xs, lo, hi, inv_h, Pn)
             centers = sel.astype(idx.dtype)
             vec = (
                 np.empty((sel.size, 3), dtype=np.float32)
