@@ -189,8 +189,25 @@ def test_tiled_rpca_one_tile_equals_untiled(tmp_path):
     np.testing.assert_array_equal(r.scores, ref.scores)
 
 
-def test_tiled_rpca_many_tiles_close_to_untiled(tmp_path):
-    # RPCA couples every point of a block through one SVT, so tiles only approximate it
+@pytest.mark.parametrize("tile", [1500, 5000])
+def test_tiled_rpca_many_tiles_equal_untiled(tmp_path, tile):
+    # above block_size the untiled method is these tiles (partition="tiles"); a larger --tile
+    # is cut down to block_size, so both runs score the same regions bit for bit
+    X = _cloud()
+    np.save(tmp_path / "c.npy", X)
+    ref = outliers.remove_outliers(X, k=10, block_size=1500)
+    r = distributed.remove_outliers_tiled(
+        tmp_path / "c.npy", tmp_path / "o.npy", tile=tile, chunk=900, return_arrays=True,
+        processes=False, workers=2, block_size=1500,
+    )  # fmt: skip
+    assert r.n_tiles == 8
+    np.testing.assert_array_equal(r.scores, ref.scores)
+    np.testing.assert_array_equal(r.keep, ref.keep)
+    np.testing.assert_array_equal(np.load(tmp_path / "o.npy"), X[ref.keep])
+
+
+def test_tiled_rpca_smaller_tiles_close_to_untiled(tmp_path):
+    # tiles below block_size are separate RPCA problems: an approximation
     X = _cloud()
     np.save(tmp_path / "c.npy", X)
     ref = outliers.remove_outliers(X, k=10)

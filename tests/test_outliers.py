@@ -217,13 +217,14 @@ def test_rpca_scores_invariances():
 def test_rpca_blocks_bound_memory_and_agree():
     P, lab = noise.add_outliers(_sphere(3000), fraction=0.1, kind="far", rng=4)
     one = rpca_scores(P, 8)
-    many = rpca_scores(P, 8, block_size=700)
-    assert many.n_blocks == 5 and one.n_blocks == 1
+    many = rpca_scores(P, 8, block_size=700, partition="blocks")
+    tiles = rpca_scores(P, 8, block_size=700)  # partition="tiles": 2^3 k-d tiles with halos
+    assert many.n_blocks == 5 and one.n_blocks == 1 and tiles.n_blocks == 8
     # block-wise RPCA is a different (independent) decomposition but flags the same outliers
-    tau = auto_threshold(one.scores, minimum=0.5, rule="density")
-    assert _f1(one.scores < tau, lab) > 0.9
-    tau = auto_threshold(many.scores, minimum=0.5, rule="density")
-    assert _f1(many.scores < tau, lab) > 0.9
+    for r in (one, many, tiles):
+        tau = auto_threshold(r.scores, minimum=0.5, rule="density")
+        assert _f1(r.scores < tau, lab) > 0.9
+    assert abs(tiles.spacing - one.spacing) < 1e-12 * one.spacing  # global spacing, exact kNN
 
 
 def test_rpca_threaded_ranges_match_single_thread(monkeypatch):

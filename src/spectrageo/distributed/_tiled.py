@@ -40,16 +40,21 @@ Reach and global steps of each method:
 * ``outliers`` ``rpca``: two hops ``(k, k)`` (the patches of ``p``'s neighbours enter its
   baseline, step 6 of :func:`spectrageo.outliers.rpca_scores`). That makes each patch exact, but
   the RPCA score is *not* a function of the patches alone: the ALM thresholds the singular values
-  of the whole block's patch matrix (one Gram matrix per block, ``lam = 1/sqrt(3m)`` from the
-  block size, global stopping rules, and a global refinement threshold), so a tiled RPCA equals
-  the untiled run only when one tile holds the cloud; with several tiles it is an approximation
-  whose keep mask agrees on the tested clouds on >= 98 % of the points (the untiled method itself
-  splits clouds above ``block_size`` = 10^6 points into independent blocks the same way). Scores
-  are rescaled to the global point spacing before the global threshold, which is the automatic
-  rule of :func:`spectrageo.outliers.remove_outliers` (``"valley"``) over all scores; the points
-  flagged as small volumetric clusters (step 8 of :func:`spectrageo.outliers.rpca_scores`, per
-  tile: a cluster of at most 150 points lies inside its tile's halo unless it straddles the
-  region's outer edge) are removed whatever their score, as in the untiled run.
+  of the whole tile's patch matrix (one Gram matrix, ``lam = 1/sqrt(3m)`` from the region size,
+  the stopping rules, the spacing and the refinement threshold are the region's). The untiled
+  method therefore defines a cloud above ``block_size`` points (default 10^6) as exactly these
+  tiles (``partition="tiles"`` of :func:`spectrageo.outliers.rpca_scores`, run in memory by
+  :func:`rpca_tiles_in_memory`): the boxes of a k-d split of the same stride sample at
+  ``ceil(log2(n / block_size))`` levels, the same halos, one RPCA per region with the own points'
+  scores kept. The tiled run uses those boxes whenever ``tile >= block_size`` (smaller tiles
+  split further and give an approximation; larger ones are cut down to ``block_size``, which
+  only lowers the memory per task), so ``outliers --tile N`` then equals the untiled run (bit for
+  bit on the tests). Scores are rescaled to the global point spacing (median of the own points'
+  mean kNN distance over all tiles) before the global threshold, which is the automatic rule of
+  :func:`spectrageo.outliers.remove_outliers` (``"valley"``) over all scores; the points flagged
+  as small volumetric clusters (step 8 of :func:`spectrageo.outliers.rpca_scores`, per tile: a
+  cluster of at most 150 points lies inside its tile's halo unless it straddles the region's
+  outer edge) are removed whatever their score, as in the untiled run.
 * ``saliency`` (:func:`spectrageo.saliency.pointcloud_saliency`, Eq. 6.30-6.33): ``s_p`` reads the
   normals of ``{p} + kNN_k(p)`` (Eq. 6.30) and each normal is the PCA of its point's
   ``normal_k``-NN (Eq. 6.31): two hops ``(k, normal_k)``; local, so exact. The tiles return the
@@ -59,7 +64,7 @@ Reach and global steps of each method:
   eigenvalue sums of Eq. 6.32 run over neighbours in index order, which differs between the
   region and the whole cloud).
 * ``robot`` (:func:`spectrageo.outliers.robot_pipeline`): (a) RPCA outlier removal with
-  ``rpca_k`` -- the ``rpca`` tiles above (exact with one tile, approximate with several), but
+  ``rpca_k`` -- the ``rpca`` tiles above (equal to the untiled run when ``tile >= block_size``), but
   with the untiled rule after gathering: the automatic threshold rule of
   :func:`spectrageo.outliers.remove_outliers` over all scores, and the points flagged as small
   clusters (per tile) removed whatever their score; (b) per
@@ -238,6 +243,57 @@ def _append(spill: str, t: int, tag: str, xyz: np.ndarray, rows: np.ndarray) -> 
         fh.write(np.ascontiguousarray(rows, dtype=np.int64).tobytes())
 
 
+def _levels(n: int, tile: int) -> int:
+    """Levels of the k-d split: ``2^L`` boxes of at most about ``tile`` points."""
+    return max(0, math.ceil(math.log2(max(1.0, n / tile))))
+
+
+def _plan(sample: np.ndarray, levels: int, glo: np.ndarray, ghi: np.ndarray):
+    """Split axes/values and leaf boxes (clipped to the bounding box ``glo .. ghi``)."""
+    axis, value, boxes = _kd_split(sample, levels, glo, ghi)
+    boxes[:, 0] = np.maximum(boxes[:, 0], glo)
+    boxes[:, 1] = np.minimum(boxes[:, 1], ghi)
+    return axis, value, boxes
+
+
+def _rpca_tile(tile: int, rpca_options: dict) -> int:
+    """Points per tile of the ``rpca`` passes: at most ``block_size``, so that the tiles are the
+    untiled method's (``partition="tiles"`` of :func:`spectrageo.outliers.rpca_scores`)."""
+    from ..outliers.rpca import BLOCK_SIZE
+
+    return min(int(tile), int(rpca_options.get("block_size", BLOCK_SIZE)))
+
+
+class _MemorySpill:
+    """The tiles of an in-memory cloud, in place of a spill folder: tile ``t`` is the rows
+    ``rows[t]`` (input order) of ``X`` (what :func:`_load` returns for a spill file)."""
+
+    def __init__(self, X: np.ndarray, rows: list[np.ndarray]):
+        self.X, self.rows = X, rows
+
+    def load(self, t: int) -> tuple[np.ndarray, np.ndarray]:
+        r = self.rows[t]
+        return self.X[r], r
+
+
+def _memory_tiles(X: np.ndarray, tile: int, chunk: int = CHUNK) -> _Tiles:
+    """:func:`_partition` of an in-memory (n, 3) float64 cloud: the same sample, boxes and
+    membership (rows in input order) as streaming it from a file."""
+    n = X.shape[0]
+    stride = max(1, n // SAMPLE)
+    glo = np.array([X[:, j].min() for j in range(3)])
+    ghi = np.array([X[:, j].max() for j in range(3)])
+    levels = _levels(n, tile)
+    axis, value, boxes = _plan(X[::stride], levels, glo, ghi)
+    leaf = np.empty(n, dtype=np.int64)
+    for a in range(0, n, chunk):
+        leaf[a : a + chunk] = _leaf_of(X[a : a + chunk], axis, value, levels)
+    order = np.argsort(leaf, kind="stable")
+    counts = np.bincount(leaf, minlength=boxes.shape[0])
+    rows = np.split(order, np.cumsum(counts)[:-1])
+    return _Tiles(_MemorySpill(X, rows), boxes, np.stack([glo, ghi]), n)  # type: ignore[arg-type]
+
+
 def _partition(source: PointSource, src, tile: int, chunk: int, spill: str) -> _Tiles:
     """Passes 1 (bounding box, sample, k-d boxes) and 2 (spill every point to its box)."""
     t0 = time.perf_counter()
@@ -254,10 +310,8 @@ def _partition(source: PointSource, src, tile: int, chunk: int, spill: str) -> _
         glo, ghi = np.minimum(glo, xyz.min(axis=0)), np.maximum(ghi, xyz.max(axis=0))
         first = (-a) % stride
         samples.append(xyz[first::stride])
-    levels = max(0, math.ceil(math.log2(max(1.0, n / tile))))
-    axis, value, boxes = _kd_split(np.concatenate(samples), levels, glo, ghi)
-    boxes[:, 0] = np.maximum(boxes[:, 0], glo)
-    boxes[:, 1] = np.minimum(boxes[:, 1], ghi)
+    levels = _levels(n, tile)
+    axis, value, boxes = _plan(np.concatenate(samples), levels, glo, ghi)
     n_tiles = boxes.shape[0]
     t_read = time.perf_counter() - t0
     for a, xyz, _ in source.chunks(chunk):
@@ -284,6 +338,8 @@ def _partition(source: PointSource, src, tile: int, chunk: int, spill: str) -> _
 
 # ----------------------------------------------------------------------------- the tile task
 def _load(spill: str, t: int, tag: str = "") -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(spill, _MemorySpill):
+        return spill.load(t)
     base = _tile_base(spill, t, tag)
     xyz = np.fromfile(f"{base}.xyz", dtype=np.float64).reshape(-1, 3)
     idx = np.fromfile(f"{base}.idx", dtype=np.int64)
@@ -521,12 +577,23 @@ def _outlier_fn(R, m, dmean, *, workers, k, method, rpca_options) -> dict:
         s = outliers.radius_scores(R, k, workers=workers)[:m]
     elif method == "sor":
         s = out["dmean"]
-    else:
-        r = outliers.rpca_scores(R, k, workers=workers, on_nonconvergence="ignore", **rpca_options)
+    else:  # one RPCA over the region (no further tiling: it is the untiled method's tile)
+        r = outliers.rpca_scores(
+            R, k, workers=workers, on_nonconvergence="ignore", partition="blocks", **rpca_options
+        )
         s = r.scores[:m]
-        out["spacing"] = float(r.spacing)
+        out.update(
+            spacing=float(r.spacing),
+            n_iter=r.n_iter,
+            converged=r.converged,
+            residual=r.residual,
+            n_blocks=r.n_blocks,
+            n_refined=r.n_refined,
+        )
         if r.clusters is not None:
             out["clusters"] = np.asarray(r.clusters[:m], dtype=bool)
+        if r.smoothed is not None:
+            out["smoothed"] = r.smoothed[:m]
     out["scores"] = np.asarray(s, dtype=np.float64)
     return out
 
@@ -596,6 +663,58 @@ def _outlier_pass(client, tiles, method, k, rpca_options, budget, progress, stat
     return scores, dmean, tile_of, spacing, blob
 
 
+def _to_global_spacing(scores, dmean, tile_of, spacing) -> float:
+    """Scores of the tiles (each in units of its own spacing) to units of the global spacing
+    ``h`` (median over all points of the mean kNN distance), in place; returns ``h``."""
+    h = float(np.median(dmean))
+    scores *= (spacing / h)[tile_of]
+    return h
+
+
+def rpca_tiles_in_memory(X: np.ndarray, k: int, *, block_size: int, workers: int, **opts: Any):
+    """``rpca_scores(X, k, partition="tiles")`` for a cloud above ``block_size`` points: the tiles
+    of :func:`remove_outliers_tiled` (same boxes, halos and per-region RPCA), run one after the
+    other in this process, scores rescaled to the global spacing (:func:`_to_global_spacing`).
+    Returns a :class:`spectrageo.outliers.PatchRPCAResult` (``n_blocks`` = the tiles)."""
+    from ..outliers.rpca import PatchRPCAResult
+
+    n = X.shape[0]
+    tiles = _memory_tiles(X, block_size)
+    T = tiles.n_tiles
+    scores, dmean = np.empty(n), np.empty(n)
+    tile_of = np.empty(n, dtype=np.int32)
+    spacing = np.full(T, np.nan)
+    clusters = np.zeros(n, dtype=bool) if opts.get("clusters", True) else None
+    smoothed = np.empty((n, 3)) if opts.get("smoothed", False) else None
+    params = {"k": k, "method": "rpca", "rpca_options": dict(opts, block_size=block_size)}
+    n_iter, converged, residual, n_refined = 0, True, 0.0, 0
+    for t in range(T):
+        r = _tile_job(tiles.spill, t, tiles.boxes, tiles.gbox, (k, k), _outlier_fn, params, workers)
+        rows = r["idx"]
+        if rows.size == 0:
+            continue
+        scores[rows], dmean[rows], tile_of[rows] = r["scores"], r["dmean"], t
+        spacing[t] = r["spacing"]
+        if clusters is not None and "clusters" in r:
+            clusters[rows] = r["clusters"]
+        if smoothed is not None:
+            smoothed[rows] = r["smoothed"]
+        n_iter, converged = max(n_iter, r["n_iter"]), converged and r["converged"]
+        residual, n_refined = max(residual, r["residual"]), n_refined + r["n_refined"]
+    h = _to_global_spacing(scores, dmean, tile_of, spacing)
+    return PatchRPCAResult(
+        scores=scores,
+        spacing=h,
+        smoothed=smoothed,
+        n_iter=n_iter,
+        converged=converged,
+        residual=residual,
+        n_blocks=T,
+        n_refined=n_refined,
+        clusters=clusters,
+    )
+
+
 def _outlier_keep(
     method, threshold, scores, dmean, tile_of, spacing, n_tiles, blob=None, rule="density"
 ):
@@ -610,10 +729,8 @@ def _outlier_keep(
 
     info: dict[str, Any] = {}
     if method == "rpca":
-        if n_tiles > 1:  # scores to units of the global spacing (median of the mean kNN distance)
-            h = float(np.median(dmean))
-            info["spacing"] = h
-            scores *= (spacing / h)[tile_of]
+        if n_tiles > 1:
+            info["spacing"] = _to_global_spacing(scores, dmean, tile_of, spacing)
         if threshold is not None:
             tau = float(threshold)
         elif rule == "valley":
@@ -704,6 +821,8 @@ def remove_outliers_tiled(
     n = source.n
     if n < k + 1:
         raise InvalidInputError(f"`k` = {k} neighbours need at least {k + 1} points; got {n}.")
+    if method == "rpca":
+        tile = _rpca_tile(tile, rpca_options)
     with _scratch_dir(dst, scratch) as spill:
         tiles = _partition(source, src, tile, chunk, spill)
         stats = _Stats(tiles.n_tiles)
@@ -999,6 +1118,7 @@ def robot_denoise_tiled(
             f"`rpca_k` = {rpca_k} neighbours need at least {rpca_k + 1} points; got {n}."
         )
     _check_same_format(source, dst)
+    tile = _rpca_tile(tile, {})  # the RPCA step's tiles: those of the untiled run
     with _scratch_dir(dst, scratch) as spill:
         tiles = _partition(source, src, tile, chunk, spill)
         stats = _Stats(tiles.n_tiles)

@@ -184,6 +184,7 @@ def rpca_scores(
     clusters: bool = True,
     device: Any = "cpu",
     second_pass: str = "replay",
+    partition: str = "tiles",
 ) -> PatchRPCAResult:
     r"""Per-point outlier scores ``||s_i||_2`` of Eq. (5.99) from RPCA of the patch matrix.
 
@@ -323,6 +324,21 @@ def rpca_scores(
         Points per independent RPCA block (memory: ``12 (k + 1)`` bytes per block point for the
         float32 solver state, twice that for float64, plus about ``60 + 4 k`` bytes per cloud
         point for the sorted copy, the normalised points, the neighbour lists and the scores).
+    partition : {"tiles", "blocks"}
+        How a cloud of more than ``block_size`` points is split (below that, both are one
+        block). ``"tiles"`` (default): the k-d tiles of ``spectrageo outliers --tile``
+        (:func:`spectrageo.distributed.remove_outliers_tiled`; boxes of a median split of a
+        stride sample, ``ceil(log2(n / block_size))`` levels), each tile with a halo holding
+        every neighbourhood its points' scores read, steps 1-8 run on each tile's region alone
+        (its own spacing, refinement threshold and clusters), the own points' scores kept and
+        rescaled to the global spacing. The tiled command then gives the same scores and keep
+        mask (tested bit for bit) whenever its ``--tile`` is at least ``block_size``, and memory
+        is bounded by one region (about ``1.3-1.6 x block_size`` points) besides the cloud.
+        ``"blocks"``: one kNN search, spacing and refinement threshold over the whole cloud,
+        the ALM in blocks of consecutive points along the Morton curve (rows: the block's
+        patches, neighbours anywhere); the behaviour before issue 21's exact tiles. Choice: on
+        the 10^7-point benchmark cloud of ``docs/scaling.md`` (1 % outliers) the tiles also
+        flag fewer inliers (F1 in ``docs/scaling.md``).
     smoothed : bool
         Also return the first column of ``E`` (the smoothed position of every point).
     on_nonconvergence : {"warn", "raise", "ignore"}
@@ -385,6 +401,7 @@ def rpca_scores(
         raise InvalidInputError(f"`block_size` must be >= k + 1 = {k + 1}; got {block_size}.")
     check_choice(on_nonconvergence, "on_nonconvergence", ("warn", "raise", "ignore"))
     check_choice(second_pass, "second_pass", ("replay", "full"))
+    check_choice(partition, "partition", ("tiles", "blocks"))
     check_positive(tangent_weight, "tangent_weight", allow_zero=True)
     if tangent_weight > 1:
         raise InvalidInputError(f"`tangent_weight` must be in [0, 1]; got {tangent_weight!r}.")
@@ -414,7 +431,16 @@ def rpca_scores(
         dtype=dt,
         clusters=bool(clusters),
         second_pass=second_pass,
+        partition=partition,
     )
+    if partition == "tiles" and n > block_size:
+        from ..distributed._tiled import rpca_tiles_in_memory
+
+        for key in ("on_nonconvergence", "partition"):
+            opts.pop(key)
+        res = rpca_tiles_in_memory(X, k, **opts)
+        _report(res, on_nonconvergence, max_iter)
+        return res
     if isinstance(backend, str):
         with numba_threads(workers):
             return _rpca_scores(X, k, **opts)
