@@ -42,14 +42,14 @@ Reach and global steps of each method:
   the RPCA score is *not* a function of the patches alone: the ALM thresholds the singular values
   of the whole tile's patch matrix (one Gram matrix, ``lam = 1/sqrt(3m)`` from the region size,
   the stopping rules, the spacing and the refinement threshold are the region's). The untiled
-  method therefore defines a cloud above ``block_size`` points (default 10^6) as exactly these
+  method therefore defines a cloud above ``block_size`` points (default 2^22) as exactly these
   tiles (``partition="tiles"`` of :func:`spectrageo.outliers.rpca_scores`, run in memory by
   :func:`rpca_tiles_in_memory`): the boxes of a k-d split of the same stride sample at
   ``ceil(log2(n / block_size))`` levels, the same halos, one RPCA per region with the own points'
-  scores kept. The tiled run uses those boxes whenever ``tile >= block_size`` (smaller tiles
-  split further and give an approximation; larger ones are cut down to ``block_size``, which
-  only lowers the memory per task), so ``outliers --tile N`` then equals the untiled run (bit for
-  bit on the tests). Scores are rescaled to the global point spacing (median of the own points'
+  scores kept. The tiled run splits at ``ceil(log2(n / min(tile, block_size)))`` levels, the same
+  whenever ``tile >= block_size`` (or ``tile`` gives the same number of levels), and then
+  ``outliers --tile N`` equals the untiled run (bit for bit on the tests); smaller tiles split
+  further and give an approximation. Scores are rescaled to the global point spacing (median of the own points'
   mean kNN distance over all tiles) before the global threshold, which is the automatic rule of
   :func:`spectrageo.outliers.remove_outliers` (``"valley"``) over all scores; the points flagged
   as small volumetric clusters (step 8 of :func:`spectrageo.outliers.rpca_scores`, per tile: a
@@ -394,7 +394,8 @@ def _region(spill, t, boxes, w, n_tiles, tag="", balls=None):
         if hit.any() and len(xyz):
             rest = np.flatnonzero(~inside)
             if rest.size:
-                found = cKDTree(xyz[rest]).query_ball_point(c[hit], rad[hit])
+                tree = cKDTree(xyz[rest], balanced_tree=False, compact_nodes=False)
+                found = tree.query_ball_point(c[hit], rad[hit])
                 sel = [np.asarray(f, dtype=np.int64) for f in found if len(f)]
                 if sel:
                     inside[rest[np.concatenate(sel)]] = True
@@ -416,10 +417,14 @@ def _own_knn(P: np.ndarray, m: int, k: int, workers) -> tuple[np.ndarray, np.nda
 
     def query(rows: np.ndarray, kk: int):
         # queries in Morton order (3-5x faster than scattered ones); results back in rows' order
-        q = np.sort(pos[rows])
+        p = pos[rows]
+        o = np.argsort(p)
+        q = p[o]
+        back = np.empty_like(o)
+        back[o] = np.arange(o.size)
         with numba_threads(workers):
             nb = knn_grid(sc, kk, query=q, self_index=q)
-        return nb, np.searchsorted(q, pos[rows])
+        return nb, back
 
     nb, back = query(np.arange(m), k)
 
@@ -790,11 +795,13 @@ def remove_outliers_tiled(
         output keeps every PLY property / LAS field and the input's format); other formats are
         read whole.
     tile : int
-        Points per tile (>= 2 k); memory per task is about ``(1 + halo) * tile`` points.
+        Points per tile (>= 2 k); memory per task is about ``(1 + halo) * tile`` points. With
+        ``rpca``, tiles hold at most ``block_size`` points (default 2^22).
     method, k, threshold, **rpca_options
         As :func:`spectrageo.outliers.remove_outliers`; ``sor``/``radius`` give the untiled keep
-        mask exactly; ``rpca`` with one tile gives it exactly, with several an approximation
-        (module docstring).
+        mask exactly; so does ``rpca`` when ``tile >= block_size`` (tiles are then cut at
+        ``block_size`` points, the untiled method's own tiles); smaller tiles give an
+        approximation (module docstring).
     workers, scheduler, processes
         Dask cluster (:func:`spectrageo.distributed.open_client`).
     chunk : int
@@ -1076,8 +1083,8 @@ def robot_denoise_tiled(
     (``spectrageo robot IN OUT --tile N``).
 
     As :func:`spectrageo.outliers.robot_pipeline` with ``output="cloud"``: the RPCA step is the
-    tiled ``rpca`` of :func:`remove_outliers_tiled` (exact with one tile, an approximation with
-    several); given its keep mask, the filter equals the untiled one to rounding (reach
+    tiled ``rpca`` of :func:`remove_outliers_tiled` (tiles of at most ``min(tile, 2^22)`` points,
+    the untiled run's own, so the keep mask equals the untiled one); given its keep mask, the filter equals the untiled one to rounding (reach
     ``(k, k)`` per pass, the global default ``sigma1`` gathered first; module docstring).
 
     Parameters
@@ -1087,7 +1094,7 @@ def robot_denoise_tiled(
         kept; x, y, z written as double), ``.npy`` (float64) and LAS/LAZ (coordinates quantised
         to the file's scale) are streamed; other formats are read whole.
     tile : int
-        Points per tile (>= 2 (max(k, rpca_k) + 1)).
+        Points per tile (>= 2 (max(k, rpca_k) + 1)); at most 2^22 (the RPCA step's tiles).
     k, threshold, rpca_k, sigma1, sigma2, n_iter
         As :func:`spectrageo.outliers.robot_pipeline`.
     outlier_removal : bool

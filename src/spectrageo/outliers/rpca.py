@@ -35,10 +35,12 @@ Implementation notes (deviations and choices, all documented in :func:`rpca_scor
 * Scale and translation invariance: the points are centred and divided by the point spacing ``h``
   (median over points of the mean kNN distance) before ``M`` is formed, so scores are in units of
   ``h`` and a threshold carries over between clouds of different scales.
-* Memory: the cloud is processed in spatially compact blocks of at most ``block_size`` points
-  (contiguous runs along a Morton curve), each an independent RPCA whose rows are the block's
-  patches (neighbours may lie outside the block). Peak memory is the points, the kNN indices and
-  one block's state, whatever the cloud size.
+* Memory: a cloud of more than ``block_size`` points is cut into the k-d tiles of
+  ``spectrageo outliers --tile`` (``partition="tiles"``: each tile plus a halo scored alone, so
+  the tiled command gives the same scores); within a region the ALM runs in blocks of at most
+  ``block_size`` consecutive points along the Morton curve, each an independent RPCA whose rows
+  are the block's patches (neighbours may lie outside the block). Peak memory is the points, one
+  region's kNN indices and one block's state, whatever the cloud size.
 """
 
 from __future__ import annotations
@@ -79,8 +81,10 @@ RANK_FLOOR = 0.4
 RANK_BIN = float(np.log10(2.0))  # decades per level
 #: Default ``rank_tol``, chosen on the tuning split of :mod:`spectrageo.evaluate.outliers`.
 RANK_TOL = 3e-3
-#: Default number of points per independent RPCA block.
-BLOCK_SIZE = 1_000_000
+#: Default number of points per independent RPCA block (and the largest tile of
+#: ``partition="tiles"``): 2^22, so clouds of up to 4.2M points are one region (no halo work)
+#: and the solver state of a block stays near 0.55 GB (float32, k = 10).
+BLOCK_SIZE = 2**22
 #: Fewest points per thread of the fused kernels (smaller blocks run on the calling thread).
 _MIN_PER_THREAD = 10_000
 #: Most point ranges per block of the fused kernels (see :class:`_Ranges`).
