@@ -392,10 +392,13 @@ def _region(spill, t, boxes, w, n_tiles, tag="", balls=None):
         xyz, _ = _load(spill, u, tag)
         inside = np.all((xyz >= lo) & (xyz <= hi), axis=1) if in_box else np.zeros(len(xyz), bool)
         if hit.any() and len(xyz):
-            rest = np.flatnonzero(~inside)
+            # candidates: outside the widened box, inside the bounding box of the hitting balls
+            ch, rh = c[hit], rad[hit]
+            blo_b, bhi_b = (ch - rh[:, None]).min(axis=0), (ch + rh[:, None]).max(axis=0)
+            rest = np.flatnonzero(~inside & np.all((xyz >= blo_b) & (xyz <= bhi_b), axis=1))
             if rest.size:
                 tree = cKDTree(xyz[rest], balanced_tree=False, compact_nodes=False)
-                found = tree.query_ball_point(c[hit], rad[hit])
+                found = tree.query_ball_point(ch, rh)
                 sel = [np.asarray(f, dtype=np.int64) for f in found if len(f)]
                 if sel:
                     inside[rest[np.concatenate(sel)]] = True
@@ -473,7 +476,7 @@ def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
         raise InvalidInputError(
             f"`k` = {k1} neighbours need at least {k1 + 1} points; the cloud has fewer."
         )
-    dmean, _dlast, (radii, used) = _own_knn(R, m, k1, workers)
+    dmean, dlast, (radii, used) = _own_knn(R, m, k1, workers)
     if len(hops) > 2:  # pragma: no cover - internal: reaches of at most two hops
         raise ValueError("reach of at most two hops")
     if len(hops) == 2:
@@ -484,7 +487,14 @@ def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
         if R.shape[0] < k2 + 1:
             w2, c2, r2 = math.inf, R[:0], np.zeros(0)
         else:
-            w2, c2, r2 = _reach(R[js], radii(js, k2), lo, hi, glo, ghi, w_min=w)
+            if k2 == k1:  # the own points' k2-NN radii are their k1-NN radii, known already
+                own = js < m
+                rj = np.empty(js.size)
+                rj[own] = dlast[js[own]]
+                rj[~own] = radii(js[~own], k2)
+            else:
+                rj = radii(js, k2)
+            w2, c2, r2 = _reach(R[js], rj, lo, hi, glo, ghi, w_min=w)
         if w2 > w or len(r2):
             w = w2
             balls = (np.concatenate([bc, c2]), np.concatenate([br, r2]))
