@@ -360,16 +360,17 @@ def _reach(P, r, lo, hi, glo, ghi, w_min: float = 0.0):
     """Halo width ``w`` and the *stragglers* for the balls ``B(P_i, r_i)``: ``w`` covers the balls
     of the regular points (radius <= 3x the median radius), the stragglers (a few points with far
     larger balls, e.g. isolated outliers) are returned as balls ``(centres, radii)`` to load
-    one by one, instead of widening the whole halo to the largest ball."""
+    one by one, instead of widening the whole halo to the largest ball. Also returns which balls
+    stick out of the box at all."""
     r = r * (1 + 1e-9)
     prot = _protrusion(P, r, lo, hi, glo, ghi) * (1 + 1e-9)
     if P.shape[0] == 0:
-        return w_min, P[:0], r[:0]
+        return w_min, P[:0], r[:0], prot > 0
     med = float(np.median(r))
     regular = r <= 3.0 * med if med > 0 else np.ones(r.shape, dtype=bool)
     w = max(w_min, float(prot[regular].max(initial=0.0)))
     far = prot > w
-    return w, P[far], r[far]
+    return w, P[far], r[far], prot > 0
 
 
 def _region(spill, t, boxes, w, n_tiles, tag="", balls=None):
@@ -407,11 +408,16 @@ def _region(spill, t, boxes, w, n_tiles, tag="", balls=None):
     return core, cidx, np.concatenate(parts) if len(parts) > 1 else core
 
 
-def _own_knn(P: np.ndarray, m: int, k: int, workers) -> tuple[np.ndarray, np.ndarray, object]:
+def _own_knn(P: np.ndarray, m: int, k: int, workers, known=None):
     """Exact ``k``-NN (self excluded) of the first ``m`` points of ``P`` among all of ``P``, by the
     compiled grid search of the untiled filters: ``dmean`` and ``dlast`` of the ``m`` points
-    (input order), a function ``(rows, k2) -> dlast`` of any rows, and a function giving the
-    sorted rows of the ``m`` points and of all their neighbours."""
+    (input order) and ``(radii, used)``: a function ``(rows, k2) -> dlast`` of any rows, and one giving the sorted rows of the ``m``
+    points and of all their neighbours.
+
+    ``known``, when given, is ``(dmean, dlast, edge)`` from a search among ``P[:m]`` (the own
+    points) where every point not flagged in ``edge`` has its whole ``k``-NN ball inside the own
+    box, so its neighbours are own points and final; only the ``edge`` points are searched
+    again."""
     from ..outliers._common import SortedCloud, knn_grid, numba_threads
 
     sc = SortedCloud.of(P)
@@ -429,19 +435,30 @@ def _own_knn(P: np.ndarray, m: int, k: int, workers) -> tuple[np.ndarray, np.nda
             nb = knn_grid(sc, kk, query=q, self_index=q)
         return nb, back
 
-    nb, back = query(np.arange(m), k)
+    if known is None:
+        nb, back = query(np.arange(m), k)
+        dmean, dlast = nb.dmean[back], nb.dlast[back]
+    else:
+        dmean, dlast, edge = (np.array(a) for a in known)
+        rows = np.flatnonzero(edge)
+        nb = None
+        if rows.size:
+            nb, back = query(rows, k)
+            dmean[rows], dlast[rows] = nb.dmean[back], nb.dlast[back]
 
     def radii(rows: np.ndarray, k2: int) -> np.ndarray:
         r, at = query(rows, k2)
         return r.dlast[at]
 
     def used() -> np.ndarray:
+        # (with ``known``, the other points' neighbours are own points, marked already)
         mark = np.zeros(P.shape[0], dtype=bool)
         mark[:m] = True
-        mark[sc.order[nb.idx.ravel()]] = True
+        if nb is not None:
+            mark[sc.order[nb.idx.ravel()]] = True
         return np.flatnonzero(mark)
 
-    return nb.dmean[back], nb.dlast[back], (radii, used)
+    return dmean, dlast, (radii, used)
 
 
 def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
@@ -459,8 +476,9 @@ def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
     m = core.shape[0]
     if m == 0:
         return core, cidx, core, np.empty(0), 0.0
+    known = None
     if m > k1:  # k1-NN radii among the own points
-        r0 = _own_knn(core, m, k1, workers)[1]
+        d0, r0, _ = _own_knn(core, m, k1, workers)
     else:  # too few own points: widen until the region has k1 + 1 points, radii in it
         w = max(float(np.max(ghi - glo)) / 64.0, np.finfo(float).tiny)
         while True:
@@ -470,13 +488,15 @@ def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
             w *= 2.0
         d0, _ = cKDTree(R).query(core, min(k1 + 1, R.shape[0]), workers=workers)
         r0 = d0.reshape(m, -1)[:, -1]
-    w, bc, br = _reach(core, r0, lo, hi, glo, ghi)
+    w, bc, br, edge = _reach(core, r0, lo, hi, glo, ghi)
+    if m > k1:  # balls inside the box hold only own points: those neighbours are final
+        known = (d0, r0, edge)
     core, cidx, R = _region(spill, t, boxes, w, n_tiles, tag, (bc, br))
     if R.shape[0] < k1 + 1:
         raise InvalidInputError(
             f"`k` = {k1} neighbours need at least {k1 + 1} points; the cloud has fewer."
         )
-    dmean, dlast, (radii, used) = _own_knn(R, m, k1, workers)
+    dmean, dlast, (radii, used) = _own_knn(R, m, k1, workers, known)
     if len(hops) > 2:  # pragma: no cover - internal: reaches of at most two hops
         raise ValueError("reach of at most two hops")
     if len(hops) == 2:
@@ -494,7 +514,7 @@ def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
                 rj[~own] = radii(js[~own], k2)
             else:
                 rj = radii(js, k2)
-            w2, c2, r2 = _reach(R[js], rj, lo, hi, glo, ghi, w_min=w)
+            w2, c2, r2, _ = _reach(R[js], rj, lo, hi, glo, ghi, w_min=w)
         if w2 > w or len(r2):
             w = w2
             balls = (np.concatenate([bc, c2]), np.concatenate([br, r2]))
