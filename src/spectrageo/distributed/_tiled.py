@@ -711,6 +711,7 @@ def rpca_tiles_in_memory(X: np.ndarray, k: int, *, block_size: int, workers: int
     of :func:`remove_outliers_tiled` (same boxes, halos and per-region RPCA), run one after the
     other in this process, scores rescaled to the global spacing (:func:`_to_global_spacing`).
     Returns a :class:`spectrageo.outliers.PatchRPCAResult` (``n_blocks`` = the tiles)."""
+    from .._progress import progress
     from ..outliers.rpca import PatchRPCAResult
 
     n = X.shape[0]
@@ -723,7 +724,7 @@ def rpca_tiles_in_memory(X: np.ndarray, k: int, *, block_size: int, workers: int
     smoothed = np.empty((n, 3)) if opts.get("smoothed", False) else None
     params = {"k": k, "method": "rpca", "rpca_options": dict(opts, block_size=block_size)}
     n_iter, converged, residual, n_refined = 0, True, 0.0, 0
-    for t in range(T):
+    for t in progress(range(T), desc=f"RPCA outlier scores, {T} tiles", total=T):
         r = _tile_job(tiles.spill, t, tiles.boxes, tiles.gbox, (k, k), _outlier_fn, params, workers)
         rows = r["idx"]
         if rows.size == 0:
