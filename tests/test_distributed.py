@@ -284,3 +284,29 @@ def test_missing_dask_message(monkeypatch):
     )
     with pytest.raises(distributed.DaskMissingError, match=r"spectrageo\[dist\]"):
         distributed.require_dask()
+
+
+_THREADS = {"processes": False, "workers": 2}
+
+
+def test_tiled_outliers_on_arrays(tmp_path):
+    # the Python API takes an (n, 3) numpy or dask array: same scores as the file, no output file
+    # unless asked (then .npy), and a clear error for other output formats
+    import dask.array as da
+
+    X = _cloud()
+    np.save(tmp_path / "c.npy", X)
+    ref = distributed.remove_outliers_tiled(
+        tmp_path / "c.npy", tmp_path / "o.npy", tile=1500, return_arrays=True, **_THREADS
+    )
+    lazy = da.from_array(X, chunks=(1000, 3))
+    r = distributed.remove_outliers_tiled(lazy, None, tile=1500, chunk=700, **_THREADS)
+    np.testing.assert_array_equal(r.scores, ref.scores)
+    np.testing.assert_array_equal(r.keep, ref.keep)
+    r2 = distributed.remove_outliers_tiled(X, tmp_path / "k.npy", tile=1500, **_THREADS)
+    assert r2.keep is None and r2.n_kept == ref.n_kept
+    np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), X[ref.keep])
+    with pytest.raises(InvalidInputError, match=r"written as \.npy"):
+        distributed.remove_outliers_tiled(X, tmp_path / "k.ply", tile=1500, **_THREADS)
+    with pytest.raises(InvalidInputError, match="expected an"):
+        distributed.remove_outliers_tiled(X[:, :2], None, tile=1500, **_THREADS)

@@ -3,13 +3,14 @@
 Streamed: binary PLY point clouds (memory-mapped vertex records, every property kept), ``.npy``
 ``(n, 3+)`` arrays (memory-mapped) and LAS/LAZ (laspy chunk iterator; needs ``spectrageo[las]``).
 Other readable formats are read whole through :func:`spectrageo.io.read_point_cloud` (not
-out-of-core) and written through :func:`spectrageo.io.write`.
+out-of-core) and written through :func:`spectrageo.io.write`. In the Python API an ``(n, 3+)``
+numpy array or ``dask.array`` is a source too (a dask array is computed one chunk of rows at a
+time, once per pass; kept rows are written as ``.npy``).
 """
 
 from __future__ import annotations
 
 import copy
-import os
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -210,8 +211,38 @@ class _MemoryWriter:
             io.write(self.path, self.cloud.select(keep))
 
 
-def open_source(path: str | os.PathLike) -> PointSource:
-    """The chunked reader of ``path`` (see the module docstring for what is streamed)."""
+class _ArraySource(PointSource):
+    """An (n, 3+) array in memory or a ``dask.array`` (computed chunk by chunk, once per pass)."""
+
+    kind = "array"
+
+    def __init__(self, arr: Any):
+        shape = tuple(getattr(arr, "shape", ()))
+        if len(shape) != 2 or shape[1] < 3:
+            raise InvalidInputError(f"points: expected an (n, 3) array; got shape {shape}.")
+        if not np.issubdtype(np.dtype(arr.dtype), np.number):
+            raise InvalidInputError(f"points: expected numbers; got dtype {arr.dtype}.")
+        self.arr = arr
+        super().__init__(Path("points"), int(shape[0]))
+
+    def chunks(self, size):
+        for a in range(0, self.n, size):
+            r = np.asarray(self.arr[a : a + size])
+            yield a, r[:, :3].astype(np.float64), r
+
+    def writer(self, path, n_kept):
+        if not Path(path).name.lower().endswith(".npy"):
+            raise InvalidInputError(
+                f"{Path(path).name}: the kept points of an array are written as .npy."
+            )
+        return _NpyWriter(path, (n_kept, int(self.arr.shape[1])), np.dtype(self.arr.dtype))
+
+
+def open_source(path: Any) -> PointSource:
+    """The chunked reader of ``path`` (see the module docstring for what is streamed); an (n, 3+)
+    array (numpy, or ``dask.array`` read chunk by chunk) is taken as it is."""
+    if hasattr(path, "shape") and hasattr(path, "dtype"):
+        return _ArraySource(path)
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(2, "No such file or directory", str(p))

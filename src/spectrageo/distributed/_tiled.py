@@ -223,8 +223,14 @@ class _Tiles:
 
 @contextmanager
 def _scratch_dir(dst, scratch) -> Iterator[str]:
-    parent = Path(scratch) if scratch is not None else Path(dst).resolve().parent
-    spill = tempfile.mkdtemp(prefix=f".{Path(dst).name}.tiles-", dir=parent)
+    if scratch is not None:
+        parent = Path(scratch)
+    elif dst is not None:
+        parent = Path(dst).resolve().parent
+    else:
+        parent = Path(tempfile.gettempdir())
+    name = Path(dst).name if dst is not None else "points"
+    spill = tempfile.mkdtemp(prefix=f".{name}.tiles-", dir=parent)
     try:
         yield spill
     finally:
@@ -304,7 +310,7 @@ def _partition(source: PointSource, src, tile: int, chunk: int, spill: str) -> _
     for a, xyz, _ in source.chunks(chunk):
         if not np.isfinite(xyz).all():
             raise InvalidInputError(
-                f"{Path(src).name}: NaN/inf coordinates near row {a}; tiled processing needs "
+                f"{source.path.name}: NaN/inf coordinates near row {a}; tiled processing needs "
                 "finite points (run without --tile to drop them)."
             )
         glo, ghi = np.minimum(glo, xyz.min(axis=0)), np.maximum(ghi, xyz.max(axis=0))
@@ -800,8 +806,8 @@ def _timing(info: dict, tiles: _Tiles, t_start: float, t_tiles: float, source) -
 
 # ----------------------------------------------------------------------------- outliers
 def remove_outliers_tiled(
-    src: str | os.PathLike,
-    dst: str | os.PathLike,
+    src: Any,
+    dst: str | os.PathLike | None,
     *,
     tile: int,
     method: str = "rpca",
@@ -821,10 +827,15 @@ def remove_outliers_tiled(
 
     Parameters
     ----------
-    src, dst : path
-        Point cloud in, kept points out. Binary PLY, ``.npy`` and LAS/LAZ are streamed (the
-        output keeps every PLY property / LAS field and the input's format); other formats are
-        read whole.
+    src : path or array
+        Point cloud in. Binary PLY, ``.npy`` and LAS/LAZ are streamed (the output keeps every
+        PLY property / LAS field and the input's format); other formats are read whole. An
+        ``(n, 3+)`` numpy array or ``dask.array`` (for instance ``dask.array.from_zarr`` of a
+        cloud larger than memory) is read one chunk of rows at a time, once per pass; its kept
+        rows are written as ``.npy``.
+    dst : path or None
+        Kept points out (written atomically, streaming). None writes nothing and returns the
+        ``keep`` mask and ``scores`` (``return_arrays`` implied).
     tile : int
         Points per tile (>= 2 k); memory per task is about ``(1 + halo) * tile`` points. With
         ``rpca``, tiles hold at most ``block_size`` points (default 2^22).
@@ -840,7 +851,8 @@ def remove_outliers_tiled(
     return_arrays : bool
         Also return the ``keep`` mask and ``scores`` (n values each, in memory).
     scratch : path, optional
-        Folder for the per-tile spill files (default: beside ``dst``; with a remote scheduler it
+        Folder for the per-tile spill files (default: beside ``dst``, or the temporary folder
+        when ``dst`` is None; with a remote scheduler it
         must be on a file system the workers see).
     """
     check_choice(method, "method", METHODS)
@@ -859,6 +871,10 @@ def remove_outliers_tiled(
     n = source.n
     if n < k + 1:
         raise InvalidInputError(f"`k` = {k} neighbours need at least {k + 1} points; got {n}.")
+    if dst is not None and source.kind == "array" and not str(dst).lower().endswith(".npy"):
+        raise InvalidInputError(
+            f"{Path(dst).name}: the kept points of an array are written as .npy."
+        )
     if method == "rpca":
         tile = _rpca_tile(tile, rpca_options)
     with _scratch_dir(dst, scratch) as spill:
@@ -881,14 +897,17 @@ def remove_outliers_tiled(
     )  # fmt: skip
     n_kept = int(keep.sum())
     # last pass: the kept rows
-    writer = source.writer(Path(dst), n_kept)
-    ok = False
-    try:
-        for a, _xyz, rows in source.chunks(chunk):
-            writer.write(rows[keep[a : a + len(_xyz)]])
-        ok = True
-    finally:
-        writer.close(ok)
+    if dst is not None:
+        writer = source.writer(Path(dst), n_kept)
+        ok = False
+        try:
+            for a, _xyz, rows in source.chunks(chunk):
+                writer.write(rows[keep[a : a + len(_xyz)]])
+            ok = True
+        finally:
+            writer.close(ok)
+    else:
+        return_arrays = True
     info.update(n_workers=n_workers, **stats.info())
     _timing(info, tiles, t_start, t_tiles, source)
     return TiledResult(
