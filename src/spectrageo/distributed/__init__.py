@@ -2,8 +2,10 @@
 
 * :func:`batch` -- a single-file command (``denoise``, ``outliers``, ``saliency``, ``compress``,
   ``complete``, ``convert``) over many files, one Dask task per file, with a JSON summary.
-* :func:`remove_outliers_tiled` -- outlier removal of a cloud streamed from PLY/NPY/LAS/LAZ in
-  spatial tiles with halos, one Dask task per tile, written streaming (see ``docs/scaling.md``).
+* :func:`remove_outliers_tiled` -- outlier removal of a cloud streamed from PLY/NPY/LAS/LAZ (or
+  an (n, 3) numpy / ``dask.array``) in spatial tiles with halos, one Dask task per tile, written
+  streaming (see ``docs/scaling.md``); with ``method="rpca"`` and ``tile >= block_size`` it equals
+  :func:`spectrageo.outliers.remove_outliers`.
 * :func:`saliency_tiled`, :func:`robot_denoise_tiled` -- point-cloud saliency and the robot
   pipeline's outlier removal + bilateral filtering, tiled the same way.
 * :func:`gft_rpca_blocks` -- mesh-animation denoising (Algorithm 3) in online mode, one Dask task
