@@ -183,3 +183,18 @@ def test_batch_against_loopback_scheduler(scheduler, tmp_path):
         ref = outliers.remove_outliers(X, method="sor", k=10)
         np.testing.assert_array_equal(np.load(tmp_path / "rem" / f"c{i}.npy"), X[ref.keep])
         assert 0 < ref.keep.sum() < len(X)
+
+
+def test_rpca_tiles_equal_untiled_against_loopback_scheduler(scheduler, tmp_path):
+    """Python API on the real scheduler: RPCA tiles at ``block_size`` equal the untiled run."""
+    from spectrageo import distributed as sgd
+
+    P = _cloud()
+    np.save(tmp_path / "c.npy", P)
+    ref = outliers.remove_outliers(P, block_size=1600)
+    r = sgd.remove_outliers_tiled(
+        tmp_path / "c.npy", None, tile=1600, scheduler=scheduler, block_size=1600
+    )
+    assert r.n_tiles == 4 and r.info["n_workers"] == 2
+    np.testing.assert_array_equal(r.scores, ref.scores)
+    np.testing.assert_array_equal(r.keep, ref.keep)
