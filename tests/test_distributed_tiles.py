@@ -124,6 +124,23 @@ def test_robot_tiled_many_tiles_close_to_pipeline(cloud, tmp_path):
     assert np.median(dist) < 1e-4 * np.ptp(X[:, 0])
 
 
+def test_robot_tiled_equals_pipeline_at_block_size(cloud, tmp_path, monkeypatch):
+    # with a block size the test cloud exceeds, the untiled pipeline's RPCA step runs on the
+    # tiles the tiled run uses (tile >= block_size): same keep mask, points to rounding
+    import spectrageo.outliers.rpca as rp
+
+    monkeypatch.setattr(rp, "BLOCK_SIZE", 3000)
+    monkeypatch.setitem(rp.rpca_scores.__kwdefaults__, "block_size", 3000)
+    d, X = cloud
+    ref = outliers.robot_pipeline(X)
+    r = distributed.robot_denoise_tiled(
+        d / "c.npy", tmp_path / "r.npy", tile=5000, return_arrays=True, **THREADS
+    )
+    assert r.n_tiles == 8
+    np.testing.assert_array_equal(r.keep, ref.keep)
+    np.testing.assert_allclose(r.points, ref.points.points, rtol=0, atol=1e-12)
+
+
 def test_cli_robot_tile_round_trip(tmp_path):
     X = _surface(6000, 60, seed=3)
     col = np.random.default_rng(2).integers(0, 255, (X.shape[0], 3), dtype=np.uint8)
