@@ -49,12 +49,13 @@ Reach and global steps of each method:
   scores kept. The tiled run splits at ``ceil(log2(n / min(tile, block_size)))`` levels, the same
   whenever ``tile >= block_size`` (or ``tile`` gives the same number of levels), and then
   ``outliers --tile N`` equals the untiled run (bit for bit on the tests); smaller tiles split
-  further and give an approximation. Scores are rescaled to the global point spacing (median of the own points'
-  mean kNN distance over all tiles) before the global threshold, which is the automatic rule of
-  :func:`spectrageo.outliers.remove_outliers` (``"valley"``) over all scores; the points flagged
-  as small volumetric clusters (step 8 of :func:`spectrageo.outliers.rpca_scores`, per tile: a
-  cluster of at most 150 points lies inside its tile's halo unless it straddles the region's
-  outer edge) are removed whatever their score, as in the untiled run.
+  further and give an approximation. Scores are rescaled to the global point spacing (median of
+  the own points' mean kNN distance over all tiles) before the global threshold, which is the
+  automatic rule of :func:`spectrageo.outliers.remove_outliers` (``"valley"``) over all scores;
+  the points flagged as small volumetric clusters (step 8 of
+  :func:`spectrageo.outliers.rpca_scores`, per tile: a cluster of at most 150 points lies inside
+  its tile's halo unless it straddles the region's outer edge) are removed whatever their score,
+  as in the untiled run.
 * ``saliency`` (:func:`spectrageo.saliency.pointcloud_saliency`, Eq. 6.30-6.33): ``s_p`` reads the
   normals of ``{p} + kNN_k(p)`` (Eq. 6.30) and each normal is the PCA of its point's
   ``normal_k``-NN (Eq. 6.31): two hops ``(k, normal_k)``; local, so exact. The tiles return the
@@ -64,11 +65,10 @@ Reach and global steps of each method:
   eigenvalue sums of Eq. 6.32 run over neighbours in index order, which differs between the
   region and the whole cloud).
 * ``robot`` (:func:`spectrageo.outliers.robot_pipeline`): (a) RPCA outlier removal with
-  ``rpca_k`` -- the ``rpca`` tiles above (equal to the untiled run when ``tile >= block_size``), but
-  with the untiled rule after gathering: the automatic threshold rule of
+  ``rpca_k`` -- the ``rpca`` tiles above (equal to the untiled run when ``tile >= block_size``),
+  but with the untiled rule after gathering: the automatic threshold rule of
   :func:`spectrageo.outliers.remove_outliers` over all scores, and the points flagged as small
-  clusters (per tile) removed whatever their score; (b) per
-  filter pass of :func:`spectrageo.outliers.bilateral_point_filter` (Eq. 5.100-5.101) the new
+  clusters (per tile) removed whatever their score; (b) per filter pass of :func:`spectrageo.outliers.bilateral_point_filter` (Eq. 5.100-5.101) the new
   ``v_p`` reads the kNN cell ``kNN_k(p)``, the cell-mean normal ``n_p`` (PCA normals of ``p`` and
   of its ``k`` neighbours, each over its own ``k``-NN) and ``sigma2_p`` from the same cell: two
   hops ``(k, k)`` among the kept points. Its global step is the default ``sigma1``, the mean
@@ -417,8 +417,8 @@ def _region(spill, t, boxes, w, n_tiles, tag="", balls=None):
 def _own_knn(P: np.ndarray, m: int, k: int, workers, known=None):
     """Exact ``k``-NN (self excluded) of the first ``m`` points of ``P`` among all of ``P``, by the
     compiled grid search of the untiled filters: ``dmean`` and ``dlast`` of the ``m`` points
-    (input order) and ``(radii, used)``: a function ``(rows, k2) -> dlast`` of any rows, and one giving the sorted rows of the ``m``
-    points and of all their neighbours.
+    (input order) and ``(radii, used)``: a function ``(rows, k2) -> dlast`` of any rows, and one
+    giving the sorted rows of the ``m`` points and of all their neighbours.
 
     ``known``, when given, is ``(dmean, dlast, edge)`` from a search among ``P[:m]`` (the own
     points) where every point not flagged in ``edge`` has its whole ``k``-NN ball inside the own
@@ -863,6 +863,8 @@ def remove_outliers_tiled(
         raise InvalidInputError(f"`tile` must be >= 2 k = {2 * k} points; got {tile}.")
     if rpca_options and method != "rpca":
         raise InvalidInputError(f"options {sorted(rpca_options)} apply to method='rpca' only.")
+    if "partition" in rpca_options:
+        raise InvalidInputError("`partition` does not apply to tiled runs (they are the tiles).")
     if threshold is not None:
         check_positive(threshold, "threshold", allow_zero=method == "sor")
     require_dask()
@@ -1134,8 +1136,9 @@ def robot_denoise_tiled(
 
     As :func:`spectrageo.outliers.robot_pipeline` with ``output="cloud"``: the RPCA step is the
     tiled ``rpca`` of :func:`remove_outliers_tiled` (tiles of at most ``min(tile, 2^22)`` points,
-    the untiled run's own, so the keep mask equals the untiled one); given its keep mask, the filter equals the untiled one to rounding (reach
-    ``(k, k)`` per pass, the global default ``sigma1`` gathered first; module docstring).
+    the untiled run's own, so the keep mask equals the untiled one); given its keep mask, the
+    filter equals the untiled one to rounding (reach ``(k, k)`` per pass, the global default
+    ``sigma1`` gathered first; module docstring).
 
     Parameters
     ----------
