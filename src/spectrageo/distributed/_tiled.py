@@ -355,11 +355,13 @@ def _load(spill: str, t: int, tag: str = "") -> tuple[np.ndarray, np.ndarray]:
 def _protrusion(P: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray, glo, ghi):
     """Per point, how far the ball ``B(P_i, r_i)`` reaches beyond the box ``[lo, hi]`` (sides on
     the global bounding box excepted: no point lies beyond them); (n,) >= 0."""
-    if P.shape[0] == 0:
-        return np.zeros(0)
-    out_lo = np.where(lo > glo, lo - (P - r[:, None]), 0.0)
-    out_hi = np.where(hi < ghi, (P + r[:, None]) - hi, 0.0)
-    return np.maximum(np.maximum(out_lo.max(axis=1), out_hi.max(axis=1)), 0.0)
+    out = np.zeros(P.shape[0])
+    for a in range(3):  # one column at a time (a few 1-D passes instead of (n, 3) temporaries)
+        if lo[a] > glo[a]:
+            np.maximum(out, lo[a] - (P[:, a] - r), out=out)
+        if hi[a] < ghi[a]:
+            np.maximum(out, (P[:, a] + r) - hi[a], out=out)
+    return out
 
 
 def _reach(P, r, lo, hi, glo, ghi, w_min: float = 0.0):
@@ -420,10 +422,12 @@ def _own_knn(P: np.ndarray, m: int, k: int, workers, known=None):
     (input order) and ``(radii, used)``: a function ``(rows, k2) -> dlast`` of any rows, and one
     giving the sorted rows of the ``m`` points and of all their neighbours.
 
-    ``known``, when given, is ``(dmean, dlast, edge)`` from a search among ``P[:m]`` (the own
-    points) where every point not flagged in ``edge`` has its whole ``k``-NN ball inside the own
-    box, so its neighbours are own points and final; only the ``edge`` points are searched
-    again."""
+    ``known``, when given, is ``(dmean, dlast, nbr, n_zero, edge)`` from a search among ``P[:m]``
+    (the own points) where every point not flagged in ``edge`` has its whole ``k``-NN ball
+    inside the own box, so its neighbours are own points and final; only the ``edge`` points
+    are searched again. Also returns ``(sc, nbr, n_zero)``: the sorted cloud of ``P``, the own
+    points' neighbours (``(m, k)`` rows of ``P``, nearest first) and how many own points have
+    a neighbour at distance 0."""
     from ..outliers._common import SortedCloud, knn_grid, numba_threads
 
     sc = SortedCloud.of(P)
@@ -441,16 +445,26 @@ def _own_knn(P: np.ndarray, m: int, k: int, workers, known=None):
             nb = knn_grid(sc, kk, query=q, self_index=q)
         return nb, back
 
+    idt = np.int32 if P.shape[0] < 2**31 else np.int64
     if known is None:
-        nb, back = query(np.arange(m), k)
+        if m == P.shape[0]:  # every point queries: the plain search (as rpca_scores runs it)
+            with numba_threads(workers):
+                nb = knn_grid(sc, k)
+            back = pos
+        else:
+            nb, back = query(np.arange(m), k)
         dmean, dlast = nb.dmean[back], nb.dlast[back]
+        nbr = sc.order[nb.idx[back]].astype(idt)
+        n_zero = nb.n_zero
     else:
-        dmean, dlast, edge = (np.array(a) for a in known)
+        dmean, dlast, nbr, n_zero, edge = known
+        dmean, dlast, nbr = dmean.copy(), dlast.copy(), nbr.copy()
         rows = np.flatnonzero(edge)
         nb = None
         if rows.size:
             nb, back = query(rows, k)
             dmean[rows], dlast[rows] = nb.dmean[back], nb.dlast[back]
+            nbr[rows] = sc.order[nb.idx[back]]
 
     def radii(rows: np.ndarray, k2: int) -> np.ndarray:
         r, at = query(rows, k2)
@@ -464,13 +478,15 @@ def _own_knn(P: np.ndarray, m: int, k: int, workers, known=None):
             mark[sc.order[nb.idx.ravel()]] = True
         return np.flatnonzero(mark)
 
-    return dmean, dlast, (radii, used)
+    return dmean, dlast, (radii, used), (sc, nbr, n_zero)
 
 
 def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
     """Own points, their rows, the region (own points first), ``dmean`` (m,): the mean distance
-    of the own points to their ``hops[0]`` nearest region points (self excluded), and the halo
-    width, with a halo wide enough for the reach ``hops`` (module docstring). The neighbour
+    of the own points to their ``hops[0]`` nearest region points (self excluded), the halo
+    width, with a halo wide enough for the reach ``hops`` (module docstring), and ``knn``: the
+    region's sorted cloud, the own points' ``hops[0]`` nearest neighbours (rows of the region)
+    and the number of own points with a duplicate (see :func:`_own_knn`). The neighbour
     searches are the compiled exact grid search of the untiled filters."""
     from scipy.spatial import cKDTree
 
@@ -481,10 +497,10 @@ def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
     core, cidx = _load(spill, t, tag)
     m = core.shape[0]
     if m == 0:
-        return core, cidx, core, np.empty(0), 0.0
+        return core, cidx, core, np.empty(0), 0.0, None
     known = None
     if m > k1:  # k1-NN radii among the own points
-        d0, r0, _ = _own_knn(core, m, k1, workers)
+        d0, r0, _, (_, nbr0, nz0) = _own_knn(core, m, k1, workers)
     else:  # too few own points: widen until the region has k1 + 1 points, radii in it
         w = max(float(np.max(ghi - glo)) / 64.0, np.finfo(float).tiny)
         while True:
@@ -496,13 +512,13 @@ def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
         r0 = d0.reshape(m, -1)[:, -1]
     w, bc, br, edge = _reach(core, r0, lo, hi, glo, ghi)
     if m > k1:  # balls inside the box hold only own points: those neighbours are final
-        known = (d0, r0, edge)
+        known = (d0, r0, nbr0, nz0, edge)
     core, cidx, R = _region(spill, t, boxes, w, n_tiles, tag, (bc, br))
     if R.shape[0] < k1 + 1:
         raise InvalidInputError(
             f"`k` = {k1} neighbours need at least {k1 + 1} points; the cloud has fewer."
         )
-    dmean, dlast, (radii, used) = _own_knn(R, m, k1, workers, known)
+    dmean, dlast, (radii, used), knn = _own_knn(R, m, k1, workers, known)
     if len(hops) > 2:  # pragma: no cover - internal: reaches of at most two hops
         raise ValueError("reach of at most two hops")
     if len(hops) == 2:
@@ -527,7 +543,27 @@ def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
             # the own points' k1-NN were exact already: ``dmean`` stands
             core, cidx, R = _region(spill, t, boxes, w, n_tiles, tag, balls)
             bc, br = balls
-    return core, cidx, R, dmean, float(w)
+            knn = _requery(R, m, k1, workers, knn[1], knn[2], known)
+    return core, cidx, R, dmean, float(w), knn
+
+
+def _requery(R, m, k, workers, nbr, n_zero, known):
+    """``(sc, nbr, n_zero)`` of :func:`_own_knn` for a reloaded region ``R`` (same own points
+    first): the own points whose neighbours may lie in the halo (the ``edge`` points of
+    ``known``, or all without it) are searched again in ``R``."""
+    from ..outliers._common import SortedCloud, knn_grid, numba_threads
+
+    sc = SortedCloud.of(R)
+    rows = np.arange(m) if known is None else np.flatnonzero(known[4])
+    if rows.size:
+        pos = np.empty(R.shape[0], dtype=np.int64)
+        pos[sc.order] = np.arange(R.shape[0])
+        q = np.sort(pos[rows])
+        with numba_threads(workers):
+            nb = knn_grid(sc, k, query=q, self_index=q)
+        nbr = nbr.copy()
+        nbr[sc.order[q]] = sc.order[nb.idx]
+    return sc, nbr, n_zero
 
 
 def _tile_job(
@@ -547,9 +583,10 @@ def _tile_job(
     ``n_region``, ``w`` and ``time_s`` are added."""
     t0 = time.perf_counter()
     workers = n_threads if n_threads is not None else -1
-    core, cidx, R, dmean, w = _halo_region(spill, t, boxes, gbox, hops, workers, tag)
+    core, cidx, R, dmean, w, knn = _halo_region(spill, t, boxes, gbox, hops, workers, tag)
     m = core.shape[0]
-    out = {} if m == 0 else fn(R, m, dmean, workers=workers, **params)
+    kw = {"knn": (*knn, dmean)} if getattr(fn, "takes_knn", False) else {}
+    out = {} if m == 0 else fn(R, m, dmean, workers=workers, **kw, **params)
     out.update(
         idx=cidx,
         n_region=int(R.shape[0]) if m else 0,
@@ -609,8 +646,10 @@ class _Stats:
 
 
 # ----------------------------------------------------------------------------- per-tile functions
-def _outlier_fn(R, m, dmean, *, workers, k, method, rpca_options) -> dict:
-    """Outlier scores of the own points (``dmean``: their mean ``k``-NN distance)."""
+def _outlier_fn(R, m, dmean, *, workers, k, method, rpca_options, knn=None) -> dict:
+    """Outlier scores of the own points (``dmean``: their mean ``k``-NN distance; ``knn``: the
+    region's sorted cloud and the own points' neighbours from the halo search, reused by the
+    RPCA's kNN step)."""
     from .. import outliers
 
     out: dict[str, Any] = {"dmean": np.asarray(dmean, dtype=np.float64)}
@@ -620,8 +659,9 @@ def _outlier_fn(R, m, dmean, *, workers, k, method, rpca_options) -> dict:
         s = out["dmean"]
     else:  # one RPCA over the region (no further tiling: it is the untiled method's tile)
         r = outliers.rpca_scores(
-            R, k, workers=workers, on_nonconvergence="ignore", partition="blocks", **rpca_options
-        )
+            R, k, workers=workers, on_nonconvergence="ignore", partition="blocks",
+            _knn=knn, **rpca_options,
+        )  # fmt: skip
         s = r.scores[:m]
         out.update(
             spacing=float(r.spacing),
@@ -637,6 +677,9 @@ def _outlier_fn(R, m, dmean, *, workers, k, method, rpca_options) -> dict:
             out["smoothed"] = r.smoothed[:m]
     out["scores"] = np.asarray(s, dtype=np.float64)
     return out
+
+
+_outlier_fn.takes_knn = True  # type: ignore[attr-defined]
 
 
 def _saliency_fn(R, m, _dmean, *, workers, k, normal_k) -> dict:

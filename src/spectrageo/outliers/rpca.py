@@ -62,6 +62,7 @@ from . import _kernels as _k
 from ._clusters import cluster_outliers
 from ._common import (
     KNN_CHUNK,
+    Neighbours,
     SortedCloud,
     as_cloud,
     check_k,
@@ -189,6 +190,7 @@ def rpca_scores(
     device: Any = "cpu",
     second_pass: str = "replay",
     partition: str = "tiles",
+    _knn: Any = None,
 ) -> PatchRPCAResult:
     r"""Per-point outlier scores ``||s_i||_2`` of Eq. (5.99) from RPCA of the patch matrix.
 
@@ -436,11 +438,12 @@ def rpca_scores(
         clusters=bool(clusters),
         second_pass=second_pass,
         partition=partition,
+        knn=_knn,
     )
     if partition == "tiles" and n > block_size:
         from ..distributed._tiled import rpca_tiles_in_memory
 
-        for key in ("on_nonconvergence", "partition"):
+        for key in ("on_nonconvergence", "partition", "knn"):
             opts.pop(key)
         res = rpca_tiles_in_memory(X, k, **opts)
         _report(res, on_nonconvergence, max_iter)
@@ -460,11 +463,14 @@ def _rpca_scores(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
     smoothed, refine = opts["smoothed"], opts["refine"]
     tangent_weight = opts["tangent_weight"]
     weighted = tangent_weight < 1
-    sc = SortedCloud.of(X)
+    if opts.get("knn") is None:
+        sc = SortedCloud.of(X)
+        nb = knn_grid(sc, k)
+    else:  # a tile region: the halo search's sorted cloud and own points' neighbours
+        sc, nb = _complete_knn(opts["knn"], k)
     order, Xs = sc.order, sc.points
-    nb = knn_grid(sc, k)
     if nb.n_zero:
-        return _scores_deduplicated(X, k, **opts)
+        return _scores_deduplicated(X, k, **{key: v for key, v in opts.items() if key != "knn"})
     h = spacing_from(nb.dmean)
     idx = nb.idx
     del nb  # the distances are not needed any more
@@ -537,6 +543,35 @@ def _rpca_scores(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
     )
     _report(res, opts["on_nonconvergence"], opts["max_iter"])
     return res
+
+
+def _complete_knn(knn: Any, k: int) -> tuple[SortedCloud, Neighbours]:
+    """Step 1 on a tile region whose first ``m`` rows (the tile's own points) already have their
+    exact ``k`` nearest neighbours from the halo search (``spectrageo.distributed``): ``knn`` is
+    ``(sc, nbr, n_zero, dmean)`` with ``sc`` the region's sorted cloud, ``nbr`` (m, k) region
+    rows, ``n_zero`` the own points with a duplicate, ``dmean`` (m,). The other rows are searched
+    here; the result is what :func:`knn_grid` gives for every row, up to the order of exactly
+    equidistant neighbours."""
+    sc, nbr, n_zero, dmean = knn
+    n, m = sc.points.shape[0], nbr.shape[0]
+    if nbr.shape[1] != k:  # pragma: no cover - internal: the halo searched with another k
+        raise ValueError("neighbour lists of another k")
+    pos = np.empty(n, dtype=np.int64)
+    pos[sc.order] = np.arange(n)
+    idt = np.int32 if n < 2**31 else np.int64
+    idx = np.empty((n, k), dtype=idt)
+    dm = np.empty(n)
+    own = pos[:m]
+    idx[own] = pos[nbr]
+    dm[own] = dmean
+    dlast = np.full(n, np.nan)  # not used by the scores
+    if n > m:
+        q = np.sort(pos[m:])
+        rest = knn_grid(sc, k, query=q, self_index=q)
+        idx[q] = rest.idx
+        dm[q] = rest.dmean
+        n_zero += rest.n_zero
+    return sc, Neighbours(idx, dm, dlast, int(n_zero))
 
 
 #: Flagging floor of the refinement pass, in spacings (see :func:`rpca_scores`, step 5).
