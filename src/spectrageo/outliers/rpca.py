@@ -345,6 +345,10 @@ def rpca_scores(
         patches, neighbours anywhere); the behaviour before issue 21's exact tiles. Choice: on
         the 10^7-point benchmark cloud of ``docs/scaling.md`` (1 % outliers) the tiles also
         flag fewer inliers (F1 in ``docs/scaling.md``).
+    _knn : internal
+        Used by the tile function of :mod:`spectrageo.distributed`: the region's sorted cloud
+        and its own points' neighbours from the halo search (:func:`_complete_knn`); leave
+        unset.
     smoothed : bool
         Also return the first column of ``E`` (the smoothed position of every point).
     on_nonconvergence : {"warn", "raise", "ignore"}
