@@ -285,10 +285,11 @@ class _MemorySpill:
 def _memory_tiles(X: np.ndarray, tile: int, chunk: int = CHUNK) -> _Tiles:
     """:func:`_partition` of an in-memory (n, 3) float64 cloud: the same sample, boxes and
     membership (rows in input order) as streaming it from a file."""
+    from ..outliers._common import column_bounds
+
     n = X.shape[0]
     stride = max(1, n // SAMPLE)
-    glo = np.array([X[:, j].min() for j in range(3)])
-    ghi = np.array([X[:, j].max() for j in range(3)])
+    glo, ghi = column_bounds(X)
     levels = _levels(n, tile)
     axis, value, boxes = _plan(X[::stride], levels, glo, ghi)
     leaf = np.empty(n, dtype=np.int64)
@@ -302,6 +303,8 @@ def _memory_tiles(X: np.ndarray, tile: int, chunk: int = CHUNK) -> _Tiles:
 
 def _partition(source: PointSource, src, tile: int, chunk: int, spill: str) -> _Tiles:
     """Passes 1 (bounding box, sample, k-d boxes) and 2 (spill every point to its box)."""
+    from ..outliers._common import column_bounds
+
     t0 = time.perf_counter()
     n = source.n
     stride = max(1, n // SAMPLE)
@@ -313,7 +316,8 @@ def _partition(source: PointSource, src, tile: int, chunk: int, spill: str) -> _
                 f"{source.path.name}: NaN/inf coordinates near row {a}; tiled processing needs "
                 "finite points (run without --tile to drop them)."
             )
-        glo, ghi = np.minimum(glo, xyz.min(axis=0)), np.maximum(ghi, xyz.max(axis=0))
+        lo_c, hi_c = column_bounds(xyz)
+        glo, ghi = np.minimum(glo, lo_c), np.maximum(ghi, hi_c)
         first = (-a) % stride
         samples.append(xyz[first::stride])
     levels = _levels(n, tile)
@@ -543,27 +547,9 @@ def _halo_region(spill, t, boxes, gbox, hops, workers, tag=""):
             # the own points' k1-NN were exact already: ``dmean`` stands
             core, cidx, R = _region(spill, t, boxes, w, n_tiles, tag, balls)
             bc, br = balls
-            knn = _requery(R, m, k1, workers, knn[1], knn[2], known)
+            # own points whose neighbours may lie in the halo are searched again in the new R
+            knn = _own_knn(R, m, k1, workers, known)[3]
     return core, cidx, R, dmean, float(w), knn
-
-
-def _requery(R, m, k, workers, nbr, n_zero, known):
-    """``(sc, nbr, n_zero)`` of :func:`_own_knn` for a reloaded region ``R`` (same own points
-    first): the own points whose neighbours may lie in the halo (the ``edge`` points of
-    ``known``, or all without it) are searched again in ``R``."""
-    from ..outliers._common import SortedCloud, knn_grid, numba_threads
-
-    sc = SortedCloud.of(R)
-    rows = np.arange(m) if known is None else np.flatnonzero(known[4])
-    if rows.size:
-        pos = np.empty(R.shape[0], dtype=np.int64)
-        pos[sc.order] = np.arange(R.shape[0])
-        q = np.sort(pos[rows])
-        with numba_threads(workers):
-            nb = knn_grid(sc, k, query=q, self_index=q)
-        nbr = nbr.copy()
-        nbr[sc.order[q]] = sc.order[nb.idx]
-    return sc, nbr, n_zero
 
 
 def _tile_job(

@@ -84,7 +84,10 @@ RANK_BIN = float(np.log10(2.0))  # decades per level
 RANK_TOL = 3e-3
 #: Default number of points per independent RPCA block (and the largest tile of
 #: ``partition="tiles"``): 2^22, so clouds of up to 4.2M points are one region (no halo work)
-#: and the solver state of a block stays near 0.55 GB (float32, k = 10).
+#: and the solver state of a block stays near 0.55 GB (float32, k = 10). Chosen for time and
+#: memory on the 10^7-point clouds of ``benchmarks/outliers_large.py`` and
+#: ``benchmarks/tiled_1e8.py`` (dragon prefix: 10^6 gave 16 tiles, 105 s, F1 0.975; 2^22 with a
+#: faster halo search 4 tiles, 50 s, F1 0.998), so those clouds informed it and are not held out.
 BLOCK_SIZE = 2**22
 #: Fewest points per thread of the fused kernels (smaller blocks run on the calling thread).
 _MIN_PER_THREAD = 10_000
@@ -339,7 +342,8 @@ def rpca_scores(
         (its own spacing, refinement threshold and clusters), the own points' scores kept and
         rescaled to the global spacing. The tiled command then gives the same scores and keep
         mask (tested bit for bit) whenever its ``--tile`` is at least ``block_size``, and memory
-        is bounded by one region (about ``1.3-1.6 x block_size`` points) besides the cloud.
+        is bounded by one region (a tile plus its halo: up to about ``1.6 x block_size``
+        points on the benchmark clouds) besides the cloud.
         ``"blocks"``: one kNN search, spacing and refinement threshold over the whole cloud,
         the ALM in blocks of consecutive points along the Morton curve (rows: the block's
         patches, neighbours anywhere); the behaviour before issue 21's exact tiles. Choice: on

@@ -390,7 +390,7 @@ def remove_outliers(
     **rpca_options
         Passed to :func:`spectrageo.outliers.rpca_scores` (``lam``, ``rho``, ``tol``,
         ``rank_tol``, ``max_iter``, ``block_size``, ``on_nonconvergence``, ``refine``,
-        ``tangent_weight``, ``dtype``, ``clusters``, ``second_pass``).
+        ``tangent_weight``, ``dtype``, ``clusters``, ``second_pass``, ``partition``).
 
     Returns
     -------
