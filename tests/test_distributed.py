@@ -310,3 +310,26 @@ def test_tiled_outliers_on_arrays(tmp_path):
         distributed.remove_outliers_tiled(X, tmp_path / "k.ply", tile=1500, **_THREADS)
     with pytest.raises(InvalidInputError, match="expected an"):
         distributed.remove_outliers_tiled(X[:, :2], None, tile=1500, **_THREADS)
+
+
+def test_tiled_rpca_with_an_empty_tile_equals_untiled(tmp_path):
+    rng = np.random.default_rng(0)
+    X = np.r_[
+        rng.random((1000, 3)) * [10.0, 1.0, 1.0], np.c_[np.full(3000, 5.0), rng.random((3000, 2))]
+    ]
+    np.save(tmp_path / "c.npy", X)
+    ref = outliers.rpca_scores(X, 10, block_size=1000)
+    r = distributed.remove_outliers_tiled(
+        tmp_path / "c.npy", None, tile=1000, block_size=1000, **_THREADS
+    )
+    assert r.n_tiles == 4
+    np.testing.assert_array_equal(r.scores, ref.scores)
+
+
+def test_tiled_rpca_mostly_copies_is_a_clear_error(tmp_path):
+    # more than half of the points are one position: no global spacing (was NaN scores)
+    rng = np.random.default_rng(0)
+    X = np.r_[rng.random((2000, 3)), np.zeros((3000, 3)) + 0.5]
+    np.save(tmp_path / "c.npy", X)
+    with pytest.raises(InvalidInputError, match="exact copies"):
+        distributed.remove_outliers_tiled(tmp_path / "c.npy", None, tile=1300, **_THREADS)

@@ -227,6 +227,36 @@ def test_rpca_blocks_bound_memory_and_agree():
     assert abs(tiles.spacing - one.spacing) < 1e-12 * one.spacing  # global spacing, exact kNN
 
 
+def test_rpca_tiles_with_many_copies():
+    # a tile made of copies of one point has no patch: the tiled partition scores the distinct
+    # positions (as the single-block path does) and gives every copy its position's score
+    rng = np.random.default_rng(0)
+    X = np.r_[np.zeros((3000, 3)) + 5.0, rng.random((200, 3))]
+    r = rpca_scores(X, 10, block_size=1000)
+    assert np.isfinite(r.scores).all()
+    assert np.ptp(r.scores[:3000]) == 0.0
+    one = rpca_scores(X, 10)  # one block: the same deduplicated problem
+    np.testing.assert_array_equal(r.scores, one.scores)
+
+
+def _plane_and_box(seed=0):
+    """An elongated box of points and a dense plane across it: the k-d split of the tiles puts
+    every sample point of one leaf on the plane's side, so that leaf is empty."""
+    rng = np.random.default_rng(seed)
+    A = rng.random((1000, 3)) * [10.0, 1.0, 1.0]
+    B = np.c_[np.full(3000, 5.0), rng.random((3000, 2))]
+    return np.r_[A, B]
+
+
+def test_rpca_tiles_with_an_empty_tile():
+    from spectrageo.distributed._tiled import _memory_tiles
+
+    X = _plane_and_box()
+    assert min(len(r) for r in _memory_tiles(X, 1000).spill.rows) == 0
+    r = rpca_scores(X, 10, block_size=1000)
+    assert r.n_blocks == 4 and np.isfinite(r.scores).all()
+
+
 def test_rpca_threaded_ranges_match_single_thread(monkeypatch):
     """Splitting a block into point ranges on threads sums the same Gram matrices and residuals."""
     import spectrageo.outliers.rpca as rp

@@ -571,8 +571,10 @@ def _tile_job(
     workers = n_threads if n_threads is not None else -1
     core, cidx, R, dmean, w, knn = _halo_region(spill, t, boxes, gbox, hops, workers, tag)
     m = core.shape[0]
-    kw = {"knn": (*knn, dmean)} if getattr(fn, "takes_knn", False) else {}
-    out = {} if m == 0 else fn(R, m, dmean, workers=workers, **kw, **params)
+    out: dict = {}
+    if m:
+        kw = {"knn": (*knn, dmean)} if getattr(fn, "takes_knn", False) else {}
+        out = fn(R, m, dmean, workers=workers, **kw, **params)
     out.update(
         idx=cidx,
         n_region=int(R.shape[0]) if m else 0,
@@ -737,6 +739,11 @@ def _to_global_spacing(scores, dmean, tile_of, spacing) -> float:
     """Scores of the tiles (each in units of its own spacing) to units of the global spacing
     ``h`` (median over all points of the mean kNN distance), in place; returns ``h``."""
     h = float(np.median(dmean))
+    if not h > 0:  # the untiled run scores distinct positions; tiles cannot (copies span tiles)
+        raise InvalidInputError(
+            "more than half of the points are exact copies of others (median kNN distance 0); "
+            "tiled RPCA needs distinct points: remove the copies or run without --tile."
+        )
     scores *= (spacing / h)[tile_of]
     return h
 

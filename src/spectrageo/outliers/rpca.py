@@ -341,7 +341,9 @@ def rpca_scores(
         every neighbourhood its points' scores read, steps 1-8 run on each tile's region alone
         (its own spacing, refinement threshold and clusters), the own points' scores kept and
         rescaled to the global spacing. The tiled command then gives the same scores and keep
-        mask (tested bit for bit) whenever its ``--tile`` is at least ``block_size``, and memory
+        mask (tested bit for bit) whenever its ``--tile`` is at least ``block_size`` and the
+        cloud has no exactly repeated points (a cloud with copies is scored on its distinct
+        positions first, as below ``block_size``, which the streamed tiles do not do), and memory
         is bounded by one region (a tile plus its halo: up to about ``1.6 x block_size``
         points on the benchmark clouds) besides the cloud.
         ``"blocks"``: one kNN search, spacing and refinement threshold over the whole cloud,
@@ -451,6 +453,8 @@ def rpca_scores(
     if partition == "tiles" and n > block_size:
         from ..distributed._tiled import rpca_tiles_in_memory
 
+        if _has_duplicates(X):  # score the distinct positions (a tile of copies has no patch)
+            return _scores_deduplicated(X, k, **{key: v for key, v in opts.items() if key != "knn"})
         for key in ("on_nonconvergence", "partition", "knn"):
             opts.pop(key)
         res = rpca_tiles_in_memory(X, k, **opts)
@@ -764,6 +768,17 @@ def _report(res: PatchRPCAResult, policy: str, max_iter: int) -> None:
     if policy == "raise":
         raise ConvergenceError(msg, partial=res)
     warnings.warn(msg, ConvergenceWarning, stacklevel=3)
+
+
+def _has_duplicates(X: np.ndarray) -> bool:
+    """Whether two rows of ``X`` are equal (exact check only where Morton codes collide)."""
+    from ._common import morton_codes, sort_codes
+
+    codes = morton_codes(X)[0]
+    sc = codes[sort_codes(codes)]
+    if not np.any(sc[1:] == sc[:-1]):
+        return False
+    return int(np.unique(X, axis=0).shape[0]) < X.shape[0]
 
 
 def _scores_deduplicated(X: np.ndarray, k: int, **kw: Any) -> PatchRPCAResult:
