@@ -117,6 +117,119 @@ def test_fill_holes_max_hole_leaves_large_loops_open():
     assert boundary_edges(F2).shape[0] == boundary_edges(Fh).shape[0]
 
 
+def _grid(k=8):
+    """A flat (k+1) x (k+1) grid in z = 0 with consistently oriented faces (normals +z)."""
+    x, y = np.meshgrid(np.arange(k + 1.0), np.arange(k + 1.0), indexing="ij")
+    V = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    idx = lambda i, j: i * (k + 1) + j  # noqa: E731
+    F = []
+    for i in range(k):
+        for j in range(k):
+            F += [(idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)),
+                  (idx(i, j), idx(i + 1, j + 1), idx(i, j + 1))]  # fmt: skip
+    return V, np.asarray(F, dtype=np.int64)
+
+
+def test_liepa_patch_orientation_and_angle_weight():
+    """The fallback patch measures its dihedral angles against the mesh faces on the loop with
+    the right orientation: on a flat hole every patch triangle is coplanar with the rim and
+    oriented like it; on a saddle loop its largest dihedral angle is not above the minimum-area
+    triangulation's."""
+    from spectrageo.complete.holes import _border_normals, _directed_faces, _dp_patch
+
+    V, F = _grid(8)
+    n = len(V)
+    cen = V[F].mean(axis=1)
+    Fh = F[np.linalg.norm(cen[:, :2] - 4.0, axis=1) > 1.6]
+    loop = min(boundary_loops(Fh, n), key=len)  # the hole, not the outer border
+    P = V[loop]
+    nb = _border_normals(V, _directed_faces(Fh, n), loop, n)
+    assert np.isfinite(nb).all()
+    tri, new = _dp_patch(P, 10.0, border_normals=nb, max_splits=0)  # no split at this size
+    assert new.shape == (0, 3) and tri.shape == (loop.size - 2, 3)
+    cr = np.cross(P[tri[:, 2]] - P[tri[:, 0]], P[tri[:, 1]] - P[tri[:, 0]])
+    cr /= np.linalg.norm(cr, axis=1, keepdims=True)
+    assert np.allclose(cr @ nb[0], 1.0)  # same orientation as the rim's faces
+    # saddle loop: z = +-1 alternating around a circle
+    t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    S = np.column_stack([np.cos(t), np.sin(t), 0.6 * np.cos(2 * t)])
+
+    def max_dihedral(tr):
+        nrm = np.cross(S[tr[:, 2]] - S[tr[:, 0]], S[tr[:, 1]] - S[tr[:, 0]])
+        nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+        e = {}
+        for k, f in enumerate(tr):
+            for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
+                e.setdefault((min(a, b), max(a, b)), []).append(k)
+        return max(np.arccos(np.clip(nrm[p[0]] @ nrm[p[1]], -1, 1))
+                   for p in e.values() if len(p) == 2)  # fmt: skip
+
+    liepa, _ = _dp_patch(S, 10.0, max_splits=0)
+    # minimum-area triangulation by brute force over the same DP with angles ignored
+    L = len(S)
+    W = np.zeros((L, L))
+    O = np.zeros((L, L), dtype=int)
+    for gap in range(2, L):
+        for i in range(L - gap):
+            j = i + gap
+            m = np.arange(i + 1, j)
+            a = 0.5 * np.linalg.norm(np.cross(S[m] - S[i], S[j] - S[i]), axis=1)
+            c = W[i, m] + W[m, j] + a
+            W[i, j], O[i, j] = c.min(), m[np.argmin(c)]
+    area_tri, stack = [], [(0, L - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i >= 2:
+            area_tri.append((i, O[i, j], j))
+            stack += [(i, O[i, j]), (O[i, j], j)]
+    assert max_dihedral(liepa) <= max_dihedral(np.asarray(area_tri)) + 1e-9
+
+
+def test_fill_holes_keeps_touching_parts_apart():
+    """Coincident vertices inside the surface (two parts that touch) are not welded: the filled
+    mesh has no edge with more than two faces, and the untouched part keeps its faces."""
+    trimesh = pytest.importorskip("trimesh")
+    V, F = icosphere(2)
+    V2 = V + np.array([2.0, 0.0, 0.0])  # second sphere touching the first at (1, 0, 0)
+    i = int(np.argmax(V[:, 0]))
+    j = int(np.argmin(V2[:, 0]))
+    V2[j] = V[i]  # one coincident vertex, distinct rows
+    n1 = len(V)
+    VV = np.concatenate([V, V2])
+    Fh = _cut_holes(V, F, [-V[i]], 0.4)  # a hole on the far side of the first sphere
+    FF = np.concatenate([Fh, F + n1])
+    Vo, Fo = fill_holes(VV, FF)
+    assert boundary_edges(Fo).shape[0] == 0
+    E = np.sort(np.concatenate([Fo[:, [0, 1]], Fo[:, [1, 2]], Fo[:, [2, 0]]]), axis=1)
+    _, cnt = np.unique(E, axis=0, return_counts=True)
+    assert cnt.max() == 2
+    assert np.array_equal(Fo[: len(FF)], FF)
+    assert trimesh.Trimesh(Vo, Fo, process=False).is_watertight
+
+
+def test_cut_holes_and_summary():
+    from spectrageo.evaluate.completion import cut_holes, holes_summary
+
+    V, F = icosphere(3)
+    Vh, Fh = cut_holes(V, F, 4, (1, 2), 0)
+    assert len(boundary_loops(Fh, len(Vh))) == 4
+    used = np.zeros(len(Vh), bool)
+    used[Fh.ravel()] = True
+    assert used.all() and len(Vh) < len(V)  # no vertex without a face
+    rows = [
+        {"part": "holes", "data": "a", "method": "lsm", "hd_surface": 1.0, "watertight": True,
+         "note": " (validation split)"},
+        {"part": "holes", "data": "a", "method": "pymeshlab", "hd_surface": 2.0,
+         "watertight": False, "note": " (validation split)"},
+        {"part": "holes", "data": "b", "method": "lsm", "hd_surface": 4.0, "watertight": True,
+         "note": " (validation split)"},
+        {"part": "holes", "data": "b", "method": "pymeshlab", "hd_surface": 2.0,
+         "watertight": True, "note": " (validation split)"},
+    ]  # fmt: skip
+    line = [x for x in holes_summary(rows).splitlines() if "| lsm |" in x][0]
+    assert "| validation | lsm | 2 | 1.000 | 2.000 | 1 / 2 | 2 / 2 |" == line
+
+
 def _animation(T=6):
     V, F = icosphere(2)
     t = np.arange(T)[:, None, None]

@@ -3,7 +3,8 @@ hole filling (thesis Section 5.3).
 
 - ``spectrageo complete IN OUT --known KNOWN.npy [--method mc|li|lsm]`` (meshes; the unknown rows
   of IN may hold anything, NaN included);
-- ``spectrageo complete IN OUT --fill-holes [--method li|lsm|mc]`` (meshes with holes);
+- ``spectrageo complete IN OUT --fill-holes [--method lsm|li|mc]`` (meshes with holes; ``lsm``
+  by default, see :func:`spectrageo.complete.fill_holes`);
 - ``spectrageo complete IN.npz OUT.npz --known KNOWN.npy [--method motion|li|lia|mc|gmc]
   [--sweeps N]``
   (animations with ``vertices`` + ``faces``; point-cloud sequences with ``points`` (T, n, 3), where
@@ -107,7 +108,7 @@ def cmd_complete(args) -> int:
     if args.fill_holes:
         if is_npz:
             raise InvalidInputError("`--fill-holes` works on a mesh file, not an .npz archive.")
-        method = args.method or "li"
+        method = args.method or "lsm"
         if method not in MESH_METHODS:
             raise InvalidInputError(
                 f"`--method` must be one of {', '.join(MESH_METHODS)} with --fill-holes."
@@ -174,7 +175,8 @@ def register(sub) -> None:
         "--method",
         default=None,
         choices=sorted(set(MESH_METHODS + ANIM_METHODS)),
-        help="meshes: li (default) | lsm | mc; animations: motion (default) | li | lia | mc",
+        help="meshes: li (default) | lsm | mc, with --fill-holes lsm (default) | li | mc; "
+        "animations: motion (default) | li | lia | mc",
     )
     p.add_argument(
         "--sweeps", type=int, default=None,
