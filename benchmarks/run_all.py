@@ -66,6 +66,7 @@ SECTIONS = [
     ("connectivity", _script("connectivity")),
     ("compress_animation", _evaluate("compress-animation", "compress_animation")),
     ("complete", _evaluate("complete", "complete")),
+    ("complete_large", _script("complete_large")),
     ("register", _evaluate("register", "register")),
     ("narrow_phase", _script("narrow_phase")),
     ("identify", _evaluate("identify", "identify")),
