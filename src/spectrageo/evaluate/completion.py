@@ -6,9 +6,14 @@
 - holes: every mesh of ``holes/`` closed by :func:`spectrageo.complete.fill_holes` (and by
   trimesh's ``fill_holes`` / PyMeshLab's close-holes when installed): boundary edges left,
   watertightness and, for the elephant, the symmetric Hausdorff distance to the clean elephant;
+- holes-cut: six holes cut into each of 29 clean meshes (:func:`cut_holes`; tuning split
+  :data:`HOLE_TUNING`, validation split :data:`HOLE_VALIDATION`), closed by ours and the peers,
+  Hausdorff distances to the clean mesh (also sampled over the surfaces, ``hd_surface``);
 - animations: the first frames of the shared animations with a random 30 % of the vertices known
   per frame (frame 0 complete), ``motion``/``li``/``lia``/``mc``/``gmc`` and, on the same data
-  read as a point-cloud sequence (kNN graph), ``wrli`` and its per-frame baseline ``seq-li``.
+  read as a point-cloud sequence (kNN graph), ``wrli`` and its per-frame baseline ``seq-li``;
+- sequence: the PCL grabber frames (real Kinect frames, pixel ``i`` = point ``i``), 30 % known
+  per frame after the first, ``wrli`` and ``seq-li``.
 
 Errors: ``rms`` = RMS error of the unknown vertices divided by the bounding-box diagonal, NMSVE
 (:func:`spectrageo.metrics.nmsve`), theta (degrees), KG (percent); times in seconds (per frame
@@ -38,7 +43,7 @@ from ._tables import pyplot, rows_to_csv, save_png, write_section
 
 TUNING = {"meshes": ("fandisk",), "seed": 1}
 VALIDATION = {"meshes": ("fandisk", "elephant", "joint", "armadillo"), "seed": 0}
-FRACTIONS = (0.3, 0.5, 0.7)
+FRACTIONS = (0.1, 0.3, 0.5, 0.7)
 PATTERNS = ("random", "region")
 STATIC_METHODS = ("mc", "li", "lsm", "mean")
 ANIMATIONS = (
@@ -46,6 +51,7 @@ ANIMATIONS = (
 )  # fmt: skip
 ANIM_METHODS = ("motion", "li", "lia", "mc", "gmc", "wrli", "seq-li")
 ANIM_FRAMES = 25
+GRABBER_STEP = 4
 ANIM_KNOWN = 0.3
 COLUMNS = ("part", "data", "n", "pattern", "known", "method", "rms", "nmsve", "theta_deg",
            "kg", "hd", "hd_surface", "hd_mean_surface", "watertight", "boundary_edges",
@@ -317,6 +323,58 @@ def _animations(data: Path, names, methods, n_frames, frac, seed) -> list[dict]:
     return rows
 
 
+def _grabber(data: Path, methods, frac, seed, step: int = GRABBER_STEP) -> list[dict]:
+    """The PCL grabber frames (3 consecutive Kinect frames, organised 640 x 480) as a point-cloud
+    sequence: point ``i`` is pixel ``i`` (every ``step``-th pixel of every ``step``-th row, those with a
+    depth in every frame), frame 0 complete, a random ``frac`` of the points known in the others;
+    ``wrli`` (Algorithm 13) against its per-frame baseline ``seq-li``."""
+    from .. import io
+    from ..complete import complete_sequence
+
+    folder = data / "scans" / "pcl" / "grabber_sequence"
+    if not folder.is_dir():
+        return []
+    frames = list(io.read(folder))
+    width, height = 640, 480
+    grid = np.zeros((height, width), dtype=bool)
+    grid[::step, ::step] = True
+    common = grid.ravel().copy()
+    full = []
+    for fr in frames:
+        idx = np.asarray(fr.attributes["source_index"])
+        have = np.zeros(width * height, dtype=bool)
+        have[idx] = True
+        common &= have
+        X = np.full((width * height, 3), np.nan)
+        X[idx] = fr.points
+        full.append(X)
+    pix = np.flatnonzero(common)
+    A = np.stack([X[pix] for X in full])
+    T, n, _ = A.shape
+    rng = np.random.default_rng([seed, n])
+    K = rng.random((T, n)) < frac
+    K[0] = True
+    Ain = A.copy()
+    Ain[~K] = np.nan
+    diag = float(np.linalg.norm(np.ptp(A[0], axis=0)))
+    rows = []
+    for meth in [m for m in methods if m in ("wrli", "seq-li")]:
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if meth == "wrli":  # the same ADMM budget as for the animations
+                X = complete_sequence(Ain, K, method="wrli", max_iter=100)
+            else:
+                X = complete_sequence(Ain, K, method="li")
+        sec = (time.perf_counter() - t0) / max(T - 1, 1)
+        u = ~K
+        rows.append({"part": "sequence", "data": f"pcl-grabber (every {step}th pixel)", "n": n,
+                     "pattern": "random", "known": frac, "method": meth,
+                     "rms": float(np.sqrt(np.mean(np.sum((X[u] - A[u]) ** 2, -1))) / diag),
+                     "seconds": sec, "note": "online, s/frame"})  # fmt: skip
+    return rows
+
+
 def evaluate(
     data_dir: Any,
     methods: list[str] | None = None,
@@ -327,7 +385,7 @@ def evaluate(
     patterns: tuple[str, ...] = PATTERNS,
     animations: tuple[str, ...] | None = None,
     n_frames: int = ANIM_FRAMES,
-    parts: tuple[str, ...] = ("static", "holes", "holes-cut", "animation"),
+    parts: tuple[str, ...] = ("static", "holes", "holes-cut", "animation", "sequence"),
 ) -> list[dict]:
     """Run the completion benchmarks; returns one row per run (keys of :data:`COLUMNS`).
 
@@ -361,6 +419,8 @@ def evaluate(
     if "animation" in parts:
         rows += _animations(data, animations or ANIMATIONS, ameth, n_frames, ANIM_KNOWN,
                             VALIDATION["seed"])  # fmt: skip
+    if "sequence" in parts:
+        rows += _grabber(data, ameth, ANIM_KNOWN, VALIDATION["seed"])
     if out is not None:
         write_tables(rows, out)
     return rows
@@ -482,5 +542,6 @@ def _plot(rows: list[dict], png: Path) -> Path | None:
     return save_png(fig, png)
 
 
-__all__ = ["ANIMATIONS", "COLUMNS", "FRACTIONS", "TUNING", "VALIDATION", "evaluate",
-           "format_csv", "format_markdown", "unknown_region", "write_tables"]  # fmt: skip
+__all__ = ["ANIMATIONS", "COLUMNS", "FRACTIONS", "HOLE_TUNING", "HOLE_VALIDATION", "TUNING",
+           "VALIDATION", "cut_holes", "evaluate", "format_csv", "format_markdown",
+           "holes_summary", "unknown_region", "write_tables"]  # fmt: skip
