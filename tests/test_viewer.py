@@ -396,6 +396,40 @@ def test_denoise_outliers_and_download(server):
     assert far_kept <= 10 and plane_kept >= 395  # most far points go, the plane stays
 
 
+def test_fill_holes_api_matches_library(server):
+    """``POST model/ID/fill-holes`` gives the library's result as a new model; a mesh without
+    holes, a point cloud and an unknown method are clear job errors."""
+    from spectrageo.complete import fill_holes
+    from spectrageo.geometry import boundary_edges
+
+    V, F = server.files["V"], server.files["F"]
+    Fh = F[1:]  # one face off: a triangular hole
+    Fh = np.r_[Fh[:10], Fh[12:]]  # and a larger one
+    io.write(server.files["dir"] / "holed.ply", Mesh(V, Fh))
+    st, r = _json(
+        server, "api/upload?name=holed.ply", data=(server.files["dir"] / "holed.ply").read_bytes()
+    )
+    assert st == 200, r
+    mid = r["model"]["id"]
+    j = _run(server, f"api/model/{mid}/fill-holes", {"method": "lsm"})
+    assert j["state"] == "done", j
+    res = j["result"]
+    V2, F2 = fill_holes(V, Fh, method="lsm")
+    assert res["model"]["n_vertices"] == len(V2) and res["n_faces_added"] == len(F2) - len(Fh)
+    assert res["n_loops"] >= 1
+    body, _ = _get(server, f"api/model/{res['model']['id']}/positions")
+    np.testing.assert_allclose(np.frombuffer(body, "<f4").reshape(-1, 3), V2, rtol=1e-5, atol=1e-6)
+    body, _ = _get(server, f"api/model/{res['model']['id']}/faces")
+    F_back = np.frombuffer(body, "<u4").reshape(-1, 3)
+    assert boundary_edges(F_back).shape[0] == 0
+    j = _run(server, "api/model/m1/fill-holes", {})  # the closed cube
+    assert j["state"] == "error" and "no hole" in j["error"]
+    j = _run(server, f"api/model/{mid}/fill-holes", {"method": "no-such"})
+    assert j["state"] == "error" and "unknown hole-filling method" in j["error"]
+    _, st = _json(server, "api/state")
+    assert st["hole_methods"][0] == "lsm"
+
+
 def test_cli_parses_view(monkeypatch):
     from spectrageo.cli import main as cli_main
     from spectrageo.cli import view_cmd

@@ -410,3 +410,23 @@ def test_level_of_detail_point_cloud(page, tmp_path):
     page.wait_for_function("window.__spectrageo.detail === 'full'")
     drawn_full = (panel_pixels(page, "left").min(axis=2) < 240).mean()
     assert 0.001 < drawn < drawn_full  # the proxy's 1000 points show, fewer than the 4000
+
+
+def test_fill_holes_button(page, shared_data):
+    """The Process panel's Fill holes button closes the shared elephant's holes: the new model
+    has the library's vertex count and the message says how many holes were closed."""
+    from spectrageo.complete import fill_holes
+
+    p = Path(shared_data) / "holes" / "elephant-with-holes.off"
+    if not p.is_file():
+        pytest.skip(f"{p} missing")
+    load(page, p)
+    page.select_option("#model-select", label="elephant-with-holes.off (mesh)")
+    idle(page)
+    page.select_option("#hole-method", "lsm")
+    page.click("#holes-btn")
+    page.wait_for_function("document.getElementById('message').textContent.includes('closed')")
+    m = io.read(p)
+    V2, _ = fill_holes(m.vertices, m.faces)
+    assert f"{V2.shape[0] - m.n_vertices} vertices implanted" in page.inner_text("#message")
+    assert "filled" in page.inner_text("#info-name")

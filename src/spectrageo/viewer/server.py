@@ -22,6 +22,7 @@ API (every JSON answer is an object; errors are ``{"error": message}`` with stat
 ``POST /api/model/ID/scalar``             ``{"field": "saliency" | "curvature" | "attr:NAME" ...}`` -> job
 ``POST /api/model/ID/denoise``            ``{"method": "tsgsp"}`` -> job, result is a new model
 ``POST /api/model/ID/outliers``           ``{"method": "rpca", "k": 10}`` -> job, result is a new model
+``POST /api/model/ID/fill-holes``         ``{"method": "lsm", "max_hole": null}`` -> job, result is a new model
 ``POST /api/compare``                     ``{"a": ID, "b": ID, "frame": 0}`` -> job (metrics table)
 ``GET  /api/job/JOB``                     ``{"state", "progress", "message", "elapsed", "result"|"error"}``
 ========================================  =====================================================
@@ -912,6 +913,35 @@ class ViewerSession:
         new = self.add(pc.select(keep), f"{_stem(m.name)}-clean.ply", source=m.id)
         return {"model": new.info(), "n_removed": int((~keep).sum()), "heat": heat}
 
+    def fill_holes(self, m: Model, method: str, max_hole, job: Job) -> dict:
+        """Close the holes of a mesh (:func:`spectrageo.complete.fill_holes`, as ``spectrageo
+        complete IN OUT --fill-holes``); the result is a new model, the input rows first."""
+        from .. import complete
+        from ..geometry import Mesh, boundary_loops
+
+        if m.kind != "mesh":
+            raise InvalidInputError(f"hole filling needs a mesh; got {m.kind}.")
+        method = str(method)
+        if method not in complete.INPAINT_METHODS:
+            raise InvalidInputError(
+                f"unknown hole-filling method {method!r}; available: "
+                f"{', '.join(complete.INPAINT_METHODS)}."
+            )
+        mh = None if max_hole in (None, "", 0) else _as_int(max_hole, "max_hole", 3)
+        V, F = m.obj.vertices, m.obj.faces
+        loops = boundary_loops(F, V.shape[0])
+        if not loops:
+            raise InvalidInputError(f"{m.name} has no hole (no boundary edge); nothing to fill.")
+        job.update(0.05, f"closing {len(loops)} boundary loop(s) ({method})")
+        V2, F2 = complete.fill_holes(V, F, method=method, max_hole=mh)
+        new = self.add(Mesh(V2, F2), f"{_stem(m.name)}-filled{_ext(m)}", source=m.id)
+        return {
+            "model": new.info(),
+            "n_loops": len(loops),
+            "n_implanted": int(V2.shape[0] - V.shape[0]),
+            "n_faces_added": int(F2.shape[0] - F.shape[0]),
+        }
+
     def download(self, m: Model, fmt: str) -> tuple[bytes, str]:
         """(file bytes, suggested name) of ``m`` written as ``fmt``."""
         from .. import io
@@ -1421,6 +1451,12 @@ class _Handler(BaseHTTPRequestHandler):
                 lambda j: s.outliers(m, p.get("method", "rpca"), p.get("k", 10), j),
                 [m],
             )
+        elif what == "fill-holes":
+            job = s.start(
+                "hole filling",
+                lambda j: s.fill_holes(m, p.get("method", "lsm"), p.get("max_hole"), j),
+                [m],
+            )
         else:
             self._json({"error": f"no such API: POST model/{what}"}, 404)
             return
@@ -1438,12 +1474,19 @@ def _state(s: ViewerSession) -> dict:
         "models": [m.info() for m in list(s.models.values())],
         "denoisers": dens,
         "outlier_methods": _outlier_methods(),
+        "hole_methods": _hole_methods(),
         "formats": io.supported_formats(),
         "limits": s.limits.to_json(),
         "feature_method": _analysis.SALIENCY_SOURCE
         if _analysis._saliency_fn("feature_vertices")
         else _analysis.FEATURE_SOURCE,
     }
+
+
+def _hole_methods() -> list[str]:
+    from ..complete import INPAINT_METHODS
+
+    return ["lsm", *[x for x in INPAINT_METHODS if x != "lsm"]]  # the default first
 
 
 def _outlier_methods() -> list[str]:

@@ -448,6 +448,10 @@ async function refreshState() {
       const o = document.createElement('option'); o.value = name; o.textContent = name;
       $('outlier-method').appendChild(o);
     }
+    for (const name of st.hole_methods || []) {
+      const o = document.createElement('option'); o.value = name; o.textContent = name;
+      $('hole-method').appendChild(o);
+    }
   }
   fillModelLists();
   return st;
@@ -681,6 +685,10 @@ $('outlier-btn').addEventListener('click', () => guard(() => processAndShow(
   `/api/model/${S.info.id}/outliers`,
   { method: $('outlier-method').value, k: Number($('outlier-k').value) }, 'outlier removal',
   (r) => message(`removed ${r.n_removed} points: ${r.model.name}`, true))));
+$('holes-btn').addEventListener('click', () => guard(() => processAndShow(
+  `/api/model/${S.info.id}/fill-holes`, { method: $('hole-method').value }, 'hole filling',
+  (r) => message(`closed ${r.n_loops} hole(s), ${r.n_implanted} vertices implanted: `
+    + `${r.model.name}`, true))));
 $('download-btn').addEventListener('click', () => guard(async () => {
   if (!S.info) return;
   const fmt = $('download-format').value;
