@@ -207,6 +207,52 @@ def test_fill_holes_keeps_touching_parts_apart():
     assert trimesh.Trimesh(Vo, Fo, process=False).is_watertight
 
 
+def test_segments_cross_collinear_sides():
+    """A polygon with collinear points along straight sides (a CAD hole, a splitting chord) is
+    simple; a bow tie and a vertex touching another edge are not."""
+    from spectrageo.complete.holes import _segments_cross
+
+    square = np.array([[0, 0], [1, 0], [2, 0], [3, 0], [3, 1], [2, 1], [1, 1], [0, 1]], float)
+    assert not _segments_cross(square)
+    assert _segments_cross(np.array([[0, 0], [1, 1], [1, 0], [0, 1]], float))
+    assert _segments_cross(np.array([[0, 0], [2, 0], [2, 2], [1, 0], [0, 2]], float))
+
+
+def test_fill_holes_long_loop_split(monkeypatch):
+    """A loop longer than DP_MAX_LOOP is cut by chords into pieces: the result is closed, every
+    edge has two faces, the orientation is consistent and the fill stays within the rim's range;
+    the input faces come first, unchanged."""
+    trimesh = pytest.importorskip("trimesh")
+    from spectrageo.complete import holes
+
+    V, F = _grid(40)
+    V = V / 40.0
+    V[:, 2] = 0.2 * np.sin(3 * V[:, 0]) * np.cos(2 * V[:, 1])
+    monkeypatch.setattr(holes, "DP_MAX_LOOP", 50)  # the 160-edge border is split twice
+    V2, F2 = fill_holes(V, F)
+    assert np.array_equal(F2[: len(F)], F)
+    E = np.sort(np.concatenate([F2[:, [0, 1]], F2[:, [1, 2]], F2[:, [2, 0]]]), axis=1)
+    _, cnt = np.unique(E, axis=0, return_counts=True)
+    assert cnt.min() == cnt.max() == 2
+    tm = trimesh.Trimesh(V2, F2, process=False)
+    assert tm.is_watertight and tm.is_winding_consistent
+    fill = V2[len(V) :]
+    assert fill.shape[0] > 100 and np.isfinite(fill).all()
+    assert fill[:, 2].min() >= V[:, 2].min() - 0.05 and fill[:, 2].max() <= V[:, 2].max() + 0.05
+
+
+def test_fill_holes_local_completion_exact_for_li(monkeypatch):
+    """The completion of the implanted points runs on the rings around them only; for ``li``
+    (equations two rings wide) that is the global solution."""
+    from spectrageo.complete import holes
+
+    V, F = icosphere(3)
+    Fh = _cut_holes(V, F, [V[0], -V[0]], 0.4)
+    local = fill_holes(V, Fh, method="li")[0]
+    monkeypatch.setitem(holes.FAIR_RINGS, "li", 10**6)
+    np.testing.assert_array_equal(fill_holes(V, Fh, method="li")[0], local)
+
+
 def test_cut_holes_and_summary():
     from spectrageo.evaluate.completion import cut_holes, holes_summary
 

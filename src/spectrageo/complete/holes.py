@@ -18,26 +18,47 @@ from .._validation import as_faces, as_points, check_choice, check_positive
 from ..geometry import boundary_edges, boundary_loops, weld
 from .static import INPAINT_METHODS, inpaint
 
-__all__ = ["fill_holes"]
+__all__ = ["DP_MAX_LOOP", "FAIR_RINGS", "fill_holes"]
+
+#: Loops with more edges are cut into pieces by chords before they are patched: the planar
+#: patch's tests cost O(L^2) memory and Liepa's dynamic programming O(L^3) time (about 1.5 s at
+#: 300 edges, minutes at 2000). The open border of a scan is such a loop; it is filled at the
+#: density of its edges, and ``max_hole`` leaves it open.
+DP_MAX_LOOP = 300
 
 
 # ------------------------------------------------------------------ planar patch (scipy Delaunay)
 def _segments_cross(Q: np.ndarray) -> bool:
-    """True when the closed polygon ``Q`` (L, 2) has two non-adjacent edges that intersect."""
+    """True when the closed polygon ``Q`` (L, 2) has two non-adjacent edges that intersect
+    (cross, or touch: an end on the other edge; collinear edges that do not overlap, as along a
+    straight side, do not count)."""
     L = Q.shape[0]
     a, b = Q, np.roll(Q, -1, axis=0)
     i, j = np.triu_indices(L, 2)
     keep = ~((i == 0) & (j == L - 1))
     i, j = i[keep], j[keep]
+    span = float(np.max(np.ptp(Q, axis=0))) if L else 0.0
+    eps = 1e-12 * span * span
 
     def orient(p, q, r):
         return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+
+    def on_segment(p, q, r):  # r (collinear with p q) inside the bounding box of p q
+        lo, hi = np.minimum(p, q), np.maximum(p, q)
+        return np.all((r >= lo - 1e-12 * span) & (r <= hi + 1e-12 * span), axis=1)
 
     d1 = orient(a[i], b[i], a[j])
     d2 = orient(a[i], b[i], b[j])
     d3 = orient(a[j], b[j], a[i])
     d4 = orient(a[j], b[j], b[i])
-    return bool(np.any((d1 * d2 <= 0) & (d3 * d4 <= 0)))
+    proper = (d1 * d2 < 0) & (d3 * d4 < 0)
+    touch = (
+        ((np.abs(d1) <= eps) & on_segment(a[i], b[i], a[j]))
+        | ((np.abs(d2) <= eps) & on_segment(a[i], b[i], b[j]))
+        | ((np.abs(d3) <= eps) & on_segment(a[j], b[j], a[i]))
+        | ((np.abs(d4) <= eps) & on_segment(a[j], b[j], b[i]))
+    )
+    return bool(np.any(proper | touch))
 
 
 def _inside(Q: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -90,10 +111,18 @@ def _planar_patch(P: np.ndarray, h: float):
     if G.shape[0]:
         G = G[_seg_dist(Q, G) > 0.6 * h]
     allp = np.concatenate([Q, G])
+    # four far corners keep the loop off the convex hull, where Qhull drops collinear points
+    # (a straight side of a CAD hole, a splitting chord); their triangles are removed below
+    mid, ext = 0.5 * (lo + hi), 10.0 * float(np.max(hi - lo)) + h
+    box = mid + ext * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
     try:
-        tri = Delaunay(allp).simplices
+        tri = Delaunay(np.concatenate([allp, box])).simplices
     except Exception:  # noqa: BLE001 - qhull errors (degenerate input) mean "use the fallback"
         return None
+    tri = tri[(tri < allp.shape[0]).all(axis=1)]
+    d1, d2 = allp[tri[:, 1]] - allp[tri[:, 0]], allp[tri[:, 2]] - allp[tri[:, 0]]
+    flat = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) <= 1e-9 * h * h
+    tri = tri[~flat]  # collinear boundary points (a splitting chord): no zero-area triangle
     cen = allp[tri].mean(axis=1)
     tri = tri[_inside(Q, cen)]
     # every loop edge must be an edge of the patch, used once; inner edges twice
@@ -148,6 +177,7 @@ def _dp_patch(
         c = np.sum(a * b, axis=-1)
         return np.arccos(np.clip(np.where(np.isnan(c), 1.0, c), -1.0, 1.0))
 
+    scale2 = float(np.max(np.sum((P - P.mean(axis=0)) ** 2, axis=1)))
     for gap in range(2, L):
         for i in range(0, L - gap):
             j = i + gap
@@ -160,7 +190,10 @@ def _dp_patch(
             if i == 0 and j == L - 1:  # the last loop edge closes the patch
                 ang = np.maximum(ang, angle(nt, nb[L - 1][None]))
             ang = np.maximum(ang, np.maximum(ang_of[i, m], ang_of[m, j]))
-            tot = 0.5 * np.linalg.norm(cr, axis=1) + area_of[i, m] + area_of[m, j]
+            area = 0.5 * np.linalg.norm(cr, axis=1)
+            tot = area + area_of[i, m] + area_of[m, j]
+            # no zero-area triangle (collinear loop points, e.g. along a splitting chord)
+            ang = np.where(area <= 1e-12 * scale2, np.inf, ang)
             if forbid is not None:
                 ang = np.where(forbid[i, m] | forbid[m, j], np.inf, ang)
             best = ang.min()
@@ -182,6 +215,14 @@ def _dp_patch(
         stack.append((i, m))
         stack.append((m, j))
     tri = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    return _refine(P, tri, h, max_splits)
+
+
+def _refine(P: np.ndarray, tri: np.ndarray, h: float, max_splits: int):
+    """Split every patch triangle larger than twice the equilateral triangle of side ``h`` 1-to-3
+    at its centroid, ``max_splits`` rounds; ``tri`` indexes ``[P | new points]``. Returns
+    ``(tri, new points)``."""
+    L = P.shape[0]
     pts = [p for p in P]
     target = np.sqrt(3.0) / 4.0 * h * h
     for _ in range(max_splits):
@@ -285,6 +326,87 @@ def _orient_patch(tri_global: np.ndarray, loop: np.ndarray) -> np.ndarray:
     return tri_global  # pragma: no cover - every loop edge is in the patch
 
 
+class _Context:
+    """What the patch of a loop needs from the mesh: positions, faces (their directed rotations
+    built once, when a loop first needs them), the vertex count and the sorted edge keys."""
+
+    def __init__(self, V: np.ndarray, F: np.ndarray, n: int, edge_keys: np.ndarray):
+        self.V, self.F, self.n, self.edge_keys = V, F, n, edge_keys
+        self._faces = None
+
+    @property
+    def faces(self) -> tuple:
+        if self._faces is None:
+            self._faces = _directed_faces(self.F, self.n)
+        return self._faces
+
+
+def _orient_local(tri: np.ndarray) -> np.ndarray:
+    """Flip a patch of a loop (local indices, loop vertices first) so that it traverses the loop
+    edge ``0 -> 1`` backwards, as the patch of a mesh hole must (see :func:`_orient_patch`)."""
+    for f in tri:
+        for s in range(3):
+            if f[s] == 0 and f[(s + 1) % 3] == 1:
+                return tri[:, ::-1].copy()
+            if f[s] == 1 and f[(s + 1) % 3] == 0:
+                return tri
+    return tri  # pragma: no cover - every loop edge is in the patch
+
+
+def _loop_patch(loop: np.ndarray, P: np.ndarray, h: float, ctx: _Context):
+    """Patch ``(tri, new points)`` of one loop, ``tri`` indexing ``[P | new points]`` and
+    oriented against the loop; ``loop`` holds the mesh index of each loop vertex, -1 for the
+    points implanted on a splitting chord (:func:`_split_patch`)."""
+    L = P.shape[0]
+    n = ctx.n
+    if L == 3:
+        return np.array([[0, 1, 2]]), np.zeros((0, 3))
+    if L > DP_MAX_LOOP:
+        return _split_patch(loop, P, h, ctx)
+    got = _planar_patch(P, h) if h > 0 else None
+    if got is not None and not _chords_ok(got[0], loop, ctx.edge_keys, n):
+        got = None
+    if got is None:
+        g = np.sort(np.stack(np.meshgrid(loop, loop, indexing="ij"), axis=-1), axis=-1)
+        forbid = np.isin(g[..., 0] * n + g[..., 1], ctx.edge_keys) & (g[..., 0] >= 0)
+        idx = np.arange(L)
+        forbid[idx, (idx + 1) % L] = forbid[(idx + 1) % L, idx] = False
+        nb = _border_normals(ctx.V, ctx.faces, loop, n)
+        got = _dp_patch(P, h, forbid, border_normals=nb)
+    tri, new3 = got if got is not None else _fan_patch(P)
+    return _orient_local(tri), new3
+
+
+def _split_patch(loop: np.ndarray, P: np.ndarray, h: float, ctx: _Context):
+    """Patch of a loop of more than :data:`DP_MAX_LOOP` edges: cut it in two by the shortest
+    chord between vertices half the loop apart, with points implanted along the chord at the
+    loop's spacing (at most a quarter of the loop), and patch both halves (recursively)."""
+    L = P.shape[0]
+    half = L // 2
+    i = np.arange(L)
+    d = np.linalg.norm(P - P[(i + half) % L], axis=1)
+    a = int(np.argmin(d))
+    b = (a + half) % L
+    m = min(max(int(round(d[a] / h)) - 1, 0), L // 4) if h > 0 else 0
+    t = np.arange(1, m + 1) / (m + 1)
+    chord = P[a] + t[:, None] * (P[b] - P[a])  # from a towards b
+    cid = L + np.arange(m)
+    halves = (
+        np.concatenate([(a + np.arange(half + 1)) % L, cid[::-1]]),  # a..b, chord back to a
+        np.concatenate([(b + np.arange(L - half + 1)) % L, cid]),  # b..a, chord on to b
+    )
+    P_all = np.concatenate([P, chord])
+    ids_all = np.concatenate([loop, np.full(m, -1, dtype=np.int64)])
+    tris, news, count = [], [chord], L + m
+    for lo in halves:
+        tri_s, new_s = _loop_patch(ids_all[lo], P_all[lo], h, ctx)
+        mapping = np.concatenate([lo, count + np.arange(new_s.shape[0])])
+        tris.append(mapping[tri_s])
+        news.append(new_s)
+        count += new_s.shape[0]
+    return np.concatenate(tris), np.concatenate(news)
+
+
 def fill_holes(
     V: Any,
     F: Any,
@@ -307,7 +429,10 @@ def fill_holes(
     2. otherwise (a curved loop whose projection folds, or a loop edge Delaunay misses) the loop is
        triangulated by Liepa's (2003) minimum-weight dynamic programming (the largest dihedral
        angle first, against the mesh faces around the loop too, then the area), and triangles
-       larger than the target size are split at their centroids;
+       larger than the target size are split at their centroids; a loop of more than
+       :data:`DP_MAX_LOOP` edges is first cut in two by its shortest chord between vertices half
+       the loop apart (points implanted along the chord), recursively, and each piece is
+       patched by steps 1-2;
     3. the patch is oriented against the loop (consistent with the mesh), and the implanted
        points are completed by :func:`spectrageo.complete.inpaint` with every original vertex
        known (Sec. 5.3.1: "triangulation ... before using our method for the final
@@ -383,7 +508,7 @@ def fill_holes(
     edge_keys = np.unique(E[:, 0] * n + E[:, 1])
     new_pts: list[np.ndarray] = []
     new_faces: list[np.ndarray] = []
-    faces = None  # directed faces, built when a loop first needs the fallback patch
+    ctx = _Context(V, F, n, edge_keys)
     n_next = n
     for loop in loops:
         L = loop.size
@@ -391,22 +516,7 @@ def fill_holes(
             continue
         P = V[loop]
         h = float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).mean()) / density
-        if L == 3:
-            tri, new3 = np.array([[0, 1, 2]]), np.zeros((0, 3))
-        else:
-            got = _planar_patch(P, h) if h > 0 else None
-            if got is not None and not _chords_ok(got[0], loop, edge_keys, n):
-                got = None
-            if got is None:
-                g = np.sort(np.stack(np.meshgrid(loop, loop, indexing="ij"), axis=-1), axis=-1)
-                forbid = np.isin(g[..., 0] * n + g[..., 1], edge_keys)
-                idx = np.arange(L)
-                forbid[idx, (idx + 1) % L] = forbid[(idx + 1) % L, idx] = False
-                if faces is None:
-                    faces = _directed_faces(F, n)
-                nb = _border_normals(V, faces, loop, n)
-                got = _dp_patch(P, h, forbid, border_normals=nb)
-            tri, new3 = got if got is not None else _fan_patch(P)
+        tri, new3 = _loop_patch(loop, P, h, ctx)
         ids = np.concatenate([loop, np.arange(n_next, n_next + new3.shape[0])])
         tg = _orient_patch(ids[tri], loop)
         new_pts.append(new3)
@@ -417,8 +527,36 @@ def fill_holes(
     V_all = np.concatenate([V, *new_pts])
     F_all = np.concatenate([F, *new_faces]).astype(np.int64)
     if V_all.shape[0] > n:
-        known = np.zeros(V_all.shape[0], dtype=bool)
-        known[:n] = True
         # unreferenced original rows (welded duplicates) are known: they stay as they are
-        V_all = inpaint(V_all, F_all, known, method=method, rng=rng)
+        unknown = np.zeros(V_all.shape[0], dtype=bool)
+        unknown[n:] = True
+        V_all[unknown] = _complete_near(V_all, F_all, unknown, method, rng)
     return V_all, F_all
+
+
+#: Graph rings of known vertices around the implanted points that take part in their completion:
+#: exact for ``li`` (its equations reach two rings), a local version of ``lsm`` (whose soft
+#: constraints couple the whole mesh, with an influence that fades within a few rings) and of
+#: ``mc`` (patches of up to 64 vertices).
+FAIR_RINGS = {"li": 2, "lsm": 4, "mc": 8}
+
+
+def _complete_near(
+    V: np.ndarray, F: np.ndarray, unknown: np.ndarray, method: str, rng
+) -> np.ndarray:
+    """Positions of the ``unknown`` rows by :func:`inpaint` on the submesh within
+    :data:`FAIR_RINGS` rings of them (a hole in a scan of millions of vertices costs what its
+    neighbourhood costs)."""
+    from ..graph import adjacency_matrix
+
+    N = V.shape[0]
+    C = adjacency_matrix(F, N)
+    region = unknown.copy()
+    for _ in range(FAIR_RINGS[method]):
+        region |= (C @ region.astype(np.float64)) > 0
+    sub = np.flatnonzero(region)
+    remap = np.full(N, -1, dtype=np.int64)
+    remap[sub] = np.arange(sub.size)
+    Fs = remap[F[region[F].all(axis=1)]]
+    X = inpaint(V[sub], Fs, ~unknown[sub], method=method, rng=rng)
+    return X[unknown[sub]]
