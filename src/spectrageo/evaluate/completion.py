@@ -282,6 +282,17 @@ def _pymeshlab_fill(V, F):
     return np.asarray(mm.vertex_matrix()), np.asarray(mm.face_matrix())
 
 
+def _hide(A: np.ndarray, frac: float, seed) -> tuple[np.ndarray, np.ndarray, float]:
+    """Known mask (T, n) with a random ``frac`` known per frame and frame 0 complete, the frames
+    with NaN at the unknown points, and the diagonal of frame 0."""
+    T, n, _ = A.shape
+    K = np.random.default_rng([seed, n]).random((T, n)) < frac
+    K[0] = True
+    Ain = A.copy()
+    Ain[~K] = np.nan
+    return K, Ain, float(np.linalg.norm(np.ptp(A[0], axis=0)))
+
+
 def _animations(data: Path, names, methods, n_frames, frac, seed) -> list[dict]:
     from ..complete import complete_animation, complete_sequence
     from ..io import read_animation
@@ -296,12 +307,7 @@ def _animations(data: Path, names, methods, n_frames, frac, seed) -> list[dict]:
         A = np.asarray(a.frames[:n_frames], dtype=np.float64)
         F = np.asarray(a.faces, dtype=np.int64)
         T, n, _ = A.shape
-        rng = np.random.default_rng([seed, n])
-        K = rng.random((T, n)) < frac
-        K[0] = True
-        Ain = A.copy()
-        Ain[~K] = np.nan
-        diag = float(np.linalg.norm(np.ptp(A[0], axis=0)))
+        K, Ain, diag = _hide(A, frac, seed)
         for meth in methods:
             t0 = time.perf_counter()
             with warnings.catch_warnings():
@@ -351,12 +357,7 @@ def _grabber(data: Path, methods, frac, seed, step: int = GRABBER_STEP) -> list[
     pix = np.flatnonzero(common)
     A = np.stack([X[pix] for X in full])
     T, n, _ = A.shape
-    rng = np.random.default_rng([seed, n])
-    K = rng.random((T, n)) < frac
-    K[0] = True
-    Ain = A.copy()
-    Ain[~K] = np.nan
-    diag = float(np.linalg.norm(np.ptp(A[0], axis=0)))
+    K, Ain, diag = _hide(A, frac, seed)
     rows = []
     for meth in [m for m in methods if m in ("wrli", "seq-li")]:
         t0 = time.perf_counter()
