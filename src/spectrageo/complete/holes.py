@@ -14,6 +14,7 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from .._errors import InvalidInputError
+from .._progress import activity, progress
 from .._validation import as_faces, as_points, check_choice, check_positive
 from ..geometry import boundary_edges, boundary_loops, weld
 from .static import INPAINT_METHODS, inpaint
@@ -510,7 +511,7 @@ def fill_holes(
     new_faces: list[np.ndarray] = []
     ctx = _Context(V, F, n, edge_keys)
     n_next = n
-    for loop in loops:
+    for loop in progress(loops, desc="holes", total=len(loops)):
         L = loop.size
         if L < 3 or (max_hole is not None and L > max_hole):
             continue
@@ -530,7 +531,8 @@ def fill_holes(
         # unreferenced original rows (welded duplicates) are known: they stay as they are
         unknown = np.zeros(V_all.shape[0], dtype=bool)
         unknown[n:] = True
-        V_all[unknown] = _complete_near(V_all, F_all, unknown, method, rng)
+        with activity(f"completing {int(unknown.sum())} implanted points ({method})"):
+            V_all[unknown] = _complete_near(V_all, F_all, unknown, method, rng)
     return V_all, F_all
 
 
