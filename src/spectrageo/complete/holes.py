@@ -453,12 +453,9 @@ def fill_holes(
     ----------
     V : (n, 3) array_like
     F : (m, 3) array_like of int
-    method : {"lsm", "li", "mc"}    Parameters
-    ----------
-    V : (n, 3) array_like
-    F : (m, 3) array_like of int
-    method : {"li", "mc", "lsm"}
-        Completion of the implanted points (see above).
+    method : {"lsm", "li", "mc"}
+        Completion of the implanted points (see above), on the :data:`FAIR_RINGS` rings of
+        original vertices around them.
     max_hole : int, optional
         Leave loops with more than ``max_hole`` edges open (e.g. the open border of a scan).
         Default: close every loop.
