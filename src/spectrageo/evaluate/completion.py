@@ -220,8 +220,8 @@ def cut_holes(
     V: np.ndarray, F: np.ndarray, n_holes: int, rings: tuple[int, ...], rng: Any
 ) -> tuple[np.ndarray, np.ndarray]:
     """Cut ``n_holes`` holes into a mesh: every face touching the ``r``-ring ball of a random seed
-    vertex is removed (``r`` drawn from ``rings``), balls kept two rings apart from each other and
-    from existing borders, vertices left without a face dropped (faces re-indexed), so the result
+    vertex is removed (``r`` drawn from ``rings``), balls kept more than three rings apart from
+    each other and more than two from existing borders, vertices left without a face dropped (faces re-indexed), so the result
     looks like a scan or a repaired file with holes. Returns ``(V_holes, F_holes)``."""
     from ..geometry import boundary_edges
     from ..graph import adjacency_matrix
