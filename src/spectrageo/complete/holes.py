@@ -293,6 +293,15 @@ def _simple_loops(loop: np.ndarray) -> list[np.ndarray]:
     return out
 
 
+def _in_sorted(q: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """``np.isin(q, keys)`` for sorted ``keys``, by binary search (the mesh's edge keys are
+    millions on a large scan; each patch asks about a few hundred)."""
+    if keys.size == 0:
+        return np.zeros(np.shape(q), dtype=bool)
+    pos = np.minimum(np.searchsorted(keys, q), keys.size - 1)
+    return keys[pos] == q
+
+
 def _chords_ok(tri: np.ndarray, loop: np.ndarray, edge_keys: np.ndarray, n: int) -> bool:
     """No patch edge between two loop vertices may be an edge of the mesh already (it would be
     shared by three faces): loop edges themselves excepted."""
@@ -304,7 +313,7 @@ def _chords_ok(tri: np.ndarray, loop: np.ndarray, edge_keys: np.ndarray, n: int)
     if e.size == 0:
         return True
     g = np.sort(loop[e], axis=1)
-    return not np.isin(g[:, 0] * n + g[:, 1], edge_keys).any()
+    return not _in_sorted(g[:, 0] * n + g[:, 1], edge_keys).any()
 
 
 def _fan_patch(P: np.ndarray):
@@ -369,7 +378,7 @@ def _loop_patch(loop: np.ndarray, P: np.ndarray, h: float, ctx: _Context):
         got = None
     if got is None:
         g = np.sort(np.stack(np.meshgrid(loop, loop, indexing="ij"), axis=-1), axis=-1)
-        forbid = np.isin(g[..., 0] * n + g[..., 1], ctx.edge_keys) & (g[..., 0] >= 0)
+        forbid = _in_sorted(g[..., 0] * n + g[..., 1], ctx.edge_keys) & (g[..., 0] >= 0)
         idx = np.arange(L)
         forbid[idx, (idx + 1) % L] = forbid[(idx + 1) % L, idx] = False
         nb = _border_normals(ctx.V, ctx.faces, loop, n)
