@@ -474,7 +474,9 @@ def fill_holes(
         seam of duplicated vertices is not mistaken for a hole; coincident vertices inside the
         surface (parts that touch) are left apart. False: take ``F`` as it is.
     density : float
-        Implanted points per loop edge length (1: spacing equal to the mean loop edge).
+        Implanted points per loop edge length (1: spacing equal to the mean loop edge). The
+        points grow with the hole's area: the 4,000-edge border of a 1000 x 1000 grid takes
+        1.13M points and 11.8 GB at 1, 70k points and 1.3 GB at 0.25.
     rng : int, Generator or None
         Passed to :func:`inpaint`.
 
