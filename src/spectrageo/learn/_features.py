@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
@@ -35,7 +36,7 @@ def centroid_knn(C: np.ndarray, k: int) -> np.ndarray:
     """
     m = C.shape[0]
     kk = min(k, m)
-    _, idx = cKDTree(C).query(C, k=kk)
+    _, idx = cKDTree(C).query(C, k=kk, workers=-1)
     idx = np.asarray(idx, dtype=np.int64).reshape(m, kk)
     # the query point itself may not come first when centroids coincide: force it
     self_pos = np.argmax(idx == np.arange(m)[:, None], axis=1)
@@ -126,11 +127,34 @@ def normal_images(
     order = column_order(k)
     lay = np.empty_like(knn_idx)
     lay[:, order] = knn_idx  # laid-out rows: lay[j, col] = face shown in column col
-    centres = knn_idx[faces, :rows]  # (b, rows)
-    ids = lay[centres]  # (b, rows, k)
-    px = G[ids]  # (b, rows, k, 3)
-    out = np.einsum("bij,brkj->birk", R[faces], px, optimize=True)
-    return out.astype(np.float32)
+    centres = np.ascontiguousarray(knn_idx[faces, :rows])  # (b, rows)
+    out = np.empty((faces.size, 3, rows, k), dtype=np.float32)
+    _images_kernel(
+        np.ascontiguousarray(R, dtype=np.float64),
+        np.ascontiguousarray(G, dtype=np.float64),
+        np.ascontiguousarray(lay),
+        centres,
+        faces,
+        out,
+    )
+    return out
+
+
+@numba.njit(cache=True, parallel=True)
+def _images_kernel(R, G, lay, centres, faces, out):  # pragma: no cover - numba
+    """``out[b, i, r, c] = sum_j R[faces[b], i, j] G[lay[centres[b, r], c], j]`` in float64,
+    stored as float32 (one gather and rotation, no (b, rows, k, 3) temporary)."""
+    nb, rows = centres.shape
+    k = lay.shape[1]
+    for b in numba.prange(nb):
+        f = faces[b]
+        for r in range(rows):
+            row = lay[centres[b, r]]
+            for c in range(k):
+                g = row[c]
+                g0, g1, g2 = G[g, 0], G[g, 1], G[g, 2]
+                for i in range(3):
+                    out[b, i, r, c] = R[f, i, 0] * g0 + R[f, i, 1] * g1 + R[f, i, 2] * g2
 
 
 def row_eigenvalues(first_row: np.ndarray) -> np.ndarray:

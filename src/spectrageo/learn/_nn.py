@@ -19,6 +19,7 @@ Denoising autoencoder (Section 5.1.3): ``y = W2 tanh(W1 x + b1) + b2`` (or linea
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
@@ -93,7 +94,23 @@ def cnn_centre(
     c = k // 2
     if rows < ks or k < 2 * ks - 1:
         raise ValueError(f"images of {rows}x{k} are too small for kernels of size {ks}.")
-    dt = np.float32 if table is not None else np.float64
+    if table is not None:  # fused compiled kernel, float32 as the tabulated path
+        out = np.empty((b, 3), dtype=np.float32)
+        W2c = np.ascontiguousarray(W2[:, :, p:, :].transpose(2, 3, 1, 0), dtype=np.float32)
+        _centre_kernel(
+            np.ascontiguousarray(x[:, :, :ks], dtype=np.float32),
+            c - 2 * p,
+            np.ascontiguousarray(np.asarray(W1).transpose(1, 2, 3, 0), dtype=np.float32),
+            np.asarray(b1, dtype=np.float32),
+            table.table,
+            np.float32(table.lo),
+            np.float32(table.step),
+            W2c,
+            np.asarray(b2, dtype=np.float32),
+            out,
+        )
+        return out.astype(np.float64)
+    dt = np.float64
     W1m = np.ascontiguousarray(W1.reshape(C, -1).T, dtype=dt)  # (ch ks ks, C)
     W2m = np.ascontiguousarray(W2[:, :, p:, :].transpose(2, 3, 1, 0), dtype=dt).reshape(-1, 3)
     b1 = np.asarray(b1, dtype=dt)
@@ -111,6 +128,46 @@ def cnn_centre(
         y = a.reshape(nb, -1) @ W2m + b2
         out[s0 : s0 + nb] = xb[:, :3, 0, 2 * p] + y
     return out
+
+
+@numba.njit(cache=True, parallel=True, fastmath=True)
+def _centre_kernel(x, c0, W1t, b1, tab, lo, step, W2c, b2, out):  # pragma: no cover - numba
+    """:func:`cnn_centre` with a tabulated shrinkage, one image per iteration: the ``(p + 1) x ks``
+    positions of ``h`` the output depends on, their shrinkage and the second convolution at the
+    centre, fused (no im2col copy). ``W1t`` is ``W1`` as (ch, ks, ks, C) (channels innermost, so
+    the sums vectorise), ``W2c`` (p + 1, ks, C, 3) the rows of ``W2`` that reach the centre of the
+    first row; ``c0`` the first of the ``4 p + 1`` columns used."""
+    nb, ch, _, _ = x.shape
+    ks = W1t.shape[1]
+    C = W1t.shape[3]
+    p = ks // 2
+    n_tab = tab.shape[1]
+    top = np.float32(n_tab - 1.000001)
+    for bi in numba.prange(nb):
+        h = np.empty(C, dtype=np.float32)
+        y = np.zeros(3, dtype=np.float32)
+        for r in range(p + 1):  # output row r reads image rows r - p .. r + p (zero above 0)
+            for q in range(ks):  # output column q reads columns c0 + q .. c0 + q + ks - 1
+                for cc in range(C):
+                    h[cc] = b1[cc]
+                for k in range(ch):
+                    for i in range(p - r, ks):
+                        row = r + i - p
+                        for j in range(ks):
+                            v = x[bi, k, row, c0 + q + j]
+                            for cc in range(C):
+                                h[cc] += W1t[k, i, j, cc] * v
+                for cc in range(C):
+                    u = (h[cc] - lo) / step
+                    u = min(max(u, np.float32(0.0)), top)
+                    t = int(u)
+                    a = tab[cc, t] + (u - t) * (tab[cc, t + 1] - tab[cc, t])
+                    y[0] += a * W2c[r, q, cc, 0]
+                    y[1] += a * W2c[r, q, cc, 1]
+                    y[2] += a * W2c[r, q, cc, 2]
+        cx = c0 + 2 * p
+        for o in range(3):
+            out[bi, o] = x[bi, o, 0, cx] + y[o] + b2[o]
 
 
 # --------------------------------------------------------------------------- DAE (MLP)
