@@ -11,7 +11,8 @@ BM3D-CNN shrinkage network (Section 5.1.4, Eq. 5.40-5.41), per feature class::
 ``*`` is a 2-D cross-correlation with zero padding ``ks // 2`` ("same"), as
 ``torch.nn.functional.conv2d``. Only the centre pixel of the first row is used (Section 5.1.4,
 "3D Mesh Reconstruction"), so only the ``(ks//2 + 1) x ks`` positions of ``h`` it depends on are
-evaluated here, as one im2col matrix product per batch.
+evaluated here: with the tabulated shrinkage (denoising) by one compiled kernel per image, in
+float32; exactly (float64, Eq. 5.41 evaluated) as one im2col matrix product per batch.
 
 Denoising autoencoder (Section 5.1.3): ``y = W2 tanh(W1 x + b1) + b2`` (or linear, the thesis'
 ``sigma = sigma'`` linear choice), trained to reproduce the clean row from the noisy one.
@@ -81,8 +82,9 @@ def cnn_centre(
     W2 : (3, C, ks, ks), b2 : (3,)
         (the residual is added to the first three channels, the guided / filtered pixel)
     table : RBFTable, optional
-        Tabulated shrinkage (fast path, float32 arithmetic); None evaluates Eq. (5.41) exactly
-        in float64.
+        Tabulated shrinkage (fast path: a compiled kernel fusing both convolutions and the
+        shrinkage, float32 arithmetic; ``chunk`` is not used); None evaluates Eq. (5.41)
+        exactly in float64, ``chunk`` images at a time.
 
     Returns
     -------
