@@ -7,7 +7,8 @@
 * :mod:`spectrageo.learn.train` -- training of the shipped weights (needs PyTorch, the ``learn``
   extra); :func:`evaluate_learned` -- the learned methods against TSGSP and BNF.
 
-Inference needs only numpy/scipy: the weights are ``.npz`` files with their metadata
+Inference needs no PyTorch, only the base install (numpy, scipy and, for the bm3d-cnn's fast
+path and its images, numba kernels): the weights are ``.npz`` files with their metadata
 (:func:`load_weights`); the shipped ones live in ``spectrageo/learn/weights/``. Both methods are
 registered as denoisers (``spectrageo denoise --method bm3d-cnn|dae``).
 """

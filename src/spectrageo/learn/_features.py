@@ -1,4 +1,5 @@
-"""Input representations of the learned denoisers, in numpy only (shared by training and inference).
+"""Input representations of the learned denoisers, in numpy (and one numba kernel for the images),
+shared by training and inference.
 
 * :func:`guided_pixels` -- guided pixels of Eq. (5.38)-(5.39): for every face the "ideal-selected
   row" among the candidate rows (the kNN rows of the centroids whose row contains the face) with
