@@ -498,6 +498,14 @@ def test_cli_round_trip_mesh_and_animation(tmp_path, sphere, capsys):
     assert main(["complete", str(tmp_path / "holed.ply"), str(out2), "--fill-holes", "-q"]) == 0
     m2 = io.read_mesh(out2)
     assert boundary_edges(m2.faces).shape[0] == 0
+    out2b = tmp_path / "filled_sparse.ply"
+    args = ["complete", str(tmp_path / "holed.ply"), str(out2b), "--fill-holes", "-q"]
+    assert main([*args, "--density", "0.5"]) == 0
+    m2b = io.read_mesh(out2b)
+    assert boundary_edges(m2b.faces).shape[0] == 0 and m2b.n_vertices < m2.n_vertices
+    assert main([*args, "--density", "0"]) == 2  # not positive
+    assert main(["complete", str(tmp_path / "holed.ply"), str(out2b), "--known",
+                 str(kp), "--max-hole", "5", "-q"]) == 2  # fmt: skip
 
     # animation .npz with NaN at unknown entries
     A, Fa = _animation(4)

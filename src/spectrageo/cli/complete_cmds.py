@@ -3,8 +3,8 @@ hole filling (thesis Section 5.3).
 
 - ``spectrageo complete IN OUT --known KNOWN.npy [--method mc|li|lsm]`` (meshes; the unknown rows
   of IN may hold anything, NaN included);
-- ``spectrageo complete IN OUT --fill-holes [--method lsm|li|mc]`` (meshes with holes; ``lsm``
-  by default, see :func:`spectrageo.complete.fill_holes`);
+- ``spectrageo complete IN OUT --fill-holes [--method lsm|li|mc] [--max-hole N] [--density D]``
+  (meshes with holes; ``lsm`` by default, see :func:`spectrageo.complete.fill_holes`);
 - ``spectrageo complete IN.npz OUT.npz --known KNOWN.npy [--method motion|li|lia|mc|gmc]
   [--sweeps N]``
   (animations with ``vertices`` + ``faces``; point-cloud sequences with ``points`` (T, n, 3), where
@@ -114,13 +114,21 @@ def cmd_complete(args) -> int:
                 f"`--method` must be one of {', '.join(MESH_METHODS)} with --fill-holes."
             )
         m = io.read_mesh(src)
-        V, F = complete.fill_holes(m.vertices, m.faces, method=method, max_hole=args.max_hole)
+        V, F = complete.fill_holes(
+            m.vertices, m.faces, method=method, max_hole=args.max_hole, density=args.density
+        )
         io.write(args.output, Mesh(V, F))
         _status(
             f"wrote {args.output}: {V.shape[0] - m.n_vertices} implanted vertices, "
             f"{F.shape[0] - m.n_faces} faces added ({method}, {time.perf_counter() - t0:.2f} s)"
         )
         return 0
+    for flag, given in (
+        ("--max-hole", args.max_hole is not None),
+        ("--density", args.density != 1.0),
+    ):
+        if given:
+            raise InvalidInputError(f"`{flag}` applies to --fill-holes.")
     if args.known is None:
         raise InvalidInputError("`--known` KNOWN.npy is required (or pass --fill-holes).")
     known = _load_known(args.known)
@@ -187,6 +195,11 @@ def register(sub) -> None:
     p.add_argument(
         "--max-hole", dest="max_hole", type=int, default=None,
         help="with --fill-holes: leave loops with more edges open",
+    )  # fmt: skip
+    p.add_argument(
+        "--density", type=float, default=1.0,
+        help="with --fill-holes: implanted points per loop edge length (default 1; lower for "
+        "very large holes, whose fill grows with their area)",
     )  # fmt: skip
     p.set_defaults(func=cmd_complete)
     p.description = (

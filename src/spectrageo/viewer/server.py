@@ -22,7 +22,7 @@ API (every JSON answer is an object; errors are ``{"error": message}`` with stat
 ``POST /api/model/ID/scalar``             ``{"field": "saliency" | "curvature" | "attr:NAME" ...}`` -> job
 ``POST /api/model/ID/denoise``            ``{"method": "tsgsp"}`` -> job, result is a new model
 ``POST /api/model/ID/outliers``           ``{"method": "rpca", "k": 10}`` -> job, result is a new model
-``POST /api/model/ID/fill-holes``         ``{"method": "lsm", "max_hole": null}`` -> job, result is a new model
+``POST /api/model/ID/fill-holes``         ``{"method": "lsm", "max_hole": null, "density": 1}`` -> job, new model
 ``POST /api/compare``                     ``{"a": ID, "b": ID, "frame": 0}`` -> job (metrics table)
 ``GET  /api/job/JOB``                     ``{"state", "progress", "message", "elapsed", "result"|"error"}``
 ========================================  =====================================================
@@ -913,7 +913,7 @@ class ViewerSession:
         new = self.add(pc.select(keep), f"{_stem(m.name)}-clean.ply", source=m.id)
         return {"model": new.info(), "n_removed": int((~keep).sum()), "heat": heat}
 
-    def fill_holes(self, m: Model, method: str, max_hole, job: Job) -> dict:
+    def fill_holes(self, m: Model, method: str, max_hole, job: Job, density=1.0) -> dict:
         """Close the holes of a mesh (:func:`spectrageo.complete.fill_holes`, as ``spectrageo
         complete IN OUT --fill-holes``); the result is a new model, the input rows first."""
         from .. import complete
@@ -928,12 +928,18 @@ class ViewerSession:
                 f"{', '.join(complete.INPAINT_METHODS)}."
             )
         mh = None if max_hole in (None, "", 0) else _as_int(max_hole, "max_hole", 3)
+        try:
+            dens = float(density)
+        except (TypeError, ValueError):
+            dens = float("nan")
+        if not (np.isfinite(dens) and dens > 0) or isinstance(density, bool):
+            raise InvalidInputError(f"`density` must be a positive number; got {density!r}.")
         V, F = m.obj.vertices, m.obj.faces
         loops = boundary_loops(F, V.shape[0])
         if not loops:
             raise InvalidInputError(f"{m.name} has no hole (no boundary edge); nothing to fill.")
         job.update(0.05, f"closing {len(loops)} boundary loop(s) ({method})")
-        V2, F2 = complete.fill_holes(V, F, method=method, max_hole=mh)
+        V2, F2 = complete.fill_holes(V, F, method=method, max_hole=mh, density=dens)
         new = self.add(Mesh(V2, F2), f"{_stem(m.name)}-filled{_ext(m)}", source=m.id)
         return {
             "model": new.info(),
@@ -1454,7 +1460,9 @@ class _Handler(BaseHTTPRequestHandler):
         elif what == "fill-holes":
             job = s.start(
                 "hole filling",
-                lambda j: s.fill_holes(m, p.get("method", "lsm"), p.get("max_hole"), j),
+                lambda j: s.fill_holes(
+                    m, p.get("method", "lsm"), p.get("max_hole"), j, p.get("density", 1.0)
+                ),
                 [m],
             )
         else:
