@@ -104,10 +104,20 @@ def test_fill_holes_closes_every_loop():
     V2, F2 = fill_holes(V, Fh)
     assert np.array_equal(V2[: len(V)], V)  # original rows unchanged, in order
     assert boundary_edges(F2).shape[0] == 0
-    assert trimesh.Trimesh(V2, F2, process=False).is_watertight
+    tm = trimesh.Trimesh(V2, F2, process=False)
+    assert tm.is_watertight and tm.is_winding_consistent  # patches oriented like the mesh
     assert V2.shape[0] > len(V)  # points were implanted
     r = np.linalg.norm(V2[len(V) :], axis=1)
     assert np.all(r > 0.75) and np.all(r < 1.05)  # close to the sphere, not flat at the centre
+
+
+def test_fill_holes_leaves_closed_mesh_unchanged():
+    """Do no harm: a closed mesh with a duplicated vertex row comes back as it is (no
+    welding, no implanted point, the same faces)."""
+    V, F = icosphere(2)
+    V = np.concatenate([V, V[:1]])  # a duplicate row, used by no face
+    Vo, Fo = fill_holes(V, F)
+    assert np.array_equal(Vo, V) and np.array_equal(Fo, F)
 
 
 def test_fill_holes_max_hole_leaves_large_loops_open():
@@ -553,7 +563,8 @@ def test_fill_holes_shared_holes_watertight(shared_data):
         m = io.read_mesh(p)
         V2, F2 = fill_holes(m.vertices, m.faces)
         assert boundary_edges(F2).shape[0] == 0, name
-        assert trimesh.Trimesh(V2, F2, process=False).is_watertight, name
+        tm = trimesh.Trimesh(V2, F2, process=False)
+        assert tm.is_watertight and tm.is_winding_consistent, name
         assert np.array_equal(V2[: m.n_vertices], m.vertices)
 
 

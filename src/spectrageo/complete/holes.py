@@ -323,19 +323,6 @@ def _fan_patch(P: np.ndarray):
     return np.column_stack([i, (i + 1) % L, np.full(L, L)]), P.mean(axis=0)[None]
 
 
-def _orient_patch(tri_global: np.ndarray, loop: np.ndarray) -> np.ndarray:
-    """Flip the patch so that it traverses the loop edge ``loop[0] -> loop[1]`` backwards (the
-    mesh's boundary edges run forwards in their faces, see :func:`boundary_loops`)."""
-    a, b = int(loop[0]), int(loop[1])
-    for f in tri_global:
-        for s in range(3):
-            if f[s] == a and f[(s + 1) % 3] == b:
-                return tri_global[:, ::-1].copy()
-            if f[s] == b and f[(s + 1) % 3] == a:
-                return tri_global
-    return tri_global  # pragma: no cover - every loop edge is in the patch
-
-
 class _Context:
     """What the patch of a loop needs from the mesh: positions, faces (their directed rotations
     built once, when a loop first needs them), the vertex count and the sorted edge keys."""
@@ -353,7 +340,9 @@ class _Context:
 
 def _orient_local(tri: np.ndarray) -> np.ndarray:
     """Flip a patch of a loop (local indices, loop vertices first) so that it traverses the loop
-    edge ``0 -> 1`` backwards, as the patch of a mesh hole must (see :func:`_orient_patch`)."""
+    edge ``0 -> 1`` backwards: the mesh's boundary edges run forwards in their faces (see
+    :func:`spectrageo.geometry.boundary_loops`), and a consistently oriented patch must traverse
+    them the other way."""
     for f in tri:
         for s in range(3):
             if f[s] == 0 and f[(s + 1) % 3] == 1:
@@ -370,7 +359,7 @@ def _loop_patch(loop: np.ndarray, P: np.ndarray, h: float, ctx: _Context):
     L = P.shape[0]
     n = ctx.n
     if L == 3:
-        return np.array([[0, 1, 2]]), np.zeros((0, 3))
+        return _orient_local(np.array([[0, 1, 2]])), np.zeros((0, 3))
     if L > DP_MAX_LOOP:
         return _split_patch(loop, P, h, ctx)
     got = _planar_patch(P, h) if h > 0 else None
@@ -527,9 +516,8 @@ def fill_holes(
         h = float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).mean()) / density
         tri, new3 = _loop_patch(loop, P, h, ctx)
         ids = np.concatenate([loop, np.arange(n_next, n_next + new3.shape[0])])
-        tg = _orient_patch(ids[tri], loop)
         new_pts.append(new3)
-        new_faces.append(tg)
+        new_faces.append(ids[tri])  # already oriented against the loop
         n_next += new3.shape[0]
     if not new_faces:
         return V.copy(), F.copy()
