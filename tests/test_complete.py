@@ -274,13 +274,13 @@ def test_cut_holes_and_summary():
     assert used.all() and len(Vh) < len(V)  # no vertex without a face
     rows = [
         {"part": "holes", "data": "a", "method": "lsm", "hd_surface": 1.0, "watertight": True,
-         "note": " (validation split)"},
+         "split": "validation"},
         {"part": "holes", "data": "a", "method": "pymeshlab", "hd_surface": 2.0,
-         "watertight": False, "note": " (validation split)"},
+         "watertight": False, "split": "validation"},
         {"part": "holes", "data": "b", "method": "lsm", "hd_surface": 4.0, "watertight": True,
-         "note": " (validation split)"},
+         "split": "validation"},
         {"part": "holes", "data": "b", "method": "pymeshlab", "hd_surface": 2.0,
-         "watertight": True, "note": " (validation split)"},
+         "watertight": True, "split": "validation"},
     ]  # fmt: skip
     line = [x for x in holes_summary(rows).splitlines() if "| lsm |" in x][0]
     assert "| validation | lsm | 2 | 1.000 | 2.000 | 1 / 2 | 2 / 2 |" == line

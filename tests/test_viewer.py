@@ -425,9 +425,9 @@ def test_fill_holes_api_matches_library(server):
     j = _run(server, "api/model/m1/fill-holes", {})  # the closed cube
     assert j["state"] == "error" and "no hole" in j["error"]
     j = _run(server, f"api/model/{mid}/fill-holes", {"method": "no-such"})
-    assert j["state"] == "error" and "unknown hole-filling method" in j["error"]
+    assert j["state"] == "error" and "`method` must be one of" in j["error"]
     j = _run(server, f"api/model/{mid}/fill-holes", {"density": -1})
-    assert j["state"] == "error" and "`density` must be a positive number" in j["error"]
+    assert j["state"] == "error" and "`density` must be > 0" in j["error"]
     j = _run(server, f"api/model/{mid}/fill-holes", {"density": 0.5})
     assert j["state"] == "done", j
     assert j["result"]["model"]["n_vertices"] == len(fill_holes(V, Fh, density=0.5)[0])

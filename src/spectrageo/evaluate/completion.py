@@ -194,6 +194,7 @@ def _holes(data: Path, methods) -> list[dict]:
         with_ref = ref if p.stem.startswith("elephant") else None
         for r in _fill_rows(p.stem, m.vertices, m.faces, with_ref, methods):
             if with_ref is not None:
+                r["split"] = "tuning"
                 r["note"] = (r.get("note") or "") + " (tuning split)"
             rows.append(r)
     return rows
@@ -211,6 +212,7 @@ def _holes_cut(data: Path, methods, models, seed, split: str) -> list[dict]:
         m = io.read_mesh(p)
         V, F = cut_holes(m.vertices, m.faces, HOLES_PER_MESH, HOLE_RINGS, [seed, len(rel)])
         for r in _fill_rows(f"{p.stem}+holes", V, F, m, methods):
+            r["split"] = split
             r["note"] = (r.get("note") or "") + f" ({split} split)"
             rows.append(r)
     return rows
@@ -462,15 +464,13 @@ def format_markdown(rows: list[dict]) -> str:
 
 
 def holes_summary(rows: list[dict], peer: str = "pymeshlab") -> str:
-    """Markdown summary of the hole rows with a reference, per split and method: meshes where
-    ``peer`` gave a result, geometric mean and worst ratio of ``hd_surface`` to the peer's, meshes
-    with a strictly lower ``hd_surface``, meshes watertight."""
+    """Markdown summary of the hole rows with a reference (those with a ``split`` key), per split
+    and method: meshes where ``peer`` gave a result, geometric mean and worst ratio of
+    ``hd_surface`` to the peer's, meshes with a strictly lower ``hd_surface``, meshes watertight."""
     by: dict[tuple[str, str], dict[str, dict]] = {}
     for r in rows:
-        if r.get("part") != "holes" or "split" not in (r.get("note") or ""):
-            continue
-        split = "tuning" if "tuning split" in r["note"] else "validation"
-        by.setdefault((split, r["data"]), {})[r["method"]] = r
+        if r.get("part") == "holes" and r.get("split"):
+            by.setdefault((r["split"], r["data"]), {})[r["method"]] = r
     lines = ["| split | method | meshes | geomean hd_surface / " + peer + " | worst ratio | "
              "lower than " + peer + " | watertight |", "|---|---|---|---|---|---|---|"]  # fmt: skip
     for split in ("tuning", "validation"):

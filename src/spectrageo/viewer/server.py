@@ -79,6 +79,7 @@ from urllib.parse import parse_qs, quote, unquote, urlsplit
 import numpy as np
 
 from .._errors import InvalidInputError, SpectrageoError
+from .._validation import check_choice, check_positive
 from . import _analysis
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
@@ -921,25 +922,16 @@ class ViewerSession:
 
         if m.kind != "mesh":
             raise InvalidInputError(f"hole filling needs a mesh; got {m.kind}.")
-        method = str(method)
-        if method not in complete.INPAINT_METHODS:
-            raise InvalidInputError(
-                f"unknown hole-filling method {method!r}; available: "
-                f"{', '.join(complete.INPAINT_METHODS)}."
-            )
+        # the library's checks, before the loops are searched
+        check_choice(method, "method", complete.INPAINT_METHODS)
+        check_positive(density, "density")
         mh = None if max_hole in (None, "", 0) else _as_int(max_hole, "max_hole", 3)
-        try:
-            dens = float(density)
-        except (TypeError, ValueError):
-            dens = float("nan")
-        if not (np.isfinite(dens) and dens > 0) or isinstance(density, bool):
-            raise InvalidInputError(f"`density` must be a positive number; got {density!r}.")
         V, F = m.obj.vertices, m.obj.faces
         loops = boundary_loops(F, V.shape[0])
         if not loops:
             raise InvalidInputError(f"{m.name} has no hole (no boundary edge); nothing to fill.")
         job.update(0.05, f"closing {len(loops)} boundary loop(s) ({method})")
-        V2, F2 = complete.fill_holes(V, F, method=method, max_hole=mh, density=dens)
+        V2, F2 = complete.fill_holes(V, F, method=method, max_hole=mh, density=density)
         new = self.add(Mesh(V2, F2), f"{_stem(m.name)}-filled{_ext(m)}", source=m.id)
         return {
             "model": new.info(),
