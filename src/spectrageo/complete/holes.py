@@ -22,7 +22,7 @@ from .static import INPAINT_METHODS, inpaint
 __all__ = ["DP_MAX_LOOP", "FAIR_RINGS", "fill_holes"]
 
 #: Loops with more edges are cut into pieces by chords before they are patched: the planar
-#: patch's tests cost O(L^2) memory and Liepa's dynamic programming O(L^3) time (about 1.5 s at
+#: patch's tests cost O(L^2) memory and Liepa's dynamic programming O(L^3) time (about 2.6 s at
 #: 300 edges, minutes at 2000). The open border of a scan is such a loop; it is filled at the
 #: density of its edges, and ``max_hole`` leaves it open.
 DP_MAX_LOOP = 300
