@@ -284,6 +284,10 @@ def test_cut_holes_and_summary():
     ]  # fmt: skip
     line = [x for x in holes_summary(rows).splitlines() if "| lsm |" in x][0]
     assert "| validation | lsm | 2 | 1.000 | 2.000 | 1 / 2 | 2 / 2 |" == line
+    from spectrageo.evaluate.completion import evaluate
+
+    with pytest.raises(InvalidInputError, match="unknown part"):
+        evaluate(".", parts=("holes", "hole"))
 
 
 def _animation(T=6):

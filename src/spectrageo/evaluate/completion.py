@@ -73,6 +73,7 @@ HOLE_VALIDATION = (
     "cad/angle_block.STL", "saliency/casting.obj", "saliency/block.obj", "saliency/cad.obj",
 )  # fmt: skip
 HOLES_PER_MESH = 6
+PARTS = ("static", "holes", "holes-cut", "animation", "sequence")
 HOLE_RINGS = (1, 2, 3)
 
 
@@ -222,10 +223,11 @@ def _holes_cut(data: Path, methods, models, seed, split: str) -> list[dict]:
 def cut_holes(
     V: np.ndarray, F: np.ndarray, n_holes: int, rings: tuple[int, ...], rng: Any
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Cut ``n_holes`` holes into a mesh: every face touching the ``r``-ring ball of a random seed
-    vertex is removed (``r`` drawn from ``rings``), balls kept more than three rings apart from
-    each other and more than two from existing borders, vertices left without a face dropped (faces re-indexed), so the result
-    looks like a scan or a repaired file with holes. Returns ``(V_holes, F_holes)``."""
+    """Cut ``n_holes`` holes (fewer when no more fit) into a mesh: every face touching the
+    ``r``-ring ball of a random seed vertex is removed (``r`` drawn from ``rings``), balls kept
+    more than three rings apart from each other and more than two from existing borders,
+    vertices left without a face dropped (faces re-indexed), so the result looks like a scan or
+    a repaired file with holes. Returns ``(V_holes, F_holes)``."""
     from ..geometry import boundary_edges
     from ..graph import adjacency_matrix
 
@@ -389,13 +391,18 @@ def evaluate(
     patterns: tuple[str, ...] = PATTERNS,
     animations: tuple[str, ...] | None = None,
     n_frames: int = ANIM_FRAMES,
-    parts: tuple[str, ...] = ("static", "holes", "holes-cut", "animation", "sequence"),
+    parts: tuple[str, ...] = PARTS,
 ) -> list[dict]:
-    """Run the completion benchmarks; returns one row per run (keys of :data:`COLUMNS`).
+    """Run the completion benchmarks; returns one row per run (keys of :data:`COLUMNS`, and
+    ``split`` on the hole rows measured against a clean mesh).
 
     ``methods`` restricts the static/hole methods (``mc, li, lsm, mean``) and the animation
-    methods (``motion, li, lia, mc, gmc, wrli, seq-li``) by name.
+    methods (``motion, li, lia, mc, gmc, wrli, seq-li``) by name; ``parts`` chooses among
+    :data:`PARTS` (see the module notes).
     """
+    bad = sorted(set(parts) - set(PARTS))
+    if bad:
+        raise InvalidInputError(f"unknown part(s) {', '.join(bad)}; known: {', '.join(PARTS)}.")
     data = Path(data_dir)
     if not data.is_dir():
         raise InvalidInputError(f"`data_dir` must be a folder; got {data}.")
@@ -544,6 +551,6 @@ def _plot(rows: list[dict], png: Path) -> Path | None:
     return save_png(fig, png)
 
 
-__all__ = ["ANIMATIONS", "COLUMNS", "FRACTIONS", "HOLE_TUNING", "HOLE_VALIDATION", "TUNING",
-           "VALIDATION", "cut_holes", "evaluate", "format_csv", "format_markdown",
+__all__ = ["ANIMATIONS", "COLUMNS", "FRACTIONS", "HOLE_TUNING", "HOLE_VALIDATION", "PARTS",
+           "TUNING", "VALIDATION", "cut_holes", "evaluate", "format_csv", "format_markdown",
            "holes_summary", "unknown_region", "write_tables"]  # fmt: skip
