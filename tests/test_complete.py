@@ -520,6 +520,8 @@ def test_cli_round_trip_mesh_and_animation(tmp_path, sphere, capsys):
     assert main([*args, "--density", "0"]) == 2  # not positive
     assert main(["complete", str(tmp_path / "holed.ply"), str(out2b), "--known",
                  str(kp), "--max-hole", "5", "-q"]) == 2  # fmt: skip
+    assert main(["complete", str(tmp_path / "holed.ply"), str(out2b), "--known",
+                 str(kp), "--density", "1", "-q"]) == 2  # fmt: skip
 
     # animation .npz with NaN at unknown entries
     A, Fa = _animation(4)

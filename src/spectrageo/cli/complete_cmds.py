@@ -115,7 +115,11 @@ def cmd_complete(args) -> int:
             )
         m = io.read_mesh(src)
         V, F = complete.fill_holes(
-            m.vertices, m.faces, method=method, max_hole=args.max_hole, density=args.density
+            m.vertices,
+            m.faces,
+            method=method,
+            max_hole=args.max_hole,
+            density=1.0 if args.density is None else args.density,
         )
         io.write(args.output, Mesh(V, F))
         _status(
@@ -123,11 +127,8 @@ def cmd_complete(args) -> int:
             f"{F.shape[0] - m.n_faces} faces added ({method}, {time.perf_counter() - t0:.2f} s)"
         )
         return 0
-    for flag, given in (
-        ("--max-hole", args.max_hole is not None),
-        ("--density", args.density != 1.0),
-    ):
-        if given:
+    for flag, value in (("--max-hole", args.max_hole), ("--density", args.density)):
+        if value is not None:
             raise InvalidInputError(f"`{flag}` applies to --fill-holes.")
     if args.known is None:
         raise InvalidInputError("`--known` KNOWN.npy is required (or pass --fill-holes).")
@@ -197,7 +198,7 @@ def register(sub) -> None:
         help="with --fill-holes: leave loops with more edges open",
     )  # fmt: skip
     p.add_argument(
-        "--density", type=float, default=1.0,
+        "--density", type=float, default=None,
         help="with --fill-holes: implanted points per loop edge length (default 1; lower for "
         "very large holes, whose fill grows with their area)",
     )  # fmt: skip
