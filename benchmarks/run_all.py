@@ -56,6 +56,7 @@ SECTIONS = [
             str(HERE / "_out" / "clean_inputs.md"),
         ],
     ),
+    ("planar_rule", [*_script("planar_rule"), "--out", str(HERE / "_out" / "planar_rule.md")]),
     ("denoise_large", _script("denoise_large")),
     ("denoise_dynamic", [*_script("denoise_dynamic"), "--max-frames", "40"]),
     ("outliers", _evaluate("outliers", "outliers")),

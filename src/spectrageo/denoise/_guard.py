@@ -156,6 +156,42 @@ irregular Delaunay-meshed cube, six seeds: 2.60 against 2.80 without any repair)
 validation row ``meshes/cube-meshed:impulsive`` is not held out for the repair. Crease vertices
 hit by a spike are not isolated by (N7) and are left to the method. Not in the thesis.
 
+Planar tessellations (:func:`planar_share`, issue 14). A CAD export triangulates its planar
+faces exactly: the two triangles on either side of an edge inside a planar face have the same
+normal up to rounding. Dense noise (Gaussian, region-varying, anisotropic) tilts every face and
+leaves almost no such pair; what the quadric statistics see on a coarse CAD tessellation, by
+contrast, is shape (patches of 16 vertices reach across creases and fillets), and three clean
+CAD files outside the shared data were called noisy and destroyed (trimesh's ``20mm-xyz-cube``:
+50.8 degrees of mean normal change and 6.7 % of the diagonal; ``7_8ths_cube``: 34 degrees,
+28 %; ``box``: 31 degrees). So
+
+    (N9)  p = |{edges e = (f, g): angle(n_f, n_g) < PLANAR_DEG}| / |{edges shared by two faces}|
+
+and a mesh with ``p >= PLANAR_SHARE`` is a clean planar tessellation as far as dense noise
+goes: the gate returns it unchanged. Sparse impulses leave most pairs coplanar, so the impulse
+repair (:func:`despike`) is tried first and kept when its first pass flags at least
+``SPIKE_SHARE`` of the vertices and the repaired mesh has a larger share ``p`` than the input:
+a spike pulled back into its plane makes its faces coplanar again, while a repair that moves
+the vertices of a sampled cylinder's rims or a cone's apex (features, not spikes) does not
+(tuning, mean normal error of the impulsive cases on planar tessellations: kept on casting,
+the torus, trimesh's ``round`` and two synthetic shapes, 1.9-14.3 -> 0.3-8.8 degrees; refused
+on trimesh's ``cylinder``, a synthetic cylinder and a clean cone, where it would have made the
+normals worse by 2.3-17.6 degrees, and also on ``idler_riser``, ``1002_tray_bottom`` and a
+synthetic tube, where it would have helped, by up to 4.7 degrees).
+Thresholds, on the tuning split only (the shared pairs; rocker-arm, knot2, spot, casting;
+seven trimesh test models that are not in the shared data, ``20mm-xyz-cube``, ``box``,
+``idler_riser``, ``cylinder``, ``round``, ``1002_tray_bottom``, ``torus``, clean and with the
+five generated kinds at 0.1, 0.3 and 0.5; synthetic cylinders, tubes, a cone and a capsule):
+``PLANAR_DEG`` = 0.1 degrees is above the rounding of float32 STL coordinates (the shares of
+the tuning CAD files barely change from 0.1 to 0.5 degrees) and far below the tilt of noise
+at the gate's level; ``PLANAR_SHARE`` is the geometric midpoint between the largest share of a
+noisy tuning case that needs the filter (0.068: the pair Twelve0.5Impulsive; under dense noise
+at most 0.008) and the smallest share of a clean CAD tessellation there (0.183: the original of
+TrimStar0.5; the trimesh models 0.347-0.692; clean organic tuning meshes and the originals of
+Bunny0.2 and SharpSphere0.3 0.003-0.043), rounded: 0.11 (``python benchmarks/planar_rule.py``).
+Known limit: dense noise on only part of a CAD mesh, leaving more than about 11 % of its face
+pairs exact, is not removed.
+
 Trust region. Displacements are capped at ``trust`` times the noise standard deviation of
 :func:`noise_sigma` (see :func:`apply_trust`). Eq. (5.15)'s plane-fit estimate counts curvature
 as noise and let the filters move clean curved parts by several triangle widths.
@@ -208,6 +244,12 @@ SPIKE_FLOOR = 0.02
 SPIKE_PLANE_DEG = 0.5
 #: passes of the repair (adjacent spikes hide each other)
 SPIKE_PASSES = 3
+#: planar tessellation test (Eq. N9): two faces sharing an edge whose unit normals agree within
+#: this angle (degrees) are coplanar
+PLANAR_DEG = 0.1
+#: ... and a mesh in which at least this share of the face pairs are coplanar carries no dense
+#: noise (tuning split, module notes "Planar tessellations")
+PLANAR_SHARE = 0.11
 #: neighbours averaged by the smoothing step of the detail test
 SMOOTH_NEIGHBORS = 10
 #: a Euclidean patch whose minimum-variance direction has a mean ``|cos|`` below this with the
@@ -432,6 +474,27 @@ def noise_sigma(V, *, F=None, patch: int = 16, quantile: float = 0.25) -> tuple[
 def noise_level(V, *, F=None, patch: int = 16, quantile: float = 0.25) -> float:
     """Relative noise level of :func:`noise_sigma` (dimensionless; 0.0 for surface detail)."""
     return noise_sigma(V, F=F, patch=patch, quantile=quantile)[1]
+
+
+def planar_share(V, F, *, angle: float = PLANAR_DEG) -> float:
+    """Share of the face pairs sharing an edge whose unit normals agree within ``angle``
+    degrees (Eq. N9 of the module notes); 0.0 when no edge is shared by two faces. Degenerate
+    faces (no normal) never count as coplanar."""
+    from ..graph import face_adjacency
+
+    V = as_points(V, "V")
+    F = as_faces(F, V.shape[0], "F")
+    check_positive(angle, "angle")
+    if F.shape[0] < 2:
+        return 0.0
+    A = sp.triu(face_adjacency(F), k=1).tocoo()
+    if A.nnz == 0:
+        return 0.0
+    N = face_normals(V, F)
+    ok = np.linalg.norm(N, axis=1) > 0.5
+    c = np.einsum("ij,ij->i", N[A.row], N[A.col])
+    same = (c >= np.cos(np.radians(angle))) & ok[A.row] & ok[A.col]
+    return float(np.mean(same))
 
 
 def apply_trust(V: np.ndarray, X: np.ndarray, radius: float) -> np.ndarray:

@@ -10,7 +10,16 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
-from ._guard import MIN_NOISE, SPIKE_SHARE, TRUST, apply_trust, despike, noise_sigma
+from ._guard import (
+    MIN_NOISE,
+    PLANAR_SHARE,
+    SPIKE_SHARE,
+    TRUST,
+    apply_trust,
+    despike,
+    noise_sigma,
+    planar_share,
+)
 
 
 @dataclass(frozen=True)
@@ -114,7 +123,13 @@ def denoise(
         :func:`spectrageo.denoise._guard.noise_estimate`, i.e. is spatially correlated surface
         detail rather than white noise) is below ``min_noise`` is returned unchanged, whatever
         the method. Default :data:`spectrageo.denoise._guard.MIN_NOISE` (0.015, chosen on the tuning
-        split); ``0`` or a negative value disables the gate (and the impulse repair).
+        split); ``0`` or a negative value disables the gate (and the impulse repair). Before
+        the level, a planar tessellation (at least
+        :data:`spectrageo.denoise._guard.PLANAR_SHARE` of the face pairs sharing an edge
+        coplanar, :func:`spectrageo.denoise._guard.planar_share`, Eq. N9: a CAD export, which
+        dense noise would have tilted) is returned unchanged, or with only its sparse impulses
+        repaired when ``impulses`` is set, the repair's first pass flags at least 1 % of the
+        vertices and the repaired mesh has more coplanar face pairs than the input.
     impulses : bool
         Sparse impulses (:func:`spectrageo.denoise._guard.despike`, Eqs. N5-N8, not in the
         thesis): on a mesh the gate calls noisy, isolated spikes are pulled back first when at
@@ -158,19 +173,36 @@ def denoise(
     # a triangle soup, which is gated after welding (or refused by the method if welding
     # leaves isolated triangles)
     sigma = None
+    planar = False
     if min_noise > 0 and not is_soup(F, V.shape[0]):
-        sigma, level = noise_sigma(V, F=F)
-        if level < min_noise:
-            return V.copy()  # no noise found: nothing to remove
+        planar = planar_share(V, F) >= PLANAR_SHARE
+        if not planar:
+            sigma, level = noise_sigma(V, F=F)
+            if level < min_noise:
+                return V.copy()  # no noise found: nothing to remove
     w = weld_mesh(V, F) if weld else None
     if w is not None and w.n_merged:
         Vw, Fw = w.vertices, w.faces
-        if sigma is None and min_noise > 0:
-            sigma, level = noise_sigma(Vw, F=Fw)
-            if level < min_noise:
-                return V.copy()
+        if sigma is None and min_noise > 0 and not planar:
+            planar = planar_share(Vw, Fw) >= PLANAR_SHARE
+            if not planar:
+                sigma, level = noise_sigma(Vw, F=Fw)
+                if level < min_noise:
+                    return V.copy()
     else:
         Vw, Fw = V, F
+    if planar:
+        # a planar tessellation (Eq. N9): no dense noise; only sparse impulses are repaired
+        # (the repair is kept only when it makes more face pairs coplanar: a spike pulled back
+        # into its plane does, moving a crease or cone apex does not)
+        rep = despike(Vw, Fw) if impulses else None
+        if (
+            rep is None
+            or rep.share < SPIKE_SHARE
+            or planar_share(rep.vertices, Fw) <= planar_share(Vw, Fw)
+        ):
+            return V.copy()
+        return w.expand(rep.vertices) if w is not None and w.n_merged else rep.vertices
     if impulses and min_noise > 0 and sigma is not None:
         rep = despike(Vw, Fw)
         if rep.share >= SPIKE_SHARE:
