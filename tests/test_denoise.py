@@ -494,11 +494,12 @@ def test_area_weights_matter_only_when_face_areas_differ(noisy_cube):
     plain = tsgsp.fine(Xc, F, area_weights=False)
     weighted = tsgsp.fine(Xc, F)  # area weights are the default
     assert not np.array_equal(plain, weighted)
-    # both denoise well and stay close to each other
+    # the weighted filter denoises well and is not worse than the plain one by more than a
+    # quarter (after the scale-weighted coarse step it is better: 1.9 vs 3.7 degrees)
     t_plain = metrics.theta_deg(plain, V, F)
     t_weighted = metrics.theta_deg(weighted, V, F)
     assert t_weighted < 0.5 * metrics.theta_deg(Vn, V, F)
-    assert abs(t_weighted - t_plain) < 0.25 * t_plain
+    assert t_weighted < 1.25 * t_plain
 
 
 def test_tangent_weight_follows_eq_t1():
@@ -535,3 +536,30 @@ def test_tsgsp_drops_tangential_noise_from_its_blend(shared_data):
     assert auto < 0.8 * plain, (plain, auto)
     with pytest.raises(InvalidInputError, match="input_tangent"):
         denoise.denoise(Vn, F, method="tsgsp", input_tangent=1.5)
+
+
+def test_coarse_scale_weights_follow_the_local_edge_length():
+    """``weights="scale"``: ``C_ij = h / ((h_i + h_j) / 2)``, about 1 on a uniform grid, smaller
+    across long edges; ``"binary"`` is the thesis's 0/1 Laplacian and gives another result."""
+    from spectrageo.graph import adjacency_matrix
+
+    V, F = grid(12, 12)
+    W = tsgsp.scale_weights(V, adjacency_matrix(F, V.shape[0]))
+    # interior vertices: median edge = the grid spacing; border and corner rows differ a little
+    assert np.median(W.data) == pytest.approx(1.0)
+    assert W.data.min() > 0.7 and W.data.max() < 1.5
+    # stretch one column of cells tenfold: the weights of edges there drop
+    Vs = V.copy()
+    Vs[:, 0] = np.where(V[:, 0] > 0.5, V[:, 0] + 9 * (V[:, 0] - 0.5).clip(0, 1 / 11), V[:, 0])
+    Ws = tsgsp.scale_weights(Vs, adjacency_matrix(F, V.shape[0])).tocoo()
+    long = np.linalg.norm(Vs[Ws.row] - Vs[Ws.col], axis=1) > 0.5
+    assert long.any() and Ws.data[long].max() < 0.5 * np.median(Ws.data)
+    # isolated vertex: no edge, no error
+    V2 = np.vstack([V, [[5.0, 5.0, 5.0]]])
+    assert tsgsp.scale_weights(V2, adjacency_matrix(F, V2.shape[0])).nnz == W.nnz
+    Vn = V + np.random.default_rng(0).normal(0, 0.01, V.shape)
+    a = tsgsp.coarse(Vn, F, weights="scale")
+    b = tsgsp.coarse(Vn, F, weights="binary")
+    assert not np.allclose(a, b)
+    with pytest.raises(InvalidInputError):
+        tsgsp.coarse(Vn, F, weights="cotangent")
