@@ -4,7 +4,7 @@ determinism, GNF patch selection, TSGSP building blocks and validation."""
 import numpy as np
 import pytest
 
-from spectrageo import denoise, metrics, noise
+from spectrageo import denoise, io, metrics, noise
 from spectrageo._errors import InvalidInputError
 from spectrageo.denoise import _normals, bilateral, gnf, smoothing, tsgsp
 from spectrageo.geometry import face_normals
@@ -563,3 +563,19 @@ def test_coarse_scale_weights_follow_the_local_edge_length():
     assert not np.allclose(a, b)
     with pytest.raises(InvalidInputError):
         tsgsp.coarse(Vn, F, weights="cotangent")
+
+
+@pytest.mark.parametrize("name", ["box.STL", "idler_riser.STL"])
+def test_scale_weights_help_on_cad_tessellations(name):
+    """Two trimesh CAD parts (tuning data of ``weights``) with Gaussian noise 0.1: the scale
+    weighted coarse step, and TSGSP after it, end closer to the clean part than with the
+    thesis's binary Laplacian (box: coarse 56.4 vs 62.2, TSGSP 46.9 vs 49.5 degrees)."""
+    from pathlib import Path
+
+    m = io.read(Path(__file__).parent / "data" / "trimesh" / name)
+    V, F = m.vertices, m.faces
+    Vn = noise.generate(V, F, kind="gaussian-normal", level=0.1, rng=0).vertices
+    th = lambda X: metrics.theta_deg(X, V, F)  # noqa: E731
+    assert th(tsgsp.coarse(Vn, F)) < th(tsgsp.coarse(Vn, F, weights="binary"))
+    binary = tsgsp.tsgsp(Vn, F, coarse_options={"weights": "binary"})
+    assert th(tsgsp.tsgsp(Vn, F)) < th(binary)
