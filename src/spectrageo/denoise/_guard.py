@@ -178,8 +178,9 @@ the torus, trimesh's ``round`` and two synthetic shapes, 1.9-14.3 -> 0.3-8.8 deg
 on trimesh's ``cylinder``, a synthetic cylinder and a clean cone, where it would have made the
 normals worse by 2.3-17.6 degrees, and also on ``idler_riser``, ``1002_tray_bottom`` and a
 synthetic tube, where it would have helped, by up to 4.7 degrees).
-Thresholds, on the tuning split only (the shared pairs; rocker-arm, knot2, spot, casting;
-seven trimesh test models that are not in the shared data, ``20mm-xyz-cube``, ``box``,
+Thresholds, on tuning data only (the protocol's tuning split: the shared pairs and rocker-arm,
+knot2, spot, casting; and data in neither split: seven trimesh test models that are not in the
+shared data, ``20mm-xyz-cube``, ``box``,
 ``idler_riser``, ``cylinder``, ``round``, ``1002_tray_bottom``, ``torus``, clean and with the
 five generated kinds at 0.1, 0.3 and 0.5; synthetic cylinders, tubes, a cone and a capsule):
 ``PLANAR_DEG`` = 0.1 degrees is above the rounding of float32 STL coordinates (the shares of
