@@ -17,6 +17,7 @@ from .._errors import InvalidInputError
 from .._progress import activity, progress
 from .._validation import as_faces, as_points, check_choice, check_positive
 from ..geometry import boundary_edges, boundary_loops, weld
+from ..geometry.primitives import _normalize_rows
 from .static import INPAINT_METHODS, inpaint
 
 __all__ = ["DP_MAX_LOOP", "FAIR_RINGS", "fill_holes"]
@@ -140,11 +141,6 @@ def _planar_patch(P: np.ndarray, h: float):
 
 
 # ------------------------------------------- fallback: Liepa's minimum-weight patch + refinement
-def _unit_rows(X: np.ndarray) -> np.ndarray:
-    nrm = np.linalg.norm(X, axis=-1, keepdims=True)
-    return X / np.where(nrm > 0, nrm, 1.0)
-
-
 def _dp_patch(
     P: np.ndarray,
     h: float,
@@ -184,7 +180,7 @@ def _dp_patch(
             j = i + gap
             m = np.arange(i + 1, j)
             cr = np.cross(P[j] - P[i], P[m] - P[i])
-            nt = _unit_rows(cr)
+            nt = _normalize_rows(cr)
             n_im = np.where((m == i + 1)[:, None], nb[i][None], nrm_of[i, m])
             n_mj = np.where((m == j - 1)[:, None], nb[m], nrm_of[m, j])
             ang = np.maximum(angle(nt, n_im), angle(nt, n_mj))
@@ -269,7 +265,7 @@ def _border_normals(V: np.ndarray, faces: tuple, loop: np.ndarray, n: int) -> np
         if hit.any():
             t = T[pos[hit]]
             nf = np.cross(V[t[:, 1]] - V[t[:, 0]], V[t[:, 2]] - V[t[:, 0]])
-            out[hit] = sign * _unit_rows(nf)
+            out[hit] = sign * _normalize_rows(nf)
     return out
 
 
@@ -545,14 +541,12 @@ def _complete_near(
     """Positions of the ``unknown`` rows by :func:`inpaint` on the submesh within
     :data:`FAIR_RINGS` rings of them (a hole in a scan of millions of vertices costs what its
     neighbourhood costs)."""
-    from ..graph import adjacency_matrix
+    from ..graph import adjacency_matrix, k_ring
 
     N = V.shape[0]
-    C = adjacency_matrix(F, N)
-    region = unknown.copy()
-    for _ in range(FAIR_RINGS[method]):
-        region |= (C @ region.astype(np.float64)) > 0
-    sub = np.flatnonzero(region)
+    sub = k_ring(adjacency_matrix(F, N), np.flatnonzero(unknown), FAIR_RINGS[method])
+    region = np.zeros(N, dtype=bool)
+    region[sub] = True
     remap = np.full(N, -1, dtype=np.int64)
     remap[sub] = np.arange(sub.size)
     Fs = remap[F[region[F].all(axis=1)]]

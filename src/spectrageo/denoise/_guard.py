@@ -218,7 +218,7 @@ from ..geometry._numba_kernels import (
     patch_quadric_residual,
 )
 from ..geometry.primitives import _normalize_rows
-from ..graph.adjacency import adjacency_matrix, knn
+from ..graph.adjacency import adjacency_matrix, face_adjacency, knn
 
 #: default gate (relative noise level below which a mesh counts as clean); see the module notes
 MIN_NOISE = 0.015
@@ -249,7 +249,7 @@ SPIKE_PASSES = 3
 #: this angle (degrees) are coplanar
 PLANAR_DEG = 0.1
 #: ... and a mesh in which at least this share of the face pairs are coplanar carries no dense
-#: noise (tuning split, module notes "Planar tessellations")
+#: noise (tuning data, module notes "Planar tessellations")
 PLANAR_SHARE = 0.11
 #: neighbours averaged by the smoothing step of the detail test
 SMOOTH_NEIGHBORS = 10
@@ -481,8 +481,6 @@ def planar_share(V, F, *, angle: float = PLANAR_DEG) -> float:
     """Share of the face pairs sharing an edge whose unit normals agree within ``angle``
     degrees (Eq. N9 of the module notes); 0.0 when no edge is shared by two faces. Degenerate
     faces (no normal) never count as coplanar."""
-    from ..graph import face_adjacency
-
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     check_positive(angle, "angle")

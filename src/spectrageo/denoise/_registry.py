@@ -173,46 +173,42 @@ def denoise(
     # a triangle soup, which is gated after welding (or refused by the method if welding
     # leaves isolated triangles)
     sigma = None
-    planar = False
+    share = 0.0  # coplanar face-pair share (Eq. N9) of the mesh the gate measured
     if min_noise > 0 and not is_soup(F, V.shape[0]):
-        planar = planar_share(V, F) >= PLANAR_SHARE
-        if not planar:
+        share = planar_share(V, F)
+        if share < PLANAR_SHARE:
             sigma, level = noise_sigma(V, F=F)
             if level < min_noise:
                 return V.copy()  # no noise found: nothing to remove
     w = weld_mesh(V, F) if weld else None
-    if w is not None and w.n_merged:
-        Vw, Fw = w.vertices, w.faces
-        if sigma is None and min_noise > 0 and not planar:
-            planar = planar_share(Vw, Fw) >= PLANAR_SHARE
-            if not planar:
-                sigma, level = noise_sigma(Vw, F=Fw)
-                if level < min_noise:
-                    return V.copy()
-    else:
-        Vw, Fw = V, F
-    if planar:
+    welded = w is not None and w.n_merged > 0
+    Vw, Fw = (w.vertices, w.faces) if welded else (V, F)
+    if welded and min_noise > 0 and sigma is None:
+        # a soup is gated here; a planar mesh's share is measured again on the welded mesh,
+        # against which the impulse repair is compared
+        share = planar_share(Vw, Fw)
+        if share < PLANAR_SHARE:
+            sigma, level = noise_sigma(Vw, F=Fw)
+            if level < min_noise:
+                return V.copy()
+    if min_noise > 0 and share >= PLANAR_SHARE:
         # a planar tessellation (Eq. N9): no dense noise; only sparse impulses are repaired
         # (the repair is kept only when it makes more face pairs coplanar: a spike pulled back
         # into its plane does, moving a crease or cone apex does not)
         rep = despike(Vw, Fw) if impulses else None
-        if (
-            rep is None
-            or rep.share < SPIKE_SHARE
-            or planar_share(rep.vertices, Fw) <= planar_share(Vw, Fw)
-        ):
+        if rep is None or rep.share < SPIKE_SHARE or planar_share(rep.vertices, Fw) <= share:
             return V.copy()
-        return w.expand(rep.vertices) if w is not None and w.n_merged else rep.vertices
+        return w.expand(rep.vertices) if welded else rep.vertices
     if impulses and min_noise > 0 and sigma is not None:
         rep = despike(Vw, Fw)
         if rep.share >= SPIKE_SHARE:
             sigma_r, level_r = noise_sigma(rep.vertices, F=Fw)
             if level_r < min_noise:
                 out = rep.vertices  # the impulses were the noise
-                return w.expand(out) if w is not None and w.n_merged else out
+                return w.expand(out) if welded else out
             Vw, sigma = rep.vertices, sigma_r
     out = _run(info, Vw, Fw, pre=pre, trust=trust, sigma=sigma, options=options)
-    return w.expand(out) if w is not None and w.n_merged else out
+    return w.expand(out) if welded else out
 
 
 def _run(info, V, F, *, pre, trust, sigma, options) -> np.ndarray:

@@ -323,6 +323,7 @@ def coarse(
             tol,
             gen,
             RULES.index(rule),
+            "weighted" if weights == "scale" else "binary",
         )
     out = reassemble(values, subs)
     if not full_output:
@@ -334,8 +335,8 @@ def coarse(
 def scale_weights(V: np.ndarray, C) -> sp.csr_matrix:
     """``C`` (symmetric adjacency, CSR) reweighted to ``h / ((h_i + h_j) / 2)``: ``h_i`` the median
     length of the edges at vertex ``i``, ``h`` the median of the ``h_i`` (see ``weights`` of
-    :func:`coarse`). Isolated vertices keep no edge; zero-length edges get the smallest positive
-    scale."""
+    :func:`coarse`). Isolated vertices keep no edge; a vertex whose median edge length is 0
+    (coincident neighbours) gets the smallest positive ``h_i``."""
     C = sp.csr_matrix(C, dtype=np.float64, copy=True)
     C.sort_indices()
     n = C.shape[0]
@@ -361,7 +362,21 @@ def scale_weights(V: np.ndarray, C) -> sp.csr_matrix:
 
 
 def _coarse_loop(
-    V, C, subs, frac0, sig2, dirs, max_keep, method, zeta, oi_iter, n_em, tol, gen, rule_code
+    V,
+    C,
+    subs,
+    frac0,
+    sig2,
+    dirs,
+    max_keep,
+    method,
+    zeta,
+    oi_iter,
+    n_em,
+    tol,
+    gen,
+    rule_code,
+    laplacian,
 ):
     """Algorithm 1 on every submesh basis; returns
     ``(values, sizes, noise, max_sizes, visits, all_conv)``."""
@@ -379,7 +394,7 @@ def _coarse_loop(
         method=method,
         zeta=zeta,
         n_iter=oi_iter,
-        laplacian="binary" if np.all(C.data == 1.0) else "weighted",
+        laplacian=laplacian,
         rng=gen,
     ):
         part = subs.parts[i]

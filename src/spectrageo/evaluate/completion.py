@@ -229,16 +229,16 @@ def cut_holes(
     vertices left without a face dropped (faces re-indexed), so the result looks like a scan or
     a repaired file with holes. Returns ``(V_holes, F_holes)``."""
     from ..geometry import boundary_edges
-    from ..graph import adjacency_matrix
+    from ..graph import adjacency_matrix, k_ring
 
     g = np.random.default_rng(rng)
     n = V.shape[0]
     C = adjacency_matrix(F, n).tocsr()
 
-    def grow(mask: np.ndarray, r: int) -> np.ndarray:
-        for _ in range(r):
-            mask = mask | (C @ mask.astype(np.float64) > 0)
-        return mask
+    def grow(mask: np.ndarray, r: int) -> np.ndarray:  # the r-ring of a vertex set, as a mask
+        out = np.zeros(n, dtype=bool)
+        out[k_ring(C, np.flatnonzero(mask), r)] = True
+        return out
 
     blocked = np.zeros(n, dtype=bool)
     be = boundary_edges(F, n)
