@@ -20,14 +20,26 @@ from ._batch import BATCH_COMMANDS, batch, expand_inputs, output_paths
 from ._cluster import DaskMissingError, open_client, require_dask
 from ._codec import CODEC_BLOCK_METHODS, encode_animation_blocks
 from ._frames import gft_rpca_blocks
-from ._tiled import (
-    TiledResult,
-    TiledRobotResult,
-    TiledSaliencyResult,
-    remove_outliers_tiled,
-    robot_denoise_tiled,
-    saliency_tiled,
+
+#: names of :mod:`._tiled`, imported on first use (it pulls in the outlier kernels, which every
+#: other command, and ``spectrageo --help``, would otherwise pay for at start-up)
+_TILED = (
+    "TiledResult",
+    "TiledRobotResult",
+    "TiledSaliencyResult",
+    "remove_outliers_tiled",
+    "robot_denoise_tiled",
+    "saliency_tiled",
 )
+
+
+def __getattr__(name: str):
+    if name in _TILED:
+        from . import _tiled
+
+        return getattr(_tiled, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "BATCH_COMMANDS",
