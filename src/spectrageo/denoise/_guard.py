@@ -417,7 +417,11 @@ def noise_estimate(V, *, F=None, patch: int = 16, quantile: float = 0.25) -> Noi
     if k < 7:
         return NoiseEstimate(0.0, 0.0, 0.0, nan, nan, nan, False)
     tree = cKDTree(V)
-    idx, dist = knn(V, k, include_self=True, tree=tree)
+    big = int(round(1.5 * k))
+    # one query serves both patch sizes (the growth test's patches are the first ``big``
+    # neighbours; the level's the first ``k`` of them)
+    idx_all, dist_all = knn(V, min(big, n), include_self=True, tree=tree)
+    idx, dist = np.ascontiguousarray(idx_all[:, :k]), dist_all[:, :k]
     rings = False
     dirs = _min_variance_dirs(V, idx)
     if F is not None:
@@ -436,14 +440,13 @@ def noise_estimate(V, *, F=None, patch: int = 16, quantile: float = 0.25) -> Noi
     var = _calibrated(res, quantile, k - 6)
     sigma = float(np.sqrt(var))
     level = sigma / radius
-    big = int(round(1.5 * k))
     if not var > 0 or big > n:
         return NoiseEstimate(sigma, level, level, nan, nan, nan, False, kind)
     # Eq. (N2): growth of the residual variance with the patch size
     if rings:
         idx_big = ring_patches(V, F, big)[0]
     else:
-        idx_big = knn(V, big, include_self=True, tree=tree)[0]
+        idx_big = idx_all
     growth = float(_calibrated(_residuals(V, idx_big), quantile, big - 6) / var)
     # Eq. (N3): variance surviving one step of the uniform kNN Laplacian (lambda = 1)
     m = min(SMOOTH_NEIGHBORS, k - 1)
