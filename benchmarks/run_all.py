@@ -39,11 +39,14 @@ SECTIONS = [
         [
             *_evaluate("denoise", "denoise_validation"),
             "--split",
-            "validation",
+            "both",
             "--levels",
             "0.3",
             "--max-vertices",
             "30000",
+            "--repeat",
+            "3",
+            "--cli-timing",
         ],
     ),
     (

@@ -278,6 +278,25 @@ def test_validation_of_arguments(shared_data, tmp_path):
         evaluate_generality(shared_data, methods=["nope"])
     with pytest.raises(InvalidInputError, match="protocol mesh 'meshes/rotor.off' not found"):
         evaluate_generality(tmp_path, split="validation", models=["rotor"], peers=False)
+    for bad in (0, 1.5, True):
+        with pytest.raises(InvalidInputError, match="`repeat` must be a positive integer"):
+            evaluate_generality(shared_data, models=["rotor"], repeat=bad)
+
+
+def test_repeat_reports_the_best_time_and_the_same_theta(shared_data, tmp_path):
+    kw = dict(
+        split="validation", levels=[0.3], kinds=["gaussian-normal"], models=["rotor"],
+        peers=False,
+    )  # fmt: skip
+    one = evaluate_generality(shared_data, **kw)
+    three = evaluate_generality(shared_data, repeat=3, out=tmp_path / "r", **kw)
+    assert three.repeat == 3
+    for a, b in zip(one.rows, three.rows, strict=True):
+        assert a["theta_deg"] == b["theta_deg"] and b["time_s"] > 0
+    assert (
+        "in-process times are the best of 3 runs per case and method"
+        in (tmp_path / "r.md").read_text()
+    )
 
 
 def test_cli_split_options(capsys, shared_data, tmp_path):
@@ -341,3 +360,10 @@ def test_time_ratios_where_both_denoised_leave_out_gate_only_cases():
     assert s["time_ratio_max_5k"] == pytest.approx(1.5)  # the gate-only case
     assert s["time_ratio_max_5k_denoised"] == pytest.approx(0.4)
     assert s["time_ratio_median_denoised"] == pytest.approx(0.325)
+    assert s["cli_time_ratio_median"] is None  # no CLI timings in these rows
+    for r, cli in zip(rows, (2.0, 4.0, 1.0, 0.9, 3.0, 5.0, 1.0, 0.9), strict=True):
+        r["cli_time_s"] = cli
+    s = ev.generality_summary(rows)["validation"]
+    assert s["cli_time_ratio_max_5k_denoised"] == pytest.approx(0.6)
+    assert s["cli_time_ratio_median_denoised"] == pytest.approx(0.55)
+    assert s["cli_time_ratio_median"] == pytest.approx(np.median([0.5, 1.0 / 0.9, 0.6, 1.0 / 0.9]))

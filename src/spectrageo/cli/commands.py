@@ -567,6 +567,7 @@ def _generality_options(args) -> dict | None:
         "--max-vertices": args.max_vertices,
         "--models": args.models,
         "--cli-timing": args.cli_timing or None,
+        "--repeat": args.repeat,
     }
     if args.split is None:
         used = [k for k, v in given.items() if v is not None]
@@ -576,6 +577,10 @@ def _generality_options(args) -> dict | None:
     if args.what != "denoise":
         raise _err(f"`--split` applies to `evaluate denoise` only; got {args.what!r}.")
     opts: dict = {"split": args.split, "cli_timing": bool(args.cli_timing)}
+    if args.repeat is not None:
+        if args.repeat < 1:
+            raise _err(f"`--repeat` must be a positive integer; got {args.repeat}.")
+        opts["repeat"] = args.repeat
     if args.levels:
         try:
             opts["levels"] = [float(x) for x in args.levels.split(",")]
@@ -898,6 +903,12 @@ def register_all(sub) -> None:
         "--cli-timing",
         action="store_true",
         help="also time `spectrageo denoise` processes for the package's methods",
+    )
+    g.add_argument(
+        "--repeat",
+        type=int,
+        default=None,
+        help="report the best of N timings of the package's methods (default 1)",
     )
     p.set_defaults(func=cmd_evaluate)
 
