@@ -17,12 +17,12 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, check_choice, check_positive
 from ..graph import adjacency_matrix, laplacian_from_adjacency
 from ..linalg import complete_matrix, laplacian_interpolation
+from ..linalg._common import spd_factor
 from ._common import as_known, as_partial_points, check_components
 
 __all__ = ["INPAINT_METHODS", "inpaint", "patch_indices"]
@@ -153,7 +153,7 @@ def _lsm(V: np.ndarray, known: np.ndarray, C: sp.csr_matrix, weight: float) -> n
     K = (L.T @ L + S).tocsc()
     rhs = np.where(known[:, None], V, 0.0) * weight**2
     try:
-        X = splu(K).solve(rhs)
+        X = spd_factor(K).solve(rhs)
     except RuntimeError as exc:  # pragma: no cover - components are checked beforehand
         raise InvalidInputError("the least-squares-meshes system is singular.") from exc
     return X

@@ -86,13 +86,13 @@ class _Solver:
     """Factorised normal equations of ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54)."""
 
     def __init__(self, L: sp.csr_matrix, a: np.ndarray) -> None:
-        import scipy.sparse.linalg as spla
+        from ..linalg._common import spd_factor
 
         n = L.shape[0]
         P = sp.csr_matrix((np.ones(a.size), (np.arange(a.size), a)), shape=(a.size, n))
         self.L, self.P = L, P
-        M = (L.T @ L + P.T @ P).tocsc()
-        self.lu = spla.splu(M, permc_spec="MMD_AT_PLUS_A")
+        # SPD (one anchor per connected component): no pivoting, symmetric ordering
+        self.lu = spd_factor(L.T @ L + P.T @ P)
 
     def solve(self, delta: np.ndarray, va: np.ndarray) -> np.ndarray:
         return self.lu.solve(np.asarray(self.L.T @ delta + self.P.T @ va))

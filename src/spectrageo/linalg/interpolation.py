@@ -7,9 +7,9 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
-from scipy.sparse.linalg import splu
 
 from .._errors import InvalidInputError
+from ._common import spd_factor
 
 __all__ = ["laplacian_interpolation"]
 
@@ -30,7 +30,7 @@ def laplacian_interpolation(
 
     of ``n`` equations in ``n - n_k`` unknowns, whose solution is Eq. 4.27. It is computed from the
     sparse normal equations ``(R^T W R) B_u = -R^T W Q B_k`` with ``R = L[:, u]``, ``Q = L[:, k]``
-    and a sparse LU factorisation (``scipy.sparse.linalg.splu``, one factorisation for all
+    and a sparse LU factorisation (SuperLU in symmetric mode, ``_common.spd_factor``, one factorisation for all
     columns of ``B``); no dense inverse is formed.
 
     ``weights`` (one non-negative weight per equation, i.e. per row of ``L``) turns it into
@@ -131,7 +131,7 @@ def laplacian_interpolation(
     K = sp.csc_matrix(Rt_w @ R)
     rhs = -(Rt_w @ (Q @ Bk))
     try:
-        lu = splu(K)
+        lu = spd_factor(K)
     except RuntimeError as exc:  # exactly singular
         raise InvalidInputError(
             "the interpolation system is singular: some unknown values are not determined by `L`."

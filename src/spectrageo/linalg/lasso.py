@@ -159,10 +159,10 @@ def _factorised_solver(
     """Return ``q -> (A^T A / N + rho I)^{-1} q`` with the factorisation computed once."""
     n_samples, p = A.shape
     if is_sparse:
-        from scipy.sparse.linalg import splu
+        from ._common import spd_factor
 
         K = (A.T @ A) / N + rho * sp.identity(p, format="csr")
-        lu = splu(sp.csc_matrix(K))
+        lu = spd_factor(K)
         return lu.solve
     if p <= n_samples:
         K = (A.T @ A) / N
