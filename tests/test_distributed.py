@@ -333,3 +333,39 @@ def test_tiled_rpca_mostly_copies_is_a_clear_error(tmp_path):
     np.save(tmp_path / "c.npy", X)
     with pytest.raises(InvalidInputError, match="exact copies"):
         distributed.remove_outliers_tiled(tmp_path / "c.npy", None, tile=1300, **_THREADS)
+
+
+def test_tiled_functions_are_imported_on_first_use():
+    """``import spectrageo.distributed`` (which every CLI command pays for) does not import the
+    tiled module and its outlier kernels; its names resolve on first use."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, spectrageo.distributed as d\n"
+        "assert 'spectrageo.distributed._tiled' not in sys.modules\n"
+        "assert 'spectrageo.outliers' not in sys.modules\n"
+        "f = d.remove_outliers_tiled\n"
+        "assert 'spectrageo.distributed._tiled' in sys.modules\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+    from spectrageo import distributed
+    from spectrageo.distributed import _tiled
+
+    assert distributed._TILED == tuple(_tiled.__all__)
+    assert set(distributed._TILED) <= set(distributed.__all__)
+    with pytest.raises(AttributeError):
+        _ = distributed.no_such_function
+
+
+def test_denoise_does_not_import_scipy_stats():
+    """The gate's chi-square quantile comes from scipy.special: scipy.stats (0.25 s of import)
+    stays out of every command that denoises."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, spectrageo.denoise, spectrageo.cli.commands\n"
+        "assert 'scipy.stats' not in sys.modules, 'scipy.stats imported'\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
