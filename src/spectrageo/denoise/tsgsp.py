@@ -38,7 +38,7 @@ import scipy.sparse as sp
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, as_rng, check_choice, check_positive
 from ..geometry import face_centroids, face_normals, vertex_normals
-from ..geometry._numba_kernels import patch_min_variance
+from ..geometry._numba_kernels import patch_min_variance, sym3_eigenvalues
 from ..geometry.features import FLAT, cluster_eigenvalues, patch_eigenvalues
 from ..geometry.primitives import _normalize_rows
 from ..graph import adjacency_matrix
@@ -621,59 +621,6 @@ def _patch_moments(N, nb_sorted):  # pragma: no cover - jitted
 
 
 @numba.njit(cache=True)
-def _jacobi_rotate(app, aqq, apq, arp, arq):  # pragma: no cover - jitted
-    """One Jacobi rotation zeroing ``a_pq`` of a symmetric 3x3 matrix (``r`` the third index)."""
-    tau = (aqq - app) / (2.0 * apq)
-    if abs(tau) > 1e150:
-        t = 0.5 / tau
-    else:
-        t = 1.0 / (abs(tau) + np.sqrt(1.0 + tau * tau))
-        if tau < 0:
-            t = -t
-    c = 1.0 / np.sqrt(1.0 + t * t)
-    s = t * c
-    return app - t * apq, aqq + t * apq, c * arp - s * arq, s * arp + c * arq
-
-
-@numba.njit(cache=True)
-def _sym3_eigenvalues(S):  # pragma: no cover - jitted
-    """Ascending eigenvalues of symmetric 3x3 matrices given as (m, 6) [xx, yy, zz, xy, xz, yz].
-
-    Cyclic Jacobi rotations (backward stable like LAPACK: absolute error of the order of the
-    rounding error times the largest eigenvalue, also for the repeated eigenvalues of flat
-    patches, where the closed-form cubic solution loses half of the digits)."""
-    m = S.shape[0]
-    out = np.empty((m, 3))
-    for i in range(m):
-        a00 = S[i, 0]
-        a11 = S[i, 1]
-        a22 = S[i, 2]
-        a01 = S[i, 3]
-        a02 = S[i, 4]
-        a12 = S[i, 5]
-        for _ in range(30):
-            off = a01 * a01 + a02 * a02 + a12 * a12
-            diag = a00 * a00 + a11 * a11 + a22 * a22
-            if off == 0.0 or off <= 1e-36 * diag:
-                break
-            if a01 != 0.0:  # (p, q, r) = (0, 1, 2)
-                a00, a11, a02, a12 = _jacobi_rotate(a00, a11, a01, a02, a12)
-                a01 = 0.0
-            if a02 != 0.0:  # (0, 2, 1)
-                a00, a22, a01, a12 = _jacobi_rotate(a00, a22, a02, a01, a12)
-                a02 = 0.0
-            if a12 != 0.0:  # (1, 2, 0)
-                a11, a22, a01, a02 = _jacobi_rotate(a11, a22, a12, a01, a02)
-                a12 = 0.0
-        lo = min(a00, min(a11, a22))
-        hi = max(a00, max(a11, a22))
-        out[i, 0] = lo
-        out[i, 1] = max(min(a00, a11), min(max(a00, a11), a22))
-        out[i, 2] = hi
-    return out
-
-
-@numba.njit(cache=True)
 def _filter_kernel(
     N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide, wa, values
 ):  # pragma: no cover
@@ -966,7 +913,7 @@ def fine(
             wa = dbl_area / max(float(dbl_area.mean()), _EPS)
         else:
             wa = np.ones(m)
-        ev = _sym3_eigenvalues(_patch_moments(N, nb_sorted))  # Eq. (4.14)-(4.15)
+        ev = sym3_eigenvalues(_patch_moments(N, nb_sorted))  # Eq. (4.14)-(4.15)
         labels = cluster_eigenvalues(ev, min_feature=min_feature)[0]
         new_feature = labels != FLAT
         if curved_gate is not None:
