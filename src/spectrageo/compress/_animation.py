@@ -56,7 +56,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_frames
@@ -199,13 +198,14 @@ def choose_anchors(V0: np.ndarray, L: sp.csr_matrix, fraction: float) -> np.ndar
 class _Solver:
     """Factorisation of ``L^T L + w^2 I_a^T I_a`` for Eq. (5.51), reused for every frame.
 
-    Reverse Cuthill-McKee order and a symmetric-mode sparse LU (fill and solve time are a
-    fraction of those of SuperLU's default ordering on mesh Laplacians); right-hand sides are
-    solved 64 columns at a time.
+    The shared SPD factorisation (:func:`spectrageo.linalg._common.spd_factor`: minimum-degree
+    order, symmetric mode, no pivoting; on the 20k-vertex joint 4x fewer factor entries and
+    11x faster than the reverse Cuthill-McKee order used before); right-hand sides are solved
+    64 columns at a time.
     """
 
     def __init__(self, L: sp.csr_matrix, anchors: np.ndarray, weight: float) -> None:
-        from scipy.sparse.csgraph import reverse_cuthill_mckee
+        from ..linalg._common import spd_factor
 
         n = L.shape[0]
         self.L = L
@@ -213,13 +213,8 @@ class _Solver:
         self.w2 = weight * weight
         d = np.zeros(n)
         d[anchors] = self.w2
-        M = (L.T @ L + sp.diags(d)).tocsr()
-        self.perm = reverse_cuthill_mckee(M, symmetric_mode=True).astype(np.int64)
-        Mp = M[self.perm][:, self.perm].tocsc()
         try:
-            self.lu = spla.splu(
-                Mp, permc_spec="NATURAL", options={"SymmetricMode": True}, diag_pivot_thresh=0.0
-            )
+            self.lu = spd_factor(L.T @ L + sp.diags(d))
         except RuntimeError as exc:  # singular: cannot happen with one anchor per component
             raise InvalidInputError(f".sga reconstruction system is singular ({exc}).") from None
 
@@ -227,13 +222,10 @@ class _Solver:
         """``delta`` (n, c) and ``anchor_pos`` (n_a, c) -> positions (n, c)."""
         rhs = np.asarray(self.L.T @ delta)
         rhs[self.anchors] += self.w2 * anchor_pos
-        rhs = rhs[self.perm]
         out = np.empty_like(rhs)
         for j in range(0, rhs.shape[1], 64):
             out[:, j : j + 64] = self.lu.solve(np.ascontiguousarray(rhs[:, j : j + 64]))
-        res = np.empty_like(out)
-        res[self.perm] = out
-        return res
+        return out
 
 
 # ----------------------------------------------------------------------------- eigen-trajectories
