@@ -623,3 +623,17 @@ def test_grabber_sequence_wrli_below_per_frame_li(shared_data):
     assert set(rows) == {"wrli", "seq-li"}
     assert rows["wrli"]["n"] > 500 and np.isfinite(rows["wrli"]["rms"])
     assert rows["wrli"]["rms"] < rows["seq-li"]["rms"]
+
+
+def test_completion_report_header_names_where_matrix_completion_wins():
+    """The header's sentence on matrix completion comes from the rows, not from a past run."""
+    from spectrageo.evaluate.completion import _header
+
+    def row(data, method, rms, known=0.3):
+        return {"part": "static", "data": data, "pattern": "random", "known": known,
+                "method": method, "rms": rms}  # fmt: skip
+
+    rows = [row("a", "mc", 2.0), row("a", "li", 1.0), row("b", "mc", 0.5), row("b", "li", 1.0)]
+    assert "except on some cases of b (" in _header(rows)
+    rows[2]["rms"] = 3.0
+    assert "Laplacian interpolation on every case" in _header(rows)

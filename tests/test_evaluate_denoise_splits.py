@@ -323,6 +323,8 @@ def test_cli_split_options(capsys, shared_data, tmp_path):
     for argv, msg in (
         (["--levels", "0.3"], "`--levels` needs `--split"),
         (["--split", "both", "--levels", "a,b"], "`--levels` must be comma-separated numbers"),
+        (["--split", "validation", "--repeat", "0"], "--repeat must be a positive integer"),
+        (["--repeat", "3"], "`--repeat` needs `--split"),
     ):
         code = main(["evaluate", "denoise", "--data", str(shared_data), *argv])
         _, err = capsys.readouterr()

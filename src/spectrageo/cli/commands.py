@@ -578,9 +578,7 @@ def _generality_options(args) -> dict | None:
         raise _err(f"`--split` applies to `evaluate denoise` only; got {args.what!r}.")
     opts: dict = {"split": args.split, "cli_timing": bool(args.cli_timing)}
     if args.repeat is not None:
-        if args.repeat < 1:
-            raise _err(f"`--repeat` must be a positive integer; got {args.repeat}.")
-        opts["repeat"] = args.repeat
+        opts["repeat"] = args.repeat  # checked by evaluate_generality
     if args.levels:
         try:
             opts["levels"] = [float(x) for x in args.levels.split(",")]

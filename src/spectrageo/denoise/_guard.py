@@ -204,7 +204,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import cKDTree
 from scipy.special import gammaincinv
 
 from .._errors import InvalidInputError
@@ -416,11 +415,10 @@ def noise_estimate(V, *, F=None, patch: int = 16, quantile: float = 0.25) -> Noi
     k = min(int(patch), n)
     if k < 7:
         return NoiseEstimate(0.0, 0.0, 0.0, nan, nan, nan, False)
-    tree = cKDTree(V)
     big = int(round(1.5 * k))
     # one query serves both patch sizes (the growth test's patches are the first ``big``
     # neighbours; the level's the first ``k`` of them)
-    idx_all, dist_all = knn(V, min(big, n), include_self=True, tree=tree)
+    idx_all, dist_all = knn(V, min(big, n), include_self=True)
     idx, dist = np.ascontiguousarray(idx_all[:, :k]), dist_all[:, :k]
     rings = False
     dirs = _min_variance_dirs(V, idx)

@@ -30,8 +30,8 @@ def laplacian_interpolation(
 
     of ``n`` equations in ``n - n_k`` unknowns, whose solution is Eq. 4.27. It is computed from the
     sparse normal equations ``(R^T W R) B_u = -R^T W Q B_k`` with ``R = L[:, u]``, ``Q = L[:, k]``
-    and a sparse LU factorisation (SuperLU in symmetric mode, ``_common.spd_factor``, one factorisation for all
-    columns of ``B``); no dense inverse is formed.
+    and one sparse factorisation for all columns of ``B`` (SuperLU without pivoting,
+    :func:`spectrageo.linalg._common.spd_factor`); no dense inverse is formed.
 
     ``weights`` (one non-negative weight per equation, i.e. per row of ``L``) turns it into
     ``min ||W^{1/2} L B||``. Giving weight 0 to the rows of the known vertices yields the classical
