@@ -9,6 +9,7 @@ import textwrap
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from spectrageo import denoise, metrics, noise
 from spectrageo._errors import InvalidInputError
@@ -64,6 +65,53 @@ def test_image_layout_follows_fig_5_40():
     row0 = img[6, 0, 0]  # first row of face 6: itself in the centre column
     assert row0[2] == 7 and row0[3] == idx[6, 1] + 1 and row0[1] == idx[6, 2] + 1
     assert img[6, 0, 1, 2] == idx[6, 1] + 1  # second row centred at the nearest centroid
+
+
+def test_fast_paths_match_their_references(noisy_fandisk):
+    """The copy-free image build, the indexed CNN kernel, the compiled row moments and the
+    RPCA on the non-zero columns give what the straightforward code gives."""
+    from spectrageo.denoise import _normals as nm
+    from spectrageo.learn.dae import face_rows, feature_mask
+    from spectrageo.linalg import rpca
+
+    Vn, _, F = noisy_fandisk
+    N, idx, G, R = fe.mesh_inputs(Vn, F)
+    img, _ = fe.build_images(Vn, F, rows=5, channels=6)
+    sep = np.concatenate([fe.normal_images(P, idx, R, rows=5) for P in (G, N)], axis=1)
+    assert np.array_equal(img, sep)
+    with pytest.raises(ValueError, match="cannot take"):
+        fe.normal_images(G, idx, R, rows=5, out=np.empty((3, 6, 5, 9), np.float32))
+    with pytest.raises(ValueError, match="cannot take"):
+        fe.normal_images(G, idx, R, rows=5, out=img, channel=4)
+    # eigenvalues of C = I^T I / k, float32 and float64 rows, against LAPACK
+    first = img[:, :3, 0, :]
+    ref = np.linalg.eigvalsh(np.einsum("bik,bjk->bij", first.astype(np.float64), first) / 9)
+    assert np.abs(fe.row_eigenvalues(first) - ref).max() < 1e-12
+    assert np.abs(fe.row_eigenvalues(first.astype(np.float64)) - ref).max() < 1e-12
+    # Eq. (4.9)'s patch term
+    P = sp.csr_matrix((np.ones(idx.size), idx.ravel(), np.arange(0, idx.size + 1, 9)))
+    Rm = np.asarray(P @ (N[:, :, None] * N[:, None, :]).reshape(-1, 9)).reshape(-1, 3, 3)
+    lam = np.linalg.eigvalsh(Rm)
+    assert np.abs(nm._thesis_patch_term(N, P) - np.abs(lam[:, 0] - lam[:, 1])).max() < 1e-12
+    # the CNN on a subset, in place, equals the CNN on the copied subset (both paths)
+    rng = np.random.default_rng(3)
+    W1, b1 = rng.normal(0, 0.1, (8, 6, 5, 5)), rng.normal(0, 0.1, 8)
+    rw, mu = rng.normal(0, 1, (8, 9)), np.linspace(-1, 1, 9)
+    W2, b2 = rng.normal(0, 0.1, (3, 8, 5, 5)), rng.normal(0, 0.1, 3)
+    sel = rng.choice(img.shape[0], 500, replace=False)
+    table = _nn.RBFTable(rw, mu, 0.5)
+    for tab in (None, table):
+        a = _nn.cnn_centre(img, W1, b1, rw, mu, 0.5, W2, b2, table=tab, index=sel)
+        b = _nn.cnn_centre(img[sel], W1, b1, rw, mu, 0.5, W2, b2, table=tab)
+        assert a.shape == (500, 3) and np.array_equal(a, b)
+    # feature identification: the zero columns left out do not change the decision
+    rows = face_rows(Vn, F)[0]
+    M = rows - np.tile([1.0, 0.0, 0.0], rows.shape[1] // 3)
+    assert np.abs(M[:, :3]).max() < 1e-9 and np.abs(M[:, 3:]).max(axis=0).min() > 1e-3
+    full = rpca(M, method="ialm", on_nonconvergence="ignore", max_iter=200)
+    want = np.linalg.norm(full.sparse, axis=1) > np.linalg.norm(full.low_rank, axis=1) + 0.7
+    got = feature_mask(rows)
+    assert 0 < got.sum() < got.size and np.array_equal(got, want)
 
 
 # --------------------------------------------------------------------------- numpy vs torch
@@ -402,3 +450,19 @@ def test_cli_train_tiny(tmp_path, capsys):
     assert rep["loss"][0]["train"] and out.with_suffix(".md").is_file()
     X = bm3d_cnn(V, F, weights=out)
     assert np.isfinite(X).all() and X.shape == V.shape
+
+
+def test_time_ratios_compare_each_case_with_tsgsp_in_the_size_range():
+    from spectrageo.learn.evaluate import format_markdown, time_ratios
+
+    def row(case, method, n, t):
+        return {"part": "pairs", "case": case, "method": method, "n_vertices": n,
+                "input_theta": 30.0, "theta_deg": 5.0, "time_s": t}  # fmt: skip
+
+    rows = [row("a", "tsgsp", 20_000, 1.0), row("a", "bm3d-cnn", 20_000, 1.5),
+            row("a", "dae", 20_000, 0.5), row("b", "tsgsp", 5_000, 1.0),
+            row("b", "bm3d-cnn", 5_000, 9.0), row("c", "tsgsp", 50_000, 2.0),
+            row("c", "bm3d-cnn", 50_000, 1.0), row("c", "bnf", 50_000, 1.0)]  # fmt: skip
+    r = time_ratios(rows)
+    assert r == {"bm3d-cnn": [1.5, 0.5], "dae": [0.5]}  # case b is below 10k vertices
+    assert "`bm3d-cnn` median 1.00, largest 1.50 (2 cases)" in format_markdown(rows)

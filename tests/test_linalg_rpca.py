@@ -153,6 +153,27 @@ def test_ill_conditioned_tall_matrix_uses_tsqr_and_matches_dense():
     assert rel(a.sparse, b.sparse) < 1e-5
 
 
+def test_core_svd_falls_back_to_gesvd_when_gesdd_fails(monkeypatch):
+    # LAPACK's gesdd reports no convergence on some finite, nearly rank-deficient matrices
+    # (seen on the DAE's temporal rows of an animation): the QR-iteration driver takes over
+    M = knn_like(2000, seed=8)
+    s_ref = np.linalg.svd(M, compute_uv=False)
+    calls = []
+
+    def failing_svd(*args, **kwargs):
+        calls.append(1)
+        raise np.linalg.LinAlgError("SVD did not converge")
+
+    monkeypatch.setattr(np.linalg, "svd", failing_svd)
+    for mode in ("qr", "gram"):
+        acc = CoreAccumulator(11, mode)
+        acc.add(M)
+        s, V = acc.finish()
+        np.testing.assert_allclose(s, s_ref, rtol=1e-8)
+        assert np.allclose(V.T @ V, np.eye(11), atol=1e-10)
+    assert len(calls) == 2
+
+
 def test_float32_mode_close_to_float64():
     M = knn_like(3000, seed=7)
     r64 = rpca(M, tol=1e-6)

@@ -264,17 +264,20 @@ def _row_reduce(values: np.ndarray, indptr: np.ndarray, ufunc, empty: float) -> 
 
 def _thesis_patch_term(N: np.ndarray, P: sp.csr_matrix) -> np.ndarray:
     """``a_j = |lambda_j1 - lambda_j2|`` of Eq. (4.9) for every patch, shape (m,)."""
-    outer = (N[:, :, None] * N[:, None, :]).reshape(-1, 9)
-    R = np.asarray(P @ outer).reshape(-1, 3, 3)  # R_j = N_j^T N_j (sum of n n^T over the patch)
-    lam = np.linalg.eigvalsh(R)  # ascending
+    from ..geometry._numba_kernels import sym3_eigenvalues
+
+    i, j = (0, 1, 2, 0, 0, 1), (0, 1, 2, 1, 2, 2)  # [xx, yy, zz, xy, xz, yz]
+    outer = N[:, i] * N[:, j]
+    R = np.asarray(P @ outer)  # R_j = N_j^T N_j (sum of n n^T over the patch), 6 entries
+    lam = sym3_eigenvalues(np.ascontiguousarray(R))  # ascending
     return np.abs(lam[:, 0] - lam[:, 1])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def _max_distance_kernel(N, faces, centers, members):  # pragma: no cover - jitted
     out = np.empty(faces.shape[0])
     k = members.shape[1]
-    for t in range(faces.shape[0]):
+    for t in numba.prange(faces.shape[0]):
         i = faces[t]
         c = centers[t]
         best = 0.0

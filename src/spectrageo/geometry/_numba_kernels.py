@@ -321,7 +321,7 @@ def jacobi_rotate(app, aqq, apq, arp, arq):  # pragma: no cover - jitted
     return app - t * apq, aqq + t * apq, c * arp - s * arq, s * arp + c * arq
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def sym3_eigenvalues(S):  # pragma: no cover - jitted
     """Ascending eigenvalues of symmetric 3x3 matrices given as (m, 6) [xx, yy, zz, xy, xz, yz].
 
@@ -330,7 +330,7 @@ def sym3_eigenvalues(S):  # pragma: no cover - jitted
     patches, where the closed-form cubic solution loses half of the digits)."""
     m = S.shape[0]
     out = np.empty((m, 3))
-    for i in range(m):
+    for i in numba.prange(m):
         a00 = S[i, 0]
         a11 = S[i, 1]
         a22 = S[i, 2]

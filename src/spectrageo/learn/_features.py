@@ -40,12 +40,15 @@ def centroid_knn(C: np.ndarray, k: int) -> np.ndarray:
     _, idx = cKDTree(C).query(C, k=kk, workers=-1)
     idx = np.asarray(idx, dtype=np.int64).reshape(m, kk)
     # the query point itself may not come first when centroids coincide: force it
-    self_pos = np.argmax(idx == np.arange(m)[:, None], axis=1)
-    has_self = (idx == np.arange(m)[:, None]).any(axis=1)
-    swap = has_self & (self_pos > 0)
-    rows = np.flatnonzero(swap)
-    idx[rows, self_pos[rows]] = idx[rows, 0]
-    idx[:, 0] = np.arange(m)
+    ar = np.arange(m)
+    rows = np.flatnonzero(idx[:, 0] != ar)
+    if rows.size:
+        sub = idx[rows] == rows[:, None]
+        self_pos = np.argmax(sub, axis=1)
+        has = sub.any(axis=1)
+        r, pos = rows[has], self_pos[has]
+        idx[r, pos] = idx[r, 0]
+        idx[:, 0] = ar
     if kk < k:
         idx = np.concatenate([idx, np.repeat(idx[:, -1:], k - kk, axis=1)], axis=1)
     return idx
@@ -102,7 +105,14 @@ def rotations_to_axis(G: np.ndarray) -> np.ndarray:
 
 
 def normal_images(
-    G: np.ndarray, knn_idx: np.ndarray, R: np.ndarray, *, rows: int | None = None, faces=None
+    G: np.ndarray,
+    knn_idx: np.ndarray,
+    R: np.ndarray,
+    *,
+    rows: int | None = None,
+    faces=None,
+    out: np.ndarray | None = None,
+    channel: int = 0,
 ) -> np.ndarray:
     """Images of Fig. 5.40 built from the pixels ``G`` and rotated by ``R`` (Fig. 5.43).
 
@@ -116,6 +126,9 @@ def normal_images(
         beyond a network's receptive field do not change its output and need not be built.
     faces : (b,) int, optional
         Build only the images of these faces (default all).
+    out : (b, c, rows, k) float32 C-contiguous, optional
+        Write into channels ``channel .. channel + 2`` of this array (several pixel sets in one
+        array without a copy) and return it.
 
     Returns
     -------
@@ -129,7 +142,17 @@ def normal_images(
     lay = np.empty_like(knn_idx)
     lay[:, order] = knn_idx  # laid-out rows: lay[j, col] = face shown in column col
     centres = np.ascontiguousarray(knn_idx[faces, :rows])  # (b, rows)
-    out = np.empty((faces.size, 3, rows, k), dtype=np.float32)
+    if out is None:
+        out = np.empty((faces.size, 3, rows, k), dtype=np.float32)
+        channel = 0
+    elif (
+        out.dtype != np.float32
+        or not out.flags.c_contiguous
+        or out.shape[0] != faces.size
+        or out.shape[2:] != (rows, k)
+        or not 0 <= channel <= out.shape[1] - 3
+    ):
+        raise ValueError(f"`out` of shape {out.shape} cannot take these images at {channel}.")
     _images_kernel(
         np.ascontiguousarray(R, dtype=np.float64),
         np.ascontiguousarray(G, dtype=np.float64),
@@ -137,14 +160,15 @@ def normal_images(
         centres,
         faces,
         out,
+        channel,
     )
     return out
 
 
 @numba.njit(cache=True, parallel=True)
-def _images_kernel(R, G, lay, centres, faces, out):  # pragma: no cover - numba
-    """``out[b, i, r, c] = sum_j R[faces[b], i, j] G[lay[centres[b, r], c], j]`` in float64,
-    stored as float32 (one gather and rotation, no (b, rows, k, 3) temporary)."""
+def _images_kernel(R, G, lay, centres, faces, out, ch0):  # pragma: no cover - numba
+    """``out[b, ch0 + i, r, c] = sum_j R[faces[b], i, j] G[lay[centres[b, r], c], j]`` in
+    float64, stored as float32 (one gather and rotation, no (b, rows, k, 3) temporary)."""
     nb, rows = centres.shape
     k = lay.shape[1]
     for b in numba.prange(nb):
@@ -155,7 +179,7 @@ def _images_kernel(R, G, lay, centres, faces, out):  # pragma: no cover - numba
                 g = row[c]
                 g0, g1, g2 = G[g, 0], G[g, 1], G[g, 2]
                 for i in range(3):
-                    out[b, i, r, c] = R[f, i, 0] * g0 + R[f, i, 1] * g1 + R[f, i, 2] * g2
+                    out[b, ch0 + i, r, c] = R[f, i, 0] * g0 + R[f, i, 1] * g1 + R[f, i, 2] * g2
 
 
 def row_eigenvalues(first_row: np.ndarray) -> np.ndarray:
@@ -164,12 +188,36 @@ def row_eigenvalues(first_row: np.ndarray) -> np.ndarray:
     than a batched ``numpy.linalg.eigvalsh`` on 70k rows)."""
     from ..geometry._numba_kernels import sym3_eigenvalues
 
-    X = np.asarray(first_row, dtype=np.float64)
-    k = X.shape[-1]
-    S = np.empty((X.shape[0], 6))
-    for c, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        S[:, c] = np.einsum("bk,bk->b", X[:, i], X[:, j]) / k
-    return sym3_eigenvalues(S)
+    X = np.asarray(first_row)
+    if X.dtype not in (np.float32, np.float64):
+        X = X.astype(np.float64)
+    return sym3_eigenvalues(_row_moments(X))
+
+
+@numba.njit(cache=True, parallel=True)
+def _row_moments(X):  # pragma: no cover - numba
+    """``[xx, yy, zz, xy, xz, yz] / k`` of every row ``X[b]`` (3, k), accumulated in float64."""
+    nb, _, k = X.shape
+    S = np.empty((nb, 6))
+    for b in numba.prange(nb):
+        s0 = s1 = s2 = s3 = s4 = s5 = 0.0
+        for t in range(k):
+            x = np.float64(X[b, 0, t])
+            y = np.float64(X[b, 1, t])
+            z = np.float64(X[b, 2, t])
+            s0 += x * x
+            s1 += y * y
+            s2 += z * z
+            s3 += x * y
+            s4 += x * z
+            s5 += y * z
+        S[b, 0] = s0 / k
+        S[b, 1] = s1 / k
+        S[b, 2] = s2 / k
+        S[b, 3] = s3 / k
+        S[b, 4] = s4 / k
+        S[b, 5] = s5 / k
+    return S
 
 
 def kmeans(X: np.ndarray, n_clusters: int, *, rng=0, n_iter: int = 50) -> np.ndarray:
@@ -249,7 +297,10 @@ def build_images(V, F, *, k: int = IMAGE_COLS, rows: int = 5, channels: int = 9,
     else:
         R = rotations_to_axis(G)
         parts = [G, N][: channels // 3]
-    img = np.concatenate([normal_images(P, idx, R, rows=rows, faces=faces) for P in parts], axis=1)
+    b = C.shape[0] if faces is None else np.asarray(faces).size
+    img = np.empty((b, 3 * len(parts), rows, k), dtype=np.float32)
+    for j, P in enumerate(parts):
+        normal_images(P, idx, R, rows=rows, faces=faces, out=img, channel=3 * j)
     return img, R
 
 

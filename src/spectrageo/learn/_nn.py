@@ -71,7 +71,18 @@ class RBFTable:
 
 
 def cnn_centre(
-    x: np.ndarray, W1, b1, rw, mu, s, W2, b2, *, chunk: int = 4096, table: RBFTable | None = None
+    x: np.ndarray,
+    W1,
+    b1,
+    rw,
+    mu,
+    s,
+    W2,
+    b2,
+    *,
+    chunk: int = 4096,
+    table: RBFTable | None = None,
+    index: np.ndarray | None = None,
 ) -> np.ndarray:
     """Denoised centre pixel of the first row of every image (the network of the module notes).
 
@@ -85,10 +96,12 @@ def cnn_centre(
         Tabulated shrinkage (fast path: a compiled kernel fusing both convolutions and the
         shrinkage, float32 arithmetic; ``chunk`` is not used); None evaluates Eq. (5.41)
         exactly in float64, ``chunk`` images at a time.
+    index : (b',) int, optional
+        Evaluate only the images ``x[index]`` (without copying them out of ``x``).
 
     Returns
     -------
-    (b, 3) float64 (not normalised).
+    (b, 3) float64 (not normalised); (b', 3) with ``index``.
     """
     b, ch, rows, k = x.shape
     C, _, ks, _ = W1.shape
@@ -96,11 +109,15 @@ def cnn_centre(
     c = k // 2
     if rows < ks or k < 2 * ks - 1:
         raise ValueError(f"images of {rows}x{k} are too small for kernels of size {ks}.")
+    if index is not None and table is None:
+        return cnn_centre(x[index], W1, b1, rw, mu, s, W2, b2, chunk=chunk)
     if table is not None:  # fused compiled kernel, float32 as the tabulated path
-        out = np.empty((b, 3), dtype=np.float32)
+        index = np.arange(b) if index is None else np.asarray(index, dtype=np.int64)
+        out = np.empty((index.size, 3), dtype=np.float32)
         W2c = np.ascontiguousarray(W2[:, :, p:, :].transpose(2, 3, 1, 0), dtype=np.float32)
         _centre_kernel(
             np.ascontiguousarray(x[:, :, :ks], dtype=np.float32),
+            index,
             c - 2 * p,
             np.ascontiguousarray(np.asarray(W1).transpose(1, 2, 3, 0), dtype=np.float32),
             np.asarray(b1, dtype=np.float32),
@@ -133,19 +150,22 @@ def cnn_centre(
 
 
 @numba.njit(cache=True, parallel=True, fastmath=True)
-def _centre_kernel(x, c0, W1t, b1, tab, lo, step, W2c, b2, out):  # pragma: no cover - numba
+def _centre_kernel(x, index, c0, W1t, b1, tab, lo, step, W2c, b2, out):  # pragma: no cover
     """:func:`cnn_centre` with a tabulated shrinkage, one image per iteration: the ``(p + 1) x ks``
     positions of ``h`` the output depends on, their shrinkage and the second convolution at the
     centre, fused (no im2col copy). ``W1t`` is ``W1`` as (ch, ks, ks, C) (channels innermost, so
     the sums vectorise), ``W2c`` (p + 1, ks, C, 3) the rows of ``W2`` that reach the centre of the
-    first row; ``c0`` the first of the ``4 p + 1`` columns used."""
-    nb, ch, _, _ = x.shape
+    first row; ``c0`` the first of the ``4 p + 1`` columns used; ``out[t]`` is the output of
+    image ``index[t]``."""
+    nb = index.size
+    ch = x.shape[1]
     ks = W1t.shape[1]
     C = W1t.shape[3]
     p = ks // 2
     n_tab = tab.shape[1]
     top = np.float32(n_tab - 1.000001)
-    for bi in numba.prange(nb):
+    for t_ in numba.prange(nb):
+        bi = index[t_]
         h = np.empty(C, dtype=np.float32)
         y = np.zeros(3, dtype=np.float32)
         for r in range(p + 1):  # output row r reads image rows r - p .. r + p (zero above 0)
@@ -169,7 +189,7 @@ def _centre_kernel(x, c0, W1t, b1, tab, lo, step, W2c, b2, out):  # pragma: no c
                     y[2] += a * W2c[r, q, cc, 2]
         cx = c0 + 2 * p
         for o in range(3):
-            out[bi, o] = x[bi, o, 0, cx] + y[o] + b2[o]
+            out[t_, o] = x[bi, o, 0, cx] + y[o] + b2[o]
 
 
 # --------------------------------------------------------------------------- DAE (MLP)

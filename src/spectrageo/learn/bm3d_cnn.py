@@ -119,7 +119,7 @@ class BM3DCNNModel:
             sel = np.flatnonzero(cls == c)
             if sel.size:
                 out[sel] = cnn_centre(
-                    img[sel],
+                    img,
                     w["W1"][c],
                     w["b1"][c],
                     w["rw"][c],
@@ -128,6 +128,7 @@ class BM3DCNNModel:
                     w["W2"][c],
                     w["b2"][c],
                     table=tables[c],
+                    index=sel,
                 )
         return out
 

@@ -74,7 +74,16 @@ def feature_mask(rows: np.ndarray, *, threshold: float = FEATURE_THRESHOLD) -> n
     M = rows - np.tile([1.0, 0.0, 0.0], k)
     if M.shape[0] < 2:
         return np.zeros(M.shape[0], dtype=bool)
-    res = rpca(M, method="ialm", on_nonconvergence="ignore", max_iter=200)
+    # The first pixel of every row is the face's own guided pixel, rotated to [1 0 0]: its three
+    # columns of M are zero up to rounding. Zero columns are zero in both RPCA parts, but they
+    # make the solver's Gram matrix singular (it then falls back to a QR per chunk, twice the
+    # time), so they are left out; the parts of the other columns are unchanged.
+    keep = np.abs(M).max(axis=0) > 1e-9 * max(float(np.abs(M).max()), 1e-300)
+    if not keep.any():
+        return np.zeros(M.shape[0], dtype=bool)
+    res = rpca(
+        np.ascontiguousarray(M[:, keep]), method="ialm", on_nonconvergence="ignore", max_iter=200
+    )
     s = np.linalg.norm(res.sparse, axis=1)
     e = np.linalg.norm(res.low_rank, axis=1)
     return s > e + threshold

@@ -82,13 +82,24 @@ class CoreAccumulator:
             F = np.sqrt(w)[:, None] * Q.T  # G = F^T F
             if self._B is not None:
                 F = F @ self._B
-            _, s, Vt = np.linalg.svd(F)
+            s, Vt = _svd(F)
             return s, Vt.T
         R = self._reduce()
         if R.shape[0] < self.n:
             R = np.vstack([R, np.zeros((self.n - R.shape[0], self.n))])
-        _, s, Vt = np.linalg.svd(R)
+        s, Vt = _svd(R)
         return s, Vt.T
+
+
+def _svd(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(s, Vt)`` of a small square matrix: LAPACK's divide and conquer (``gesdd``), and the
+    QR-iteration driver (``gesvd``) where ``gesdd`` reports no convergence, which it does on some
+    finite, nearly rank-deficient matrices."""
+    try:
+        _, s, Vt = np.linalg.svd(X)
+    except np.linalg.LinAlgError:
+        _, s, Vt = sla.svd(X, lapack_driver="gesvd", check_finite=False)
+    return s, Vt
 
 
 def positive_part(s: np.ndarray, m: int) -> int:
