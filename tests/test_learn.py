@@ -114,6 +114,41 @@ def test_fast_paths_match_their_references(noisy_fandisk):
     assert 0 < got.sum() < got.size and np.array_equal(got, want)
 
 
+def _grid_sheet(nx, z, offset=0):
+    x, y = np.meshgrid(np.arange(nx, dtype=float), np.arange(nx, dtype=float))
+    V = np.c_[x.ravel(), y.ravel(), np.full(nx * nx, z)]
+    q = np.arange(nx * nx).reshape(nx, nx)[:-1, :-1].ravel()
+    F = np.r_[np.c_[q, q + 1, q + nx], np.c_[q + 1, q + nx + 1, q + nx]] + offset
+    return V, F
+
+
+def test_face_neighbourhoods_stay_on_their_own_sheet():
+    # two parallel sheets 0.2 apart, sampled every 1.0: the Euclidean nearest centroids of a
+    # face lie on the other sheet, those within its vertex rings do not
+    V1, F1 = _grid_sheet(8, 0.0)
+    V2, F2 = _grid_sheet(8, 0.2, offset=64)
+    V, F = np.r_[V1, V2], np.r_[F1, F2]
+    C = fe.face_centroids(V, F)
+    sheet = np.r_[np.zeros(len(F1), int), np.ones(len(F2), int)]
+    eu = fe.centroid_knn(C, 9)
+    ring = fe.centroid_knn(C, 9, F)
+    assert (sheet[eu] != sheet[:, None]).any(axis=1).mean() > 0.9
+    assert (sheet[ring] == sheet[:, None]).all()
+    assert (ring[:, 0] == np.arange(len(F))).all()
+    d = np.linalg.norm(C[ring] - C[:, None], axis=2)
+    assert (np.diff(d, axis=1) >= -1e-12).all()  # nearest first
+    # on one sheet the rings hold the Euclidean neighbours (compared by distance: ties may pick
+    # other faces), except at the two sharp corners, whose ninth is three rings away
+    C1 = fe.face_centroids(V1, F1)
+    one, eu1 = fe.centroid_knn(C1, 9, F1), fe.centroid_knn(C1, 9)
+    d_ring = np.linalg.norm(C1[one] - C1[:, None], axis=2)
+    d_eu = np.linalg.norm(C1[eu1] - C1[:, None], axis=2)
+    assert np.isclose(d_ring, d_eu).all(axis=1).sum() == len(F1) - 2
+    # a piece with fewer faces than k repeats its farthest face
+    tri = fe.centroid_knn(np.array([[0.0, 0, 0], [1, 0, 0]]), 4, np.array([[0, 1, 2], [1, 3, 2]]))
+    assert tri.tolist() == [[0, 1, 1, 1], [1, 0, 0, 0]]
+
+
 # --------------------------------------------------------------------------- numpy vs torch
 def test_numpy_cnn_matches_torch(noisy_fandisk):
     torch = pytest.importorskip("torch")

@@ -1,8 +1,10 @@
 """Feature-aware, content-wise denoising autoencoders (thesis Section 5.1.3, Algorithm 4).
 
 Rows. Every face ``i`` gives a row ``M_i`` in R^{3k}: the guided normals (Section 4.2.1, made unit
-length as in Section 5.1.3) of its ``k = 9`` nearest centroids, nearest first, rotated so that
-its own guided normal is ``[1 0 0]``. The thesis makes the dataset coherent by moving every
+length as in Section 5.1.3) of its ``k = 9`` nearest centroids, nearest first (among the faces
+within two vertex rings, so that thin parts and touching pieces do not mix:
+:func:`spectrageo.learn._features.centroid_knn`), rotated so that its own guided normal is
+``[1 0 0]``. The thesis makes the dataset coherent by moving every
 normal into the positive octant (Fig. 5.33); a per-row rotation is used instead because it
 removes the orientation entirely (an octant flip does not keep the angles between the normals
 of a row, which are what the autoencoder must restore).
