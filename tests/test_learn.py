@@ -381,6 +381,33 @@ def test_dae_animation_validation(noisy_fandisk):
         dae_animation(A, F, train_frames=2, n_stages=0)
 
 
+def test_local_rotations_recover_a_turn_and_auto_motion_follows_the_poses(noisy_fandisk):
+    from scipy.spatial.transform import Rotation
+
+    from spectrageo.learn.dae import local_rotations, rotation_angles
+
+    Vn, V0, F = noisy_fandisk
+    Rt = Rotation.from_euler("xyz", [70, -20, 35], degrees=True).as_matrix()
+    C = fe.face_centroids(V0, F)
+    idx = fe.centroid_knn(C, 30, F)
+    Q = local_rotations(C @ Rt.T + 3.0, C, idx)  # maps the turned copy back
+    assert np.allclose(Q, Rt.T, atol=1e-9)
+    assert np.allclose(rotation_angles(Q), np.degrees(np.arccos((np.trace(Rt) - 1) / 2)))
+    with pytest.raises(InvalidInputError, match="`motion` must be one of"):
+        train_frames_model(np.stack([Vn] * 8), F, train_frames=8, motion="affine")
+    # a pose set (the whole shape turned by 90 degrees from frame to frame) is compensated, a
+    # still one is not; the model records the choice
+    rng = np.random.default_rng(0)
+    turn = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    poses = np.stack([V0 @ np.linalg.matrix_power(turn, t).T for t in range(8)])
+    poses += rng.normal(0, 0.002, poses.shape)
+    still = np.stack([V0] * 8) + rng.normal(0, 0.002, poses.shape)
+    kw = {"train_frames": 8, "epochs": 1, "max_rows": 3000}
+    assert train_frames_model(poses, F, **kw)[0].meta["motion"] == "rigid"
+    assert train_frames_model(still, F, **kw)[0].meta["motion"] == "none"
+    assert train_frames_model(still, F, motion="rigid", **kw)[0].meta["motion"] == "rigid"
+
+
 def test_denoiser_option_validation(tmp_path):
     V, F = fandisk_small()
     with pytest.raises(InvalidInputError, match="`weights` file not found"):
