@@ -460,7 +460,15 @@ def test_cli_denoise_mesh_and_animation(tmp_path, noisy_fandisk):
     io.write(tmp_path / "a.npz", MeshAnimation(frames, Fs))
     assert main(["denoise", str(tmp_path / "a.npz"), str(tmp_path / "b.npz"), "--method", "dae",
                  "--train-frames", "7"]) == 0  # fmt: skip
-    assert io.read(tmp_path / "b.npz").frames.shape == frames.shape
+    B = io.read(tmp_path / "b.npz").frames
+    assert B.shape == frames.shape
+    # --motion reaches the DAE: on this still animation auto chooses no compensation
+    assert main(["denoise", str(tmp_path / "a.npz"), str(tmp_path / "c.npz"), "--method", "dae",
+                 "--train-frames", "7", "--motion", "none"]) == 0  # fmt: skip
+    assert np.array_equal(io.read(tmp_path / "c.npz").frames, B)
+    assert main(["denoise", str(tmp_path / "a.npz"), str(tmp_path / "d.npz"), "--method", "dae",
+                 "--train-frames", "7", "--motion", "rigid"]) == 0  # fmt: skip
+    assert not np.array_equal(io.read(tmp_path / "d.npz").frames, B)
 
 
 def test_cli_errors(tmp_path, capsys):
@@ -475,6 +483,9 @@ def test_cli_errors(tmp_path, capsys):
     assert main(["denoise", str(tmp_path / "n.ply"), str(tmp_path / "o.ply"), "--method", "dae",
                  "--train-frames", "3"]) != 0  # fmt: skip
     assert "--train-frames applies to animations" in capsys.readouterr().err
+    assert main(["denoise", str(tmp_path / "n.ply"), str(tmp_path / "o.ply"), "--method", "dae",
+                 "--motion", "rigid"]) != 0  # fmt: skip
+    assert "--motion applies to --method dae with --train-frames" in capsys.readouterr().err
     assert main(["train", "dae", "--data", str(tmp_path / "nope"), "--out", "w.npz"]) != 0
     err = capsys.readouterr().err
     assert "--data must be a folder" in err or "install spectrageo[learn]" in err

@@ -311,6 +311,9 @@ def cmd_denoise(args) -> int:
         opts["weights"] = args.weights
     if args.train_frames is not None and args.method != "dae":
         raise _err(f"--train-frames applies to --method dae only; got {args.method!r}.")
+    motion = getattr(args, "motion", None)
+    if motion is not None and args.train_frames is None:
+        raise _err("--motion applies to --method dae with --train-frames only.")
     block_size = getattr(args, "block_size", None)
     if block_size is not None and args.method != "gft-rpca":
         raise _err(f"--block-size applies to --method gft-rpca only; got {args.method!r}.")
@@ -332,6 +335,8 @@ def cmd_denoise(args) -> int:
         dyn = getattr(denoise, "dynamic_methods", lambda: [])()
         if args.method == "dae" and args.train_frames is not None:
             opts["train_frames"] = args.train_frames
+            if motion is not None:
+                opts["motion"] = motion
         if block_size is not None:
             opts["block_size"] = block_size
         # `spectrageo batch` sets this inside a Dask task: the frame blocks then run as tasks of
@@ -812,6 +817,13 @@ def register_all(sub) -> None:
         default=None,
         metavar="N",
         help="--method dae on an animation: train the autoencoders on its first N frames",
+    )
+    p.add_argument(
+        "--motion",
+        choices=["auto", "rigid", "none"],
+        default=None,
+        help="with --train-frames: turn other frames' normals by the local motion (rigid), not "
+        "(none), or decide from the motion between training frames (auto, the default)",
     )
     p.add_argument(
         "--block-size",
