@@ -17,7 +17,7 @@ from spectrageo.cli.main import main
 from spectrageo.datasets import data_dir, denoise_pairs, fandisk
 from spectrageo.learn import _features as fe
 from spectrageo.learn import _nn
-from spectrageo.learn._weights import DEFAULT_WEIGHTS, load_weights, save_weights
+from spectrageo.learn._weights import DEFAULT_WEIGHTS, load_weights, save_weights, unrotate_unit
 from spectrageo.learn.bm3d_cnn import bm3d_cnn
 from spectrageo.learn.dae import dae, dae_animation, train_frames_model
 
@@ -112,6 +112,18 @@ def test_fast_paths_match_their_references(noisy_fandisk):
     want = np.linalg.norm(full.sparse, axis=1) > np.linalg.norm(full.low_rank, axis=1) + 0.7
     got = feature_mask(rows)
     assert 0 < got.sum() < got.size and np.array_equal(got, want)
+
+
+@shipped
+def test_bm3d_cnn_chunks_do_not_change_the_result(noisy_fandisk):
+    from spectrageo.learn import BM3DCNNModel
+
+    Vn, _, F = noisy_fandisk
+    model = BM3DCNNModel.load()
+    whole = model.filter_normals(Vn, F, 0)
+    assert np.array_equal(model.filter_normals(Vn, F, 0, chunk=997), whole)
+    img, R = model.images(Vn, F)
+    assert np.allclose(whole, unrotate_unit(R, model.predict(img, 0)), atol=1e-12)
 
 
 def _grid_sheet(nx, z, offset=0):

@@ -375,14 +375,11 @@ def filtered_pixels(N, G, knn_idx, C, A, *, sigma_r: float = 0.35) -> np.ndarray
     return joint_bilateral_normals(N, G, W, sigma_r)
 
 
-def build_images(V, F, *, k: int = IMAGE_COLS, rows: int = 5, channels: int = 9, faces=None):
-    """Network input of a mesh: images (b, channels, rows, k) float32 and rotations (m, 3, 3).
-
-    ``channels = 9``: filtered pixels (:func:`filtered_pixels`), guided pixels, noisy normals,
-    all rotated so that the face's filtered pixel is ``[1 0 0]``. ``channels = 6``: guided pixels
-    and noisy normals, rotated so that the guided pixel is ``[1 0 0]``. ``channels = 3``: guided
-    pixels only (the thesis' images).
-    """
+def image_parts(V, F, *, k: int = IMAGE_COLS, channels: int = 9):
+    """What the images of :func:`build_images` are made of: ``(idx, R, parts)``, the neighbour
+    rows (m, k), the rotations (m, 3, 3) and the ``channels // 3`` pixel sets (m, 3) each
+    (filtered / guided pixels, noisy normals; see :func:`build_images`). Images of any subset of
+    faces follow by :func:`normal_images`, so a large mesh can be imaged in chunks."""
     from ..geometry import face_areas
 
     N = face_normals(V, F)
@@ -391,16 +388,31 @@ def build_images(V, F, *, k: int = IMAGE_COLS, rows: int = 5, channels: int = 9,
     G = guided_pixels(N, idx)
     if channels == 9:
         Fp = filtered_pixels(N, G, idx, C, face_areas(V, F))
-        R = rotations_to_axis(Fp)
-        parts = [Fp, G, N]
-    else:
-        R = rotations_to_axis(G)
-        parts = [G, N][: channels // 3]
-    b = C.shape[0] if faces is None else np.asarray(faces).size
+        return idx, rotations_to_axis(Fp), [Fp, G, N]
+    return idx, rotations_to_axis(G), [G, N][: channels // 3]
+
+
+def images_of(idx, R, parts, *, rows: int = 5, faces=None) -> np.ndarray:
+    """Images (b, 3 len(parts), rows, k) float32 of ``faces`` (default all) from
+    :func:`image_parts`' output."""
+    m, k = idx.shape
+    b = m if faces is None else np.asarray(faces).size
     img = np.empty((b, 3 * len(parts), rows, k), dtype=np.float32)
     for j, P in enumerate(parts):
         normal_images(P, idx, R, rows=rows, faces=faces, out=img, channel=3 * j)
-    return img, R
+    return img
+
+
+def build_images(V, F, *, k: int = IMAGE_COLS, rows: int = 5, channels: int = 9, faces=None):
+    """Network input of a mesh: images (b, channels, rows, k) float32 and rotations (m, 3, 3).
+
+    ``channels = 9``: filtered pixels (:func:`filtered_pixels`), guided pixels, noisy normals,
+    all rotated so that the face's filtered pixel is ``[1 0 0]``. ``channels = 6``: guided pixels
+    and noisy normals, rotated so that the guided pixel is ``[1 0 0]``. ``channels = 3``: guided
+    pixels only (the thesis' images).
+    """
+    idx, R, parts = image_parts(V, F, k=k, channels=channels)
+    return images_of(idx, R, parts, rows=rows, faces=faces), R
 
 
 def mesh_inputs(V, F, k: int = IMAGE_COLS):
@@ -420,6 +432,8 @@ __all__ = [
     "centroid_knn",
     "column_order",
     "guided_pixels",
+    "image_parts",
+    "images_of",
     "kmeans",
     "mesh_inputs",
     "normal_images",

@@ -57,6 +57,8 @@ from . import _features as fe
 from ._nn import RBFTable, cnn_centre
 from ._weights import default_weights, load_weights, model_loader, unrotate_unit
 
+#: faces imaged and filtered at a time (bounded memory on large meshes)
+IMAGE_CHUNK = 131072
 #: arrays of a bm3d-cnn weight file (leading axes: stage, class)
 ARRAYS = ("class_centres", "W1", "b1", "rw", "mu", "W2", "b2")
 
@@ -140,10 +142,19 @@ class BM3DCNNModel:
                 )
         return out
 
-    def filter_normals(self, V, F, s: int = 0) -> np.ndarray:
-        """Filtered unit face normals (m, 3) of one stage (steps 1-5 and the rotation back)."""
-        img, R = self.images(V, F)
-        p = self.predict(img, s)
+    def filter_normals(self, V, F, s: int = 0, *, chunk: int = IMAGE_CHUNK) -> np.ndarray:
+        """Filtered unit face normals (m, 3) of one stage (steps 1-5 and the rotation back).
+
+        The images are built and filtered ``chunk`` faces at a time (about 1 KB per face for
+        the shipped weights), so memory stays bounded on large meshes; the result does not
+        depend on ``chunk``."""
+        idx, R, parts = fe.image_parts(V, F, k=self.k, channels=self.channels)
+        m = idx.shape[0]
+        p = np.empty((m, 3))
+        for a in range(0, m, max(1, int(chunk))):
+            faces = np.arange(a, min(m, a + max(1, int(chunk))))
+            img = fe.images_of(idx, R, parts, rows=self.kernel, faces=faces)
+            p[faces] = self.predict(img, s)
         return unrotate_unit(R, p)
 
 
