@@ -88,8 +88,16 @@ def test_fast_paths_match_their_references(noisy_fandisk):
     ref = np.linalg.eigvalsh(np.einsum("bik,bjk->bij", first.astype(np.float64), first) / 9)
     assert np.abs(fe.row_eigenvalues(first) - ref).max() < 1e-12
     assert np.abs(fe.row_eigenvalues(first.astype(np.float64)) - ref).max() < 1e-12
-    # Eq. (4.9)'s patch term
+    # the compiled guided pixels equal the generic guided normals on the kNN patches (Eq. 4.8-4.11)
     P = sp.csr_matrix((np.ones(idx.size), idx.ravel(), np.arange(0, idx.size + 1, 9)))
+    g_ref = nm.guided_normals(N, np.ones(len(N)), nm.PatchSet.from_matrix(P), measure="thesis")
+    assert np.array_equal(fe.guided_pixels(N, idx), g_ref)
+    dup = idx.copy()
+    dup[:, -1] = dup[:, -2]  # repeated members (padded rows) count once
+    Pd = sp.csr_matrix((np.ones(dup.size), dup.ravel(), np.arange(0, dup.size + 1, 9)))
+    g_dup = nm.guided_normals(N, np.ones(len(N)), nm.PatchSet.from_matrix(Pd), measure="thesis")
+    assert np.array_equal(fe.guided_pixels(N, dup), g_dup)
+    # Eq. (4.9)'s patch term
     Rm = np.asarray(P @ (N[:, :, None] * N[:, None, :]).reshape(-1, 9)).reshape(-1, 3, 3)
     lam = np.linalg.eigvalsh(Rm)
     assert np.abs(nm._thesis_patch_term(N, P) - np.abs(lam[:, 0] - lam[:, 1])).max() < 1e-12

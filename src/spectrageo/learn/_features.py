@@ -78,13 +78,24 @@ def _ring_knn(C: np.ndarray, F: np.ndarray, k: int) -> np.ndarray:
     if C.shape[0] != m:
         raise ValueError(f"{C.shape[0]} centroids for {m} faces.")
     n = int(F.max()) + 1 if m else 0
-    order = np.argsort(F.ravel(), kind="stable")
     vptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(F.ravel(), minlength=n), out=vptr[1:])
-    vf = order // 3  # faces around each vertex, CSR by vptr
+    vf = np.empty(3 * m, dtype=np.int64)  # faces around each vertex, CSR by vptr
+    _vertex_faces(F, vptr, vf)
     out = np.empty((m, k), dtype=np.int64)
     _ring_knn_kernel(F, vptr, vf, C, FACE_RINGS, out)
     return out
+
+
+@numba.njit(cache=True)
+def _vertex_faces(F, vptr, vf):  # pragma: no cover - numba
+    """``vf[vptr[v]:vptr[v + 1]]``: the faces around vertex ``v``, ascending (counting sort)."""
+    fill = vptr[:-1].copy()
+    for f in range(F.shape[0]):
+        for a in range(3):
+            v = F[f, a]
+            vf[fill[v]] = f
+            fill[v] += 1
 
 
 @numba.njit(cache=True, parallel=True)
@@ -167,16 +178,112 @@ def guided_pixels(N: np.ndarray, knn_idx: np.ndarray) -> np.ndarray:
     ``i``; the ideal row minimises ``s_ij h_ij`` with ``s_ij = |lambda_1 - lambda_2|`` (the two
     smallest eigenvalues of ``C_ij = I^T I``) and ``h_ij`` the largest colour difference between
     pixel ``i`` and the row (Eq. 5.38); ``g_i`` is its normalised mean pixel (Eq. 5.39).
-    """
-    from ..denoise._normals import PatchSet, guided_normals
 
+    This is :func:`spectrageo.denoise._normals.guided_normals` (``measure="thesis"``, unit
+    areas) on the patch matrix of the rows, computed by compiled kernels without building that
+    matrix (the same sums in the same order: equal bit for bit, tested); a row's repeated
+    faces count once. A face whose result is not a unit vector keeps its normal.
+    """
+    from ..geometry._numba_kernels import sym3_eigenvalues
+    from ..geometry.primitives import _normalize_rows
+
+    N = np.ascontiguousarray(N, dtype=np.float64)
     m, k = knn_idx.shape
-    P = sp.csr_matrix((np.ones(m * k), knn_idx.ravel(), np.arange(0, m * k + 1, k)), shape=(m, m))
-    ps = PatchSet.from_matrix(P)
-    g = guided_normals(N, np.ones(m), ps, measure="thesis")
+    # patch j = the distinct faces of row j, ascending (the order of a CSR patch matrix's sums);
+    # the candidates of face i = the rows that contain it, ascending
+    members = np.sort(np.asarray(knn_idx, dtype=np.int64), axis=1)
+    first = np.ones((m, k), dtype=np.bool_)
+    first[:, 1:] = members[:, 1:] != members[:, :-1]
+    cptr = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(np.bincount(members[first], minlength=m), out=cptr[1:])
+    cand = np.empty(int(cptr[-1]), dtype=np.int64)
+    _transpose_rows(members, first, cptr, cand)
+    moments = np.empty((m, 6))
+    sums = np.empty((m, 3))
+    _patch_sums(N, members, first, moments, sums)
+    lam = sym3_eigenvalues(moments)  # Eq. (4.9): a_j = |lambda_1 - lambda_2|
+    best = np.empty(m, dtype=np.int64)
+    _ideal_rows(N, members, first, np.abs(lam[:, 0] - lam[:, 1]), cptr, cand, best)
+    g = _normalize_rows(sums)[best]
     bad = ~np.isfinite(g).all(axis=1) | (np.linalg.norm(g, axis=1) < 0.5)
     g[bad] = N[bad]
     return g
+
+
+@numba.njit(cache=True)
+def _transpose_rows(members, first, cptr, cand):  # pragma: no cover - numba
+    """``cand[cptr[i]:cptr[i + 1]]``: the rows containing face ``i``, ascending (counting sort)."""
+    fill = cptr[:-1].copy()
+    m, k = members.shape
+    for j in range(m):
+        for q in range(k):
+            if first[j, q]:
+                l = members[j, q]
+                cand[fill[l]] = j
+                fill[l] += 1
+
+
+@numba.njit(cache=True, parallel=True)
+def _patch_sums(N, members, first, moments, sums):  # pragma: no cover - numba
+    """Per patch: ``sum n n^T`` as [xx, yy, zz, xy, xz, yz] and ``sum n`` over its distinct
+    members, added in ascending face order from zero."""
+    m, k = members.shape
+    for j in numba.prange(m):
+        s0 = s1 = s2 = s3 = s4 = s5 = 0.0
+        a0 = a1 = a2 = 0.0
+        for q in range(k):
+            if first[j, q]:
+                l = members[j, q]
+                x, y, z = N[l, 0], N[l, 1], N[l, 2]
+                s0 += x * x
+                s1 += y * y
+                s2 += z * z
+                s3 += x * y
+                s4 += x * z
+                s5 += y * z
+                a0 += x
+                a1 += y
+                a2 += z
+        moments[j, 0] = s0
+        moments[j, 1] = s1
+        moments[j, 2] = s2
+        moments[j, 3] = s3
+        moments[j, 4] = s4
+        moments[j, 5] = s5
+        sums[j, 0] = a0
+        sums[j, 1] = a1
+        sums[j, 2] = a2
+
+
+@numba.njit(cache=True, parallel=True)
+def _ideal_rows(N, members, first, a, cptr, cand, best):  # pragma: no cover - numba
+    """Eq. (4.8)/(5.38): for face ``i`` the candidate row ``j`` with the least ``a_j b_ij``,
+    ``b_ij = max_l ||n_i - n_l||`` (Eq. 4.10); ties to the lowest ``j``; a row set with an
+    undefined (NaN) score keeps the face's own row."""
+    m, k = members.shape
+    for i in numba.prange(m):
+        bi = -1
+        bs = np.inf
+        nan = False
+        for t in range(cptr[i], cptr[i + 1]):
+            j = cand[t]
+            d = 0.0
+            for q in range(k):
+                if first[j, q]:
+                    l = members[j, q]
+                    d0 = N[i, 0] - N[l, 0]
+                    d1 = N[i, 1] - N[l, 1]
+                    d2 = N[i, 2] - N[l, 2]
+                    e = d0 * d0 + d1 * d1 + d2 * d2
+                    if e > d:
+                        d = e
+            sc = a[j] * np.sqrt(d)
+            if sc != sc:
+                nan = True
+            elif sc < bs:
+                bs = sc
+                bi = j
+        best[i] = i if (nan or bi < 0) else bi
 
 
 def rotations_to_axis(G: np.ndarray) -> np.ndarray:
