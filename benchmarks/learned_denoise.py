@@ -6,6 +6,7 @@
 
 Parts (see :func:`spectrageo.learn.evaluate.evaluate_learned`): every shared benchmark pair of
 ``denoise/``; a slice of the denoising protocol's validation split at Gaussian noise 0.3 and 0.5;
+the protocol's whole validation split (every corruption kind at 0.3, models up to 30k vertices);
 the shared animations at Gaussian noise 0.3 (first 20 frames), ``dae`` trained on the first 8
 frames against per-frame TSGSP. No case was used for training (see the weights' metadata).
 """
@@ -28,11 +29,17 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="benchmark pairs only")
     ap.add_argument("--out", default=str(OUT / "learned_denoise"))
     ap.add_argument("--repeat", type=int, default=3, help="static cases: best time of N runs")
+    ap.add_argument(
+        "--protocol-levels",
+        default="0.3",
+        help="also the denoising protocol's whole validation split at these levels ('' to skip)",
+    )
     args = ap.parse_args(argv)
     from spectrageo.learn.evaluate import evaluate_learned, format_markdown, write
 
     t0 = time.perf_counter()
-    kw = {"validation": (), "animations": ()} if args.quick else {}
+    levels = tuple(float(x) for x in args.protocol_levels.split(",") if x.strip())
+    kw = {"validation": (), "animations": ()} if args.quick else {"protocol_levels": levels}
     rows = evaluate_learned(args.data, repeat=args.repeat, **kw)
     note = (
         f"Produced by `python benchmarks/learned_denoise.py`; {machine_line()}; whole run "

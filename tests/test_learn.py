@@ -164,6 +164,17 @@ def test_face_neighbourhoods_stay_on_their_own_sheet():
     d_ring = np.linalg.norm(C1[one] - C1[:, None], axis=2)
     d_eu = np.linalg.norm(C1[eu1] - C1[:, None], axis=2)
     assert np.isclose(d_ring, d_eu).all(axis=1).sum() == len(F1) - 2
+    # a double fan whose two apices have 400 faces each: hundreds of candidates per face
+    ang = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    Vf = np.r_[[[0, 0, 1.0]], np.c_[np.cos(ang), np.sin(ang), np.zeros(400)], [[0, 0, 0.0]]]
+    rim = 1 + np.arange(400)
+    Ff = np.r_[np.c_[np.zeros(400, int), rim, 1 + (rim % 400)],
+               np.c_[np.full(400, 401), 1 + (rim % 400), rim]]  # fmt: skip
+    Cf = fe.face_centroids(Vf, Ff)
+    fan = fe.centroid_knn(Cf, 9, Ff)
+    df = np.linalg.norm(Cf[fan] - Cf[:, None], axis=2)
+    assert (fan[:, 0] == np.arange(800)).all() and (np.diff(df, axis=1) >= -1e-12).all()
+    assert np.allclose(df, np.linalg.norm(Cf[fe.centroid_knn(Cf, 9)] - Cf[:, None], axis=2))
     # a piece with fewer faces than k repeats its farthest face
     tri = fe.centroid_knn(np.array([[0.0, 0, 0], [1, 0, 0]]), 4, np.array([[0, 1, 2], [1, 3, 2]]))
     assert tri.tolist() == [[0, 1, 1, 1], [1, 0, 0, 0]]
@@ -546,7 +557,7 @@ def test_cli_train_tiny(tmp_path, capsys):
 
 
 def test_time_ratios_compare_each_case_with_tsgsp_in_the_size_range():
-    from spectrageo.learn.evaluate import format_markdown, time_ratios
+    from spectrageo.learn.evaluate import format_markdown, time_ratios, versus_tsgsp
 
     def row(case, method, n, t):
         return {"part": "pairs", "case": case, "method": method, "n_vertices": n,
@@ -558,4 +569,9 @@ def test_time_ratios_compare_each_case_with_tsgsp_in_the_size_range():
             row("c", "bm3d-cnn", 50_000, 1.0), row("c", "bnf", 50_000, 1.0)]  # fmt: skip
     r = time_ratios(rows)
     assert r == {"bm3d-cnn": [1.5, 0.5], "dae": [0.5]}  # case b is below 10k vertices
+    protocol = [dict(x, part="protocol") for x in rows]
+    assert time_ratios(protocol) == {}  # timed once per case there: not for the speed target
+    v = versus_tsgsp(rows + [row("c", "dae", 50_000, 1.0) | {"theta_deg": 40.0}])
+    assert v[("pairs", "bm3d-cnn")] == {"cases": 3, "below_tsgsp": 0, "above_input": 0}
+    assert v[("pairs", "dae")] == {"cases": 2, "below_tsgsp": 0, "above_input": 1}
     assert "`bm3d-cnn` median 1.00, largest 1.50 (2 cases)" in format_markdown(rows)

@@ -29,7 +29,8 @@ from ..geometry import face_centroids, face_normals
 IMAGE_COLS = 9
 
 
-#: vertex rings around a face searched for its nearest centroids when the faces are known
+#: vertex rings around a face searched for its nearest centroids when the faces are known (the
+#: candidate bound of :func:`_ring_knn` holds for at most 2)
 FACE_RINGS = 2
 
 
@@ -83,7 +84,15 @@ def _ring_knn(C: np.ndarray, F: np.ndarray, k: int) -> np.ndarray:
     vf = np.empty(3 * m, dtype=np.int64)  # faces around each vertex, CSR by vptr
     _vertex_faces(F, vptr, vf)
     out = np.empty((m, k), dtype=np.int64)
-    _ring_knn_kernel(F, vptr, vf, C, FACE_RINGS, out)
+    if m == 0:
+        return out
+    # candidate buffer: a bound on the faces within two rings of any face (sum, over the face's
+    # vertices, of the valences of the vertices of the faces around them), at most m
+    deg = np.diff(vptr).astype(np.float64)
+    around = np.bincount(F.ravel(), weights=np.repeat(deg[F].sum(axis=1), 3), minlength=n)
+    cap = int(min(m, around[F].sum(axis=1).max() + 1))
+    n_chunks = int(min(m, 4 * numba.get_num_threads()))
+    _ring_knn_kernel(F, vptr, vf, C, FACE_RINGS, cap, n_chunks, out)
     return out
 
 
@@ -99,17 +108,18 @@ def _vertex_faces(F, vptr, vf):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, parallel=True)
-def _ring_knn_kernel(F, vptr, vf, C, rings, out):  # pragma: no cover - numba
+def _ring_knn_kernel(F, vptr, vf, C, rings, cap, n_chunks, out):  # pragma: no cover - numba
     """``out[f]``: the ``k`` faces nearest to face ``f`` by centroid among the faces within
-    ``rings`` vertex rings of it, ``f`` first, ties by index, padded with the farthest one."""
+    ``rings`` (at most 2: ``cap`` bounds their number) vertex rings of it, ``f`` first, ties by
+    index, padded with the farthest one. ``n_chunks`` blocks of faces, each with its own
+    marks (memory ``n_chunks (m + n + cap)`` integers)."""
     m = F.shape[0]
     n = vptr.size - 1
     k = out.shape[1]
-    n_chunks = min(m, 64)
     for ch in numba.prange(n_chunks):
         mark = np.full(m, -1, dtype=np.int64)  # stamp: the face whose search saw it last
         vmark = np.full(n, -1, dtype=np.int64)  # ... and the vertex whose faces it listed
-        cand = np.empty(64, dtype=np.int64)
+        cand = np.empty(cap, dtype=np.int64)
         bd = np.empty(k)
         bi = np.empty(k, dtype=np.int64)
         for f in range(ch * m // n_chunks, (ch + 1) * m // n_chunks):
@@ -130,10 +140,6 @@ def _ring_knn_kernel(F, vptr, vf, C, rings, out):  # pragma: no cover - numba
                             h = vf[t]
                             if mark[h] != f:
                                 mark[h] = f
-                                if nc == cand.size:
-                                    grown = np.empty(2 * cand.size, dtype=np.int64)
-                                    grown[:nc] = cand[:nc]
-                                    cand = grown
                                 cand[nc] = h
                                 nc += 1
                 start = end

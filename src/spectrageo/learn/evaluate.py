@@ -69,6 +69,8 @@ def evaluate_learned(
     train_frames: int = 8,
     frame_step: int = 3,
     repeat: int = 1,
+    protocol_levels=(),
+    protocol_max_vertices: int = 30000,
 ) -> list[dict]:
     """Run the comparison of the module notes; returns the rows (keys :data:`COLUMNS`) and, with
     ``out``, writes ``<out>.md`` and ``<out>.csv``.
@@ -78,6 +80,12 @@ def evaluate_learned(
 
     ``frame_step``: per-frame TSGSP (slow) and the error of every method are evaluated on every
     ``frame_step``-th frame of the first ``max_frames``; ``dae`` denoises all of them.
+
+    ``protocol_levels`` (e.g. ``(0.3,)``): also run the whole validation split of the denoising
+    protocol (:func:`spectrageo.evaluate.denoise.protocol_cases`: every corruption kind at these
+    levels, models up to ``protocol_max_vertices``), part ``"protocol"``, each case seeded and
+    corrupted exactly as ``spectrageo evaluate denoise --split validation`` does (one timed run
+    per method there, whatever ``repeat``).
     """
     from .. import denoise, io
     from ..datasets import data_dir as _data_dir
@@ -107,6 +115,15 @@ def evaluate_learned(
             _, V0, F = _load_clean(data, case)
             Vn = generate(V0, F, kind="gaussian-normal", level=lv, rng=case.seed).vertices
             _static_rows("validation", case.name, Vn, V0, F, methods, rows, repeat)
+    if protocol_levels:
+        from ..evaluate.denoise import protocol_cases
+
+        for case in progress(protocol_cases("validation", levels=protocol_levels), desc="protocol"):
+            _, V0, F = _load_clean(data, case)
+            if V0.shape[0] > int(protocol_max_vertices):
+                continue
+            Vn = generate(V0, F, kind=case.corruption, level=case.level, rng=case.seed).vertices
+            _static_rows("protocol", case.name, Vn, V0, F, methods, rows)  # one timed run
     for name in progress(animations, desc="animations"):
         path = data / "animations" / f"{name}.npz"
         if not path.is_file():
@@ -171,6 +188,7 @@ def format_markdown(rows: list[dict], note: str = "") -> str:
         summary(rows), ("part", "method", "cases", "input_theta", "theta_deg", "time_s")
     )
     lines += _time_ratio_lines(rows)
+    lines += _versus_lines(rows)
     lines += ["", "### Per case", ""]
     lines += markdown_table(rows, COLUMNS)
     return "\n".join(lines) + "\n"
@@ -178,9 +196,14 @@ def format_markdown(rows: list[dict], note: str = "") -> str:
 
 def time_ratios(rows: list[dict], lo: int = 10_000, hi: int = 100_000) -> dict[str, list[float]]:
     """Per learned method, its time over TSGSP's on every static case with ``lo``-``hi``
-    vertices (the range of issue 20's speed target)."""
+    vertices (the range of issue 20's speed target), outside the ``"protocol"`` part (timed
+    once per case there)."""
     out: dict[str, list[float]] = {}
-    static = [r for r in rows if r["part"] != "animation" and lo <= r["n_vertices"] <= hi]
+    static = [
+        r
+        for r in rows
+        if r["part"] not in ("animation", "protocol") and lo <= r["n_vertices"] <= hi
+    ]
     for r in static:
         if r["method"] in ("tsgsp", "bnf"):
             continue
@@ -188,6 +211,37 @@ def time_ratios(rows: list[dict], lo: int = 10_000, hi: int = 100_000) -> dict[s
         if ref:
             out.setdefault(r["method"], []).append(r["time_s"] / ref[0]["time_s"])
     return out
+
+
+def versus_tsgsp(rows: list[dict]) -> dict[tuple[str, str], dict[str, int]]:
+    """Per (part, learned method): cases, cases below TSGSP's theta, cases above the noisy
+    input (static parts)."""
+    out: dict[tuple[str, str], dict[str, int]] = {}
+    static = [r for r in rows if r["part"] != "animation"]
+    ref = {(r["part"], r["case"]): r for r in static if r["method"] == "tsgsp"}
+    for r in static:
+        t = ref.get((r["part"], r["case"]))
+        if r["method"] in ("tsgsp", "bnf") or t is None:
+            continue
+        c = out.setdefault(
+            (r["part"], r["method"]), {"cases": 0, "below_tsgsp": 0, "above_input": 0}
+        )
+        c["cases"] += 1
+        c["below_tsgsp"] += int(r["theta_deg"] < t["theta_deg"])
+        c["above_input"] += int(r["theta_deg"] > r["input_theta"])
+    return out
+
+
+def _versus_lines(rows: list[dict]) -> list[str]:
+    v = versus_tsgsp(rows)
+    if not v:
+        return []
+    parts = [
+        f"{part} `{m}`: {c['below_tsgsp']} of {c['cases']} (above the noisy input on "
+        f"{c['above_input']})"
+        for (part, m), c in v.items()
+    ]
+    return ["", "Cases where a learned method ends below TSGSP's theta: " + "; ".join(parts) + "."]
 
 
 def _time_ratio_lines(rows: list[dict]) -> list[str]:
@@ -217,4 +271,5 @@ __all__ = [
     "format_markdown",
     "summary",
     "time_ratios",
+    "versus_tsgsp",
 ]
