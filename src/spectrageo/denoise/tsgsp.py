@@ -38,7 +38,7 @@ import scipy.sparse as sp
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, as_rng, check_choice, check_positive
 from ..geometry import face_centroids, face_normals, vertex_normals
-from ..geometry._numba_kernels import patch_min_variance, sym3_eigenvalues
+from ..geometry._numba_kernels import patch_min_variance, patch_moments, sym3_eigenvalues
 from ..geometry.features import FLAT, cluster_eigenvalues, patch_eigenvalues
 from ..geometry.primitives import _normalize_rows
 from ..graph import adjacency_matrix
@@ -588,39 +588,6 @@ def _select(N, nb, feature, lam, indptr, cand) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _patch_moments(N, nb_sorted):  # pragma: no cover - jitted
-    """Entries [xx, yy, zz, xy, xz, yz] of ``R_i = N_i^T N_i / k`` for every patch (members in
-    ascending order, the summation order of the sparse product of ``patch_eigenvalues``)."""
-    m, k = nb_sorted.shape
-    out = np.zeros((m, 6))
-    for i in range(m):
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        a3 = 0.0
-        a4 = 0.0
-        a5 = 0.0
-        for q in range(k):
-            g = nb_sorted[i, q]
-            x = N[g, 0]
-            y = N[g, 1]
-            z = N[g, 2]
-            a0 += x * x
-            a1 += y * y
-            a2 += z * z
-            a3 += x * y
-            a4 += x * z
-            a5 += y * z
-        out[i, 0] = a0 / k
-        out[i, 1] = a1 / k
-        out[i, 2] = a2 / k
-        out[i, 3] = a3 / k
-        out[i, 4] = a4 / k
-        out[i, 5] = a5 / k
-    return out
-
-
-@numba.njit(cache=True)
 def _filter_kernel(
     N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide, wa, values
 ):  # pragma: no cover
@@ -913,7 +880,7 @@ def fine(
             wa = dbl_area / max(float(dbl_area.mean()), _EPS)
         else:
             wa = np.ones(m)
-        ev = sym3_eigenvalues(_patch_moments(N, nb_sorted))  # Eq. (4.14)-(4.15)
+        ev = sym3_eigenvalues(patch_moments(N, nb_sorted))  # Eq. (4.14)-(4.15)
         labels = cluster_eigenvalues(ev, min_feature=min_feature)[0]
         new_feature = labels != FLAT
         if curved_gate is not None:

@@ -321,6 +321,41 @@ def jacobi_rotate(app, aqq, apq, arp, arq):  # pragma: no cover - jitted
     return app - t * apq, aqq + t * apq, c * arp - s * arq, s * arp + c * arq
 
 
+@numba.njit(cache=True)
+def patch_moments(N, nb_sorted):  # pragma: no cover - jitted
+    """Entries [xx, yy, zz, xy, xz, yz] of ``R_i = N_i^T N_i / k`` for every patch ``i`` of the
+    rows ``N[nb_sorted[i]]``, summed in the order given (TSGSP's fine step passes its members
+    in ascending order, the summation order of the sparse product of ``patch_eigenvalues``),
+    in float64 whatever the dtype of ``N``."""
+    m, k = nb_sorted.shape
+    out = np.zeros((m, 6))
+    for i in range(m):
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        a4 = 0.0
+        a5 = 0.0
+        for q in range(k):
+            g = nb_sorted[i, q]
+            x = np.float64(N[g, 0])
+            y = np.float64(N[g, 1])
+            z = np.float64(N[g, 2])
+            a0 += x * x
+            a1 += y * y
+            a2 += z * z
+            a3 += x * y
+            a4 += x * z
+            a5 += y * z
+        out[i, 0] = a0 / k
+        out[i, 1] = a1 / k
+        out[i, 2] = a2 / k
+        out[i, 3] = a3 / k
+        out[i, 4] = a4 / k
+        out[i, 5] = a5 / k
+    return out
+
+
 @numba.njit(cache=True, parallel=True)
 def sym3_eigenvalues(S):  # pragma: no cover - jitted
     """Ascending eigenvalues of symmetric 3x3 matrices given as (m, 6) [xx, yy, zz, xy, xz, yz].
