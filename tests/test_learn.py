@@ -437,6 +437,9 @@ def test_local_rotations_recover_a_turn_and_auto_motion_follows_the_poses(noisy_
     assert train_frames_model(poses, F, **kw)[0].meta["motion"] == "rigid"
     assert train_frames_model(still, F, **kw)[0].meta["motion"] == "none"
     assert train_frames_model(still, F, motion="rigid", **kw)[0].meta["motion"] == "rigid"
+    # one clean training frame: no motion to measure
+    one = {"train_frames": 1, "clean": still[:1], "epochs": 1, "max_rows": 3000}
+    assert train_frames_model(still, F, **one)[0].meta["motion"] == "none"
 
 
 def test_denoiser_option_validation(tmp_path):

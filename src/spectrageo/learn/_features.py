@@ -209,7 +209,7 @@ def guided_pixels(N: np.ndarray, knn_idx: np.ndarray) -> np.ndarray:
     _patch_sums(N, members, first, moments, sums)
     lam = sym3_eigenvalues(moments)  # Eq. (4.9): a_j = |lambda_1 - lambda_2|
     best = np.empty(m, dtype=np.int64)
-    _ideal_rows(N, members, first, np.abs(lam[:, 0] - lam[:, 1]), cptr, cand, best)
+    _ideal_rows(N, members, np.abs(lam[:, 0] - lam[:, 1]), cptr, cand, best)
     g = _normalize_rows(sums)[best]
     bad = ~np.isfinite(g).all(axis=1) | (np.linalg.norm(g, axis=1) < 0.5)
     g[bad] = N[bad]
@@ -262,10 +262,10 @@ def _patch_sums(N, members, first, moments, sums):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, parallel=True)
-def _ideal_rows(N, members, first, a, cptr, cand, best):  # pragma: no cover - numba
+def _ideal_rows(N, members, a, cptr, cand, best):  # pragma: no cover - numba
     """Eq. (4.8)/(5.38): for face ``i`` the candidate row ``j`` with the least ``a_j b_ij``,
-    ``b_ij = max_l ||n_i - n_l||`` (Eq. 4.10); ties to the lowest ``j``; a row set with an
-    undefined (NaN) score keeps the face's own row."""
+    ``b_ij = max_l ||n_i - n_l||`` (Eq. 4.10, a repeated member does not change the maximum);
+    ties to the lowest ``j``; a row set with an undefined (NaN) score keeps the face's own row."""
     m, k = members.shape
     for i in numba.prange(m):
         bi = -1
@@ -275,14 +275,13 @@ def _ideal_rows(N, members, first, a, cptr, cand, best):  # pragma: no cover - n
             j = cand[t]
             d = 0.0
             for q in range(k):
-                if first[j, q]:
-                    l = members[j, q]
-                    d0 = N[i, 0] - N[l, 0]
-                    d1 = N[i, 1] - N[l, 1]
-                    d2 = N[i, 2] - N[l, 2]
-                    e = d0 * d0 + d1 * d1 + d2 * d2
-                    if e > d:
-                        d = e
+                l = members[j, q]
+                d0 = N[i, 0] - N[l, 0]
+                d1 = N[i, 1] - N[l, 1]
+                d2 = N[i, 2] - N[l, 2]
+                e = d0 * d0 + d1 * d1 + d2 * d2
+                if e > d:
+                    d = e
             sc = a[j] * np.sqrt(d)
             if sc != sc:
                 nan = True

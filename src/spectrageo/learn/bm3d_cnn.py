@@ -150,9 +150,10 @@ class BM3DCNNModel:
         depend on ``chunk``."""
         idx, R, parts = fe.image_parts(V, F, k=self.k, channels=self.channels)
         m = idx.shape[0]
+        step = max(1, int(chunk))
         p = np.empty((m, 3))
-        for a in range(0, m, max(1, int(chunk))):
-            faces = np.arange(a, min(m, a + max(1, int(chunk))))
+        for a in range(0, m, step):
+            faces = np.arange(a, min(m, a + step))
             img = fe.images_of(idx, R, parts, rows=self.kernel, faces=faces)
             p[faces] = self.predict(img, s)
         return unrotate_unit(R, p)

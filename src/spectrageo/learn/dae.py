@@ -257,7 +257,8 @@ class _FrameData:
         self.A, self.F, self.k = A, F, k
         self.motion = motion
         self.cache: dict[int, tuple] = {}
-        self._centroids: dict = {}
+        self._centroids: dict[int, np.ndarray] = {}
+        self._patches: dict[int, np.ndarray] = {}
 
     def _clamp(self, t: int) -> int:
         return int(min(max(t, 0), self.A.shape[0] - 1))
@@ -290,11 +291,11 @@ class _FrameData:
         return float(np.median(rotation_angles(Q)))
 
     def motion_patches(self, t: int) -> np.ndarray:
+        """The :data:`MOTION_PATCH` faces around every face of frame ``t`` (Kabsch patches)."""
         t = self._clamp(t)
-        key = ("patches", t)
-        if key not in self._centroids:
-            self._centroids[key] = fe.centroid_knn(self.centroids(t), MOTION_PATCH, self.F)
-        return self._centroids[key]
+        if t not in self._patches:
+            self._patches[t] = fe.centroid_knn(self.centroids(t), MOTION_PATCH, self.F)
+        return self._patches[t]
 
     def rows(self, t: int, radius: int) -> tuple[np.ndarray, np.ndarray]:
         """Temporal rows of frame ``t``: the guided normals of frames ``t - radius .. t + radius``
@@ -356,10 +357,10 @@ def train_frames_model(
     r = int(temporal)
     check_choice(motion, "motion", MOTIONS)
     data = _FrameData(Ain, F, k, "none" if motion == "auto" else motion)
-    if motion == "auto":
+    if motion == "auto":  # one training frame (clean targets) shows no motion: "none"
         gap = min(r + 1, train_frames - 1)
-        angles = [data.local_motion(t, t + gap) for t in range(0, train_frames - gap, gap)]
-        data.motion = "rigid" if angles and np.median(angles) > AUTO_MOTION_DEG else "none"
+        angles = [data.local_motion(t, t + gap) for t in range(0, train_frames - gap, max(gap, 1))]
+        data.motion = "rigid" if gap > 0 and np.median(angles) > AUTO_MOTION_DEG else "none"
     X, Y = [], []
     if clean is not None:
         Cl = as_frames(clean, "clean")
