@@ -68,8 +68,10 @@ impulses 0.3, which denoising improves) and 0.35 (clean dino). The clean meshes 
 (the validation half) were only measured afterwards, with these thresholds fixed.
 
 Known limits. Noise weaker than the detail of the mesh it sits on (Gaussian 0.1 on the Chinese
-dragon, impulses on most organic meshes) is called detail and left alone; on every such tuning
-case tsgsp made the normals worse than the noisy input, so nothing was lost there. On the
+dragon, impulses on most organic meshes) is called detail and left alone by the filters; on
+every such tuning case tsgsp made the normals worse than the noisy input, so nothing was lost
+there. Sparse impulses are still repaired there (below, "Impulses on meshes the gate calls
+clean"). On the
 validation half two noisy versions that tsgsp would have improved are now left alone
 (anchor_dense with Gaussian noise 0.1: G 1.69, S 0.10; cheese with Gaussian noise 0.5), and three
 clean meshes whose detail is about one triangle wide average out like noise (bull and cheese: ``S``
@@ -156,6 +158,27 @@ irregular Delaunay-meshed cube, six seeds: 2.60 against 2.80 without any repair)
 validation row ``meshes/cube-meshed:impulsive`` is not held out for the repair. Crease vertices
 hit by a spike are not isolated by (N7) and are left to the method. Not in the thesis.
 
+Impulses on meshes the gate calls clean (issue 14). Sparse impulses on an organic mesh leave its
+residual correlated enough to pass the detail test (level 0): the gate returned such meshes
+unchanged, every spike in place (the tuning case spot with impulses at 0.3: 5.15 degrees of mean
+normal error kept). When the gate finds no dense noise on a mesh that is not a planar
+tessellation, the repair (N5-N8) now runs and its result is returned when its first pass flags
+at least ``SPIKE_SHARE_QUIET`` (2 %) of the vertices; otherwise the input comes back unchanged.
+The share is higher than ``SPIKE_SHARE`` because a clean organic sampling has outliers of its
+own: on the clean meshes of the shared data (``meshes/``, ``cad/``, ``saliency/``, ``holes/``,
+the pairs' originals, the real scans) the first pass flags 0-1.81 % (the most: the tuning mesh
+spot; then dino 1.23 %, partLp 1.22 %, camel 1.00 %), while the tuning cases the gate calls clean
+with impulses flag 2.18 % (rocker-arm, level 0.1) to 5.22 % (spot, 0.3); 2 % lies between the
+two tuning values. Tuning split (the protocol's 60 generated cases at 0.1 / 0.3 / 0.5): rocker-arm
+0.1 2.08 -> 1.51 degrees, spot 0.1 2.03 -> 0.99, spot 0.3 5.15 -> 1.40, nothing else changes.
+Validation split, measured afterwards with the constant fixed (every case up to 60k vertices
+the gate calls clean, levels 0.1-0.5): 18 cases repaired, every one improved (at 0.3: the
+Chinese dragon 6.32 -> 3.80, camel 6.50 -> 1.77, dino 7.06 -> 3.47, diplodocus 4.83 -> 0.92,
+elephant 4.78 -> 2.12, lion 6.19 -> 1.44, man 7.54 -> 3.96); dino at 0.1 (1.74 % flagged, 3.03
+-> 2.64 possible) stays below the share and unchanged, as does joint with region-varying noise
+at 0.1 (1.81 %), which the repair would have made worse (36.09 -> 36.36). Both margins are
+thin: clean spot at 1.81 %, dino at 0.1 with another seed at 1.99 %. Not in the thesis.
+
 Planar tessellations (:func:`planar_share`, issue 14). A CAD export triangulates its planar
 faces exactly: the two triangles on either side of an edge inside a planar face have the same
 normal up to rounding. Dense noise (Gaussian, region-varying, anisotropic) tilts every face and
@@ -238,6 +261,9 @@ SPIKE_THRESHOLD = 4.0
 SPIKE_ISOLATION = 0.5
 #: the repair runs when the first pass flags at least this share of the vertices
 SPIKE_SHARE = 0.01
+#: on a mesh the gate calls clean, the repair is kept when its first pass flags at least this
+#: share (module notes, "Impulses on meshes the gate calls clean")
+SPIKE_SHARE_QUIET = 0.02
 #: ... and never one smaller than this fraction of the mean edge length (regular samplings)
 SPIKE_FLOOR = 0.02
 #: faces whose unit normals agree within this angle (degrees) lie in one plane (Eq. N7)

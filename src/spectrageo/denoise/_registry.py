@@ -14,6 +14,7 @@ from ._guard import (
     MIN_NOISE,
     PLANAR_SHARE,
     SPIKE_SHARE,
+    SPIKE_SHARE_QUIET,
     TRUST,
     apply_trust,
     despike,
@@ -123,7 +124,8 @@ def denoise(
         :func:`spectrageo.denoise._guard.noise_estimate`, i.e. is spatially correlated surface
         detail rather than white noise) is below ``min_noise`` is returned unchanged, whatever
         the method. Default :data:`spectrageo.denoise._guard.MIN_NOISE` (0.015, chosen on the tuning
-        split); ``0`` or a negative value disables the gate (and the impulse repair). Before
+        split), except for its sparse impulses (see ``impulses``); ``0`` or a negative value
+        disables the gate (and the impulse repair). Before
         the level, a planar tessellation (at least
         :data:`spectrageo.denoise._guard.PLANAR_SHARE` of the face pairs sharing an edge
         coplanar, :func:`spectrageo.denoise._guard.planar_share`, Eq. N9: a CAD export, which
@@ -136,7 +138,11 @@ def denoise(
         least 1 % of the vertices are such spikes; if the noise level then falls below
         ``min_noise`` the repaired mesh is returned without running the method, otherwise the
         method runs on it (and ``trust`` bounds the displacements from the repaired mesh, with
-        the noise deviation measured on it). False: the method sees the input as before.
+        the noise deviation measured on it). On a mesh the gate calls clean (not a planar
+        tessellation) the repair also runs, and its result is returned when its first pass flags
+        at least :data:`spectrageo.denoise._guard.SPIKE_SHARE_QUIET` (2 %) of the vertices
+        (impulses on organic meshes pass the detail test). False: the method sees the input as
+        before, and a mesh the gate calls clean comes back unchanged.
     **options
         Keyword options of the method. ``trust`` (noise standard deviations of Eq. 5.15, default
         6; None disables it) bounds every vertex displacement of the feature-preserving
@@ -174,12 +180,15 @@ def denoise(
     # leaves isolated triangles)
     sigma = None
     share = 0.0  # coplanar face-pair share (Eq. N9) of the mesh the gate measured
+    quiet = False  # the gate found no dense noise (level below min_noise)
     if min_noise > 0 and not is_soup(F, V.shape[0]):
         share = planar_share(V, F)
         if share < PLANAR_SHARE:
             sigma, level = noise_sigma(V, F=F)
             if level < min_noise:
-                return V.copy()  # no noise found: nothing to remove
+                if not impulses:
+                    return V.copy()  # no noise found: nothing to remove
+                quiet = True
     w = weld_mesh(V, F) if weld else None
     welded = w is not None and w.n_merged > 0
     Vw, Fw = (w.vertices, w.faces) if welded else (V, F)
@@ -190,7 +199,18 @@ def denoise(
         if share < PLANAR_SHARE:
             sigma, level = noise_sigma(Vw, F=Fw)
             if level < min_noise:
-                return V.copy()
+                if not impulses:
+                    return V.copy()
+                quiet = True
+    if quiet:
+        # no dense noise, but sparse impulses on a surface with detail pass the detail test
+        # (N2-N4): pull them back when the repair's first pass flags enough vertices to be
+        # impulses rather than the sampling's own outliers (module notes of _guard, "Impulses
+        # on meshes the gate calls clean")
+        rep = despike(Vw, Fw)
+        if rep.share < SPIKE_SHARE_QUIET:
+            return V.copy()
+        return w.expand(rep.vertices) if welded else rep.vertices
     if min_noise > 0 and share >= PLANAR_SHARE:
         # a planar tessellation (Eq. N9): no dense noise; only sparse impulses are repaired
         # (the repair is kept only when it makes more face pairs coplanar: a spike pulled back
