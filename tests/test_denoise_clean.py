@@ -423,6 +423,19 @@ def test_impulses_on_a_mesh_the_gate_calls_clean_are_repaired(shared_data):
         np.testing.assert_array_equal(denoise.denoise(Vn, F, method="gnf"), out)
 
 
+def test_mesh_whose_faces_all_collapse_is_returned_unchanged():
+    """Every vertex at one point: welding leaves no face, so there is nothing to denoise and the
+    mesh comes back unchanged (the impulse repair on quiet meshes and the gate of a soup must
+    not fail on the empty welded mesh)."""
+    V = np.zeros((20, 3))
+    F = np.array([(i, i + 1, i + 2) for i in range(18)])
+    for method in FILTERS:
+        np.testing.assert_array_equal(denoise.denoise(V, F, method=method), V)
+    # the same as a triangle soup (gated after welding)
+    V, F = np.zeros((54, 3)), np.arange(54).reshape(18, 3)
+    np.testing.assert_array_equal(denoise.denoise(V, F, method="tsgsp"), V)
+
+
 def test_impulse_repair_hands_creased_parts_to_the_filter():
     """A subdivided cube with impulses (six seeds): spikes on creases are not isolated (N7), the
     repaired mesh is still noisy for the gate, and tsgsp finishes it; the mean theta is below

@@ -115,8 +115,9 @@ def denoise(
         Denoise the welded surface: vertices that coincide within
         :data:`spectrageo.geometry.WELD_TOL` of the bounding-box diagonal (UV/normal seam copies,
         unwelded STL corners) are merged first, and every copy receives its merged vertex's result,
-        so seams stay closed. Input order and count are kept. False: process ``(V, F)`` as given
-        (each seam copy is then a boundary vertex and the seam can open).
+        so seams stay closed. Input order and count are kept; a mesh none of whose faces survives
+        the merge (every face degenerate) is returned unchanged. False: process ``(V, F)`` as
+        given (each seam copy is then a boundary vertex and the seam can open).
     min_noise : float or None
         Do-no-harm gate (:mod:`spectrageo.denoise._guard`): a mesh whose curvature-robust noise
         level (:func:`spectrageo.denoise.noise_level`, noise standard deviation over the median
@@ -192,6 +193,8 @@ def denoise(
     w = weld_mesh(V, F) if weld else None
     welded = w is not None and w.n_merged > 0
     Vw, Fw = (w.vertices, w.faces) if welded else (V, F)
+    if Fw.shape[0] == 0:
+        return V.copy()  # every face collapsed when coincident vertices were merged
     if welded and min_noise > 0 and sigma is None:
         # a soup is gated here; a planar mesh's share is measured again on the welded mesh,
         # against which the impulse repair is compared
