@@ -421,6 +421,11 @@ def test_impulses_on_a_mesh_the_gate_calls_clean_are_repaired(shared_data):
         np.testing.assert_array_equal(denoise.denoise(Vn, F, method="tsgsp", impulses=False), Vn)
         # only the repair moved vertices: gnf gives the same mesh
         np.testing.assert_array_equal(denoise.denoise(Vn, F, method="gnf"), out)
+    # as a triangle soup (gated after welding, the repair on the welded mesh): every copy gets
+    # its merged vertex's result
+    Vs = Vn[F.ravel()]
+    Fs = np.arange(Vs.shape[0]).reshape(-1, 3)
+    np.testing.assert_allclose(denoise.denoise(Vs, Fs, method="tsgsp"), out[F.ravel()], atol=1e-12)
 
 
 def test_mesh_whose_faces_all_collapse_is_returned_unchanged():
