@@ -428,6 +428,20 @@ def test_impulses_on_a_mesh_the_gate_calls_clean_are_repaired(shared_data):
     np.testing.assert_allclose(denoise.denoise(Vs, Fs, method="tsgsp"), out[F.ravel()], atol=1e-12)
 
 
+def test_small_clean_models_are_not_repaired_as_impulses():
+    """The quiet-mesh repair needs 2 % *and* 20 flagged vertices: on a clean 42-vertex icosphere
+    the 12 valence-5 vertices stand out (29 %), on a clean cone its apex (3 %)."""
+    import trimesh
+
+    from spectrageo.denoise._guard import SPIKE_SHARE_QUIET
+
+    for m in (trimesh.creation.icosphere(1), trimesh.creation.cone(1.0, 2.0, sections=32)):
+        V, F = np.asarray(m.vertices, float), np.asarray(m.faces)
+        assert despike(V, F).share >= SPIKE_SHARE_QUIET  # the share alone would repair them
+        for method in FILTERS:
+            np.testing.assert_array_equal(denoise.denoise(V, F, method=method), V)
+
+
 def test_mesh_whose_faces_all_collapse_is_returned_unchanged():
     """Every vertex at one point: welding leaves no face, so there is nothing to denoise and the
     mesh comes back unchanged (the impulse repair on quiet meshes and the gate of a soup must

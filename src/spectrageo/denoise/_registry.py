@@ -13,6 +13,7 @@ from .._validation import as_faces, as_points, check_positive
 from ._guard import (
     MIN_NOISE,
     PLANAR_SHARE,
+    SPIKE_COUNT_QUIET,
     SPIKE_SHARE,
     SPIKE_SHARE_QUIET,
     TRUST,
@@ -141,8 +142,9 @@ def denoise(
         method runs on it (and ``trust`` bounds the displacements from the repaired mesh, with
         the noise deviation measured on it). On a mesh the gate calls clean (not a planar
         tessellation) the repair also runs, and its result is returned when its first pass flags
-        at least :data:`spectrageo.denoise._guard.SPIKE_SHARE_QUIET` (2 %) of the vertices
-        (impulses on organic meshes pass the detail test). False: the method sees the input as
+        at least :data:`spectrageo.denoise._guard.SPIKE_SHARE_QUIET` (2 %) and at least
+        :data:`spectrageo.denoise._guard.SPIKE_COUNT_QUIET` (20) of the vertices (impulses on
+        organic meshes pass the detail test). False: the method sees the input as
         before, and a mesh the gate calls clean comes back unchanged.
     **options
         Keyword options of the method. ``trust`` (noise standard deviations of Eq. 5.15, default
@@ -211,7 +213,7 @@ def denoise(
         # impulses rather than the sampling's own outliers (module notes of _guard, "Impulses
         # on meshes the gate calls clean")
         rep = despike(Vw, Fw)
-        if rep.share < SPIKE_SHARE_QUIET:
+        if rep.share < SPIKE_SHARE_QUIET or round(rep.share * Vw.shape[0]) < SPIKE_COUNT_QUIET:
             return V.copy()
         return w.expand(rep.vertices) if welded else rep.vertices
     if min_noise > 0 and share >= PLANAR_SHARE:
