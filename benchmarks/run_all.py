@@ -60,6 +60,10 @@ SECTIONS = [
         ],
     ),
     ("planar_rule", [*_script("planar_rule"), "--out", str(HERE / "_out" / "planar_rule.md")]),
+    (
+        "quiet_impulses",
+        [*_script("quiet_impulses"), "--out", str(HERE / "_out" / "quiet_impulses.md")],
+    ),
     ("denoise_large", _script("denoise_large")),
     ("denoise_dynamic", [*_script("denoise_dynamic"), "--max-frames", "40"]),
     ("outliers", _evaluate("outliers", "outliers")),
