@@ -121,3 +121,17 @@ def test_validation(noisy_cube):
         classify_vertices(V)
     with pytest.raises(InvalidInputError, match="exceeds the number of vertices"):
         classify_vertices(V, F, patch=10**7)
+
+
+def test_mesh_without_any_face_area_is_refused():
+    """Every vertex at one point: all normals are zero, and every patch would have been called
+    flat; a clear error instead. One face with an area is enough to classify."""
+    V = np.zeros((20, 3))
+    F = np.array([(i, i + 1, i + 2) for i in range(18)])
+    with pytest.raises(InvalidInputError, match="every face of the mesh is degenerate"):
+        classify_faces(V, F)
+    with pytest.raises(InvalidInputError, match="every face of the mesh is degenerate"):
+        classify_vertices(V, F)
+    V[19] = (1.0, 1.0, 0.0)
+    V[18] = (1.0, 0.0, 0.0)
+    assert classify_faces(V, F).labels.shape == (18,)

@@ -276,6 +276,15 @@ def _as_normals(normals, m: int, name: str = "normals") -> np.ndarray:
     return np.divide(N, norm, out=np.zeros_like(N), where=norm > 0)
 
 
+def _check_some_area(N: np.ndarray) -> None:
+    """Refuse a mesh none of whose faces has an area: its normals are all zero, and every
+    patch would be called flat."""
+    if not np.any(np.einsum("ij,ij->i", N, N) > 0):
+        raise InvalidInputError(
+            "every face of the mesh is degenerate (zero area): there are no normals to classify."
+        )
+
+
 def classify_faces(
     V, F, *, patch: int = 15, normals=None, min_feature: float = 0.02, rng=None
 ) -> FeatureClasses:
@@ -309,7 +318,11 @@ def classify_faces(
     F = as_faces(F, V.shape[0], "F")
     m = F.shape[0]
     _check_common(patch, min_feature, m, "faces")
-    N = face_normals(V, F) if normals is None else _as_normals(normals, m)
+    if normals is None:
+        N = face_normals(V, F)
+        _check_some_area(N)
+    else:
+        N = _as_normals(normals, m)
     nb, _ = knn(face_centroids(V, F), int(patch), include_self=True)
     ev = patch_eigenvalues(N, nb)
     labels, centers, n_iter, conv, res = cluster_eigenvalues(ev, min_feature=min_feature, rng=rng)
@@ -337,6 +350,7 @@ def classify_vertices(
     if normals is not None:
         N = _as_normals(normals, n)
     elif F is not None:
+        _check_some_area(face_normals(V, F))
         N = vertex_normals(V, F, weighting="area")
     else:
         raise InvalidInputError("`normals` is required when `F` is None (a point cloud).")
