@@ -32,7 +32,7 @@ from scipy.spatial import cKDTree
 
 from .._errors import InvalidInputError
 from .._validation import check_choice, check_positive
-from ..geometry._numba_kernels import vertex_update_kernel
+from ..geometry._numba_kernels import max_sq_distance, vertex_update_kernel
 from ..geometry.primitives import _normalize_rows
 from ..graph import face_adjacency
 
@@ -276,20 +276,8 @@ def _thesis_patch_term(N: np.ndarray, P: sp.csr_matrix) -> np.ndarray:
 @numba.njit(cache=True, parallel=True)
 def _max_distance_kernel(N, faces, centers, members):  # pragma: no cover - jitted
     out = np.empty(faces.shape[0])
-    k = members.shape[1]
     for t in numba.prange(faces.shape[0]):
-        i = faces[t]
-        c = centers[t]
-        best = 0.0
-        for q in range(k):
-            l = members[c, q]
-            d0 = N[i, 0] - N[l, 0]
-            d1 = N[i, 1] - N[l, 1]
-            d2 = N[i, 2] - N[l, 2]
-            d = d0 * d0 + d1 * d1 + d2 * d2
-            if d > best:
-                best = d
-        out[t] = np.sqrt(best)
+        out[t] = np.sqrt(max_sq_distance(N, faces[t], members, centers[t]))
     return out
 
 

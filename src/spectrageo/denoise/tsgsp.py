@@ -38,7 +38,12 @@ import scipy.sparse as sp
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, as_rng, check_choice, check_positive
 from ..geometry import face_centroids, face_normals, vertex_normals
-from ..geometry._numba_kernels import patch_min_variance, patch_moments, sym3_eigenvalues
+from ..geometry._numba_kernels import (
+    max_sq_distance,
+    patch_min_variance,
+    patch_moments,
+    sym3_eigenvalues,
+)
 from ..geometry.features import FLAT, cluster_eigenvalues, patch_eigenvalues
 from ..geometry.primitives import _normalize_rows
 from ..graph import adjacency_matrix
@@ -438,7 +443,7 @@ def _coarse_loop(
 def _select_kernel(N, nb, feature, psi, mean, indptr, cand):  # pragma: no cover - jitted
     """Eq. (5.16)-(5.19) for every feature face; ``cand[indptr[i]:indptr[i+1]]`` are the centres
     of the patches containing face ``i`` (ascending, so ties go to the lowest centre)."""
-    m, k = nb.shape
+    m = nb.shape[0]
     best = np.arange(m)
     for i in range(m):
         if not feature[i]:
@@ -447,15 +452,7 @@ def _select_kernel(N, nb, feature, psi, mean, indptr, cand):  # pragma: no cover
         for p in range(indptr[i], indptr[i + 1]):
             j = cand[p]
             xi = N[i, 0] * mean[j, 0] + N[i, 1] * mean[j, 1] + N[i, 2] * mean[j, 2]
-            om = 0.0
-            for q in range(k):
-                g = nb[j, q]
-                d0 = N[i, 0] - N[g, 0]
-                d1 = N[i, 1] - N[g, 1]
-                d2 = N[i, 2] - N[g, 2]
-                d = d0 * d0 + d1 * d1 + d2 * d2
-                if d > om:
-                    om = d
+            om = max_sq_distance(N, i, nb, j)
             score = psi[j] * xi / (np.sqrt(om) + 1e-12)
             if score > top:
                 top = score

@@ -322,6 +322,23 @@ def jacobi_rotate(app, aqq, apq, arp, arq):  # pragma: no cover - jitted
 
 
 @numba.njit(cache=True)
+def max_sq_distance(N, i, members, j):  # pragma: no cover - jitted
+    """``max_q ||N[i] - N[members[j, q]]||^2`` (0 when every member is ``i``; a NaN distance
+    never raises the maximum): the spread of a patch of unit normals around ``N[i]``
+    (Eq. 4.10 / 5.17), shared by the kernels that score patches by it."""
+    best = 0.0
+    for q in range(members.shape[1]):
+        g = members[j, q]
+        d0 = N[i, 0] - N[g, 0]
+        d1 = N[i, 1] - N[g, 1]
+        d2 = N[i, 2] - N[g, 2]
+        d = d0 * d0 + d1 * d1 + d2 * d2
+        if d > best:
+            best = d
+    return best
+
+
+@numba.njit(cache=True)
 def patch_moments(N, nb_sorted):  # pragma: no cover - jitted
     """Entries [xx, yy, zz, xy, xz, yz] of ``R_i = N_i^T N_i / k`` for every patch ``i`` of the
     rows ``N[nb_sorted[i]]``, summed in the order given (TSGSP's fine step passes its members

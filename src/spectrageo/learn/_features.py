@@ -24,6 +24,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from ..geometry import face_centroids, face_normals
+from ..geometry._numba_kernels import max_sq_distance
 
 #: default image width ``k`` (an odd number, Fig. 5.40); see :mod:`spectrageo.learn.bm3d_cnn`
 IMAGE_COLS = 9
@@ -266,23 +267,14 @@ def _ideal_rows(N, members, a, cptr, cand, best):  # pragma: no cover - numba
     """Eq. (4.8)/(5.38): for face ``i`` the candidate row ``j`` with the least ``a_j b_ij``,
     ``b_ij = max_l ||n_i - n_l||`` (Eq. 4.10, a repeated member does not change the maximum);
     ties to the lowest ``j``; a row set with an undefined (NaN) score keeps the face's own row."""
-    m, k = members.shape
+    m = members.shape[0]
     for i in numba.prange(m):
         bi = -1
         bs = np.inf
         nan = False
         for t in range(cptr[i], cptr[i + 1]):
             j = cand[t]
-            d = 0.0
-            for q in range(k):
-                l = members[j, q]
-                d0 = N[i, 0] - N[l, 0]
-                d1 = N[i, 1] - N[l, 1]
-                d2 = N[i, 2] - N[l, 2]
-                e = d0 * d0 + d1 * d1 + d2 * d2
-                if e > d:
-                    d = e
-            sc = a[j] * np.sqrt(d)
+            sc = a[j] * np.sqrt(max_sq_distance(N, i, members, j))
             if sc != sc:
                 nan = True
             elif sc < bs:
