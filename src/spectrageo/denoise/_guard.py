@@ -76,7 +76,8 @@ validation half two noisy versions that tsgsp would have improved are now left a
 (anchor_dense with Gaussian noise 0.1: G 1.69, S 0.10; cheese with Gaussian noise 0.5), and three
 clean meshes whose detail is about one triangle wide average out like noise (bull and cheese: ``S``
 0.05; knot2, a swept tube whose 16-neighbour patches span its rings: ``S`` 0.02, ``T`` 0.01) and
-are still smoothed. The real scan ``iron`` (level 0.018, no ground truth) now counts as detail.
+were smoothed; bull still is (cheese is now a planar tessellation, knot2 is kept by the rule of
+"Nearly empty lower tail without impulses" below). The real scan ``iron`` (level 0.018, no ground truth) now counts as detail.
 
 Patches that miss the surface (issue 14). Euclidean neighbours assume a sampling about as dense
 across the surface as along it. Meshes extruded or lofted from dense profiles break that: the
@@ -187,6 +188,30 @@ improved flags 95 vertices or more (elephant, 2775 vertices, impulses at 0.3), a
 smallest mesh among them has 2337 (mushroom). Not in the
 thesis.
 
+Nearly empty lower tail without impulses (issue 14). Under dense white noise the lower-tail
+ratio ``T`` (N4) is 0.72; near 0, a tenth of the patches fit (almost) exactly while the rest do
+not. Sparse impulses on a smooth surface do that (``MIN_TAIL`` was chosen for them), and so does
+a surface whose own sampling makes some patches exact and others not: ``knot2.off``, a swept
+tube, has ``T`` 0.01 clean and 0.07 with impulses at 0.1, and its residual is the tube's rings,
+not noise. So when the gate calls a mesh noisy with ``T < SPARSE_TAIL`` (0.12) and the impulse
+repair's first pass flags fewer than ``SPIKE_SHARE`` of its vertices, there are no impulses to
+repair and no dense noise to filter: the mesh comes back unchanged (``impulses=False`` skips the
+repair and this rule with it). Chosen on tuning data only: among the cases of the protocol's
+tuning split (68, levels 0.1 / 0.3 / 0.5) and of trimesh's seven CAD test models with the five
+generated kinds at the same levels that the gate calls noisy and on which the repair flags
+fewer than 1 %, the smallest ``T`` is knot2 with impulses at 0.1 (0.067; tsgsp took it from 1.78
+to 21.52 degrees of mean normal error), the next idler_riser with Gaussian noise 0.1 (0.203,
+dense noise the filter reduces); 0.12 is their geometric midpoint, rounded. Tuning mean 10.47 ->
+10.18 degrees, only that case changing. A first version used ``MIN_TAIL`` (0.25) itself: it also
+returned dense noise on CAD tessellations with long thin triangles unchanged (``T`` 0.17-0.24
+there, where degenerate patches fit the noise exactly; tsgsp gains 0.2-0.9 degrees on them),
+found by a test of the noisy shared CAD parts. The clean knot2 (smoothed by 18.4 degrees before;
+the clean-input benchmark's validation half) was seen while designing the rule. Validation
+split of ``spectrageo evaluate denoise`` (level 0.3), measured afterwards: one case changes,
+abc_00000050 with Gaussian noise along the normals, 68.95 -> 69.58 degrees (its input): dense
+noise on a CAD tessellation whose tail is nearly empty too, so the rule's premise fails there
+(the filter had gained 0.6 degrees of 69.6). Not in the thesis.
+
 Planar tessellations (:func:`planar_share`, issue 14). A CAD export triangulates its planar
 faces exactly: the two triangles on either side of an edge inside a planar face have the same
 normal up to rounding. Dense noise (Gaussian, region-varying, anisotropic) tilts every face and
@@ -263,6 +288,9 @@ MIN_SURVIVAL = 0.09
 #: detail test, tail: ... and whose 10 %-quantile of per-patch residual variances is at least
 #: this fraction of the 25 %-quantile (sparse impulses leave many exact patches; module notes)
 MIN_TAIL = 0.25
+#: lower-tail ratio (Eq. N4) below which a residual without impulses is left alone; see the
+#: module notes, "Nearly empty lower tail without impulses"
+SPARSE_TAIL = 0.12
 #: sparse impulses (Eq. N7): a spike's offset exceeds this many robust deviations of all offsets
 SPIKE_THRESHOLD = 4.0
 #: ... and no neighbour's offset of the same sign reaches this fraction of it

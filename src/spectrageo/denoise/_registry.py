@@ -13,12 +13,14 @@ from .._validation import as_faces, as_points, check_positive
 from ._guard import (
     MIN_NOISE,
     PLANAR_SHARE,
+    SPARSE_TAIL,
     SPIKE_COUNT_QUIET,
     SPIKE_SHARE,
     SPIKE_SHARE_QUIET,
     TRUST,
     apply_trust,
     despike,
+    noise_estimate,
     noise_sigma,
     planar_share,
 )
@@ -144,7 +146,11 @@ def denoise(
         tessellation) the repair also runs, and its result is returned when its first pass flags
         at least :data:`spectrageo.denoise._guard.SPIKE_SHARE_QUIET` (2 %) and at least
         :data:`spectrageo.denoise._guard.SPIKE_COUNT_QUIET` (20) of the vertices (impulses on
-        organic meshes pass the detail test). False: the method sees the input as
+        organic meshes pass the detail test). A mesh the gate calls noisy whose residual has a
+        nearly empty lower tail (ratio of Eq. N4 below
+        :data:`spectrageo.denoise._guard.SPARSE_TAIL`, 0.12) and on which the repair flags fewer
+        than 1 % of the vertices is returned unchanged (no impulses to repair, and no dense
+        noise: module notes of ``_guard``, "Nearly empty lower tail without impulses"). False: the method sees the input as
         before, and a mesh the gate calls clean comes back unchanged.
     **options
         Keyword options of the method. ``trust`` (noise standard deviations of Eq. 5.15, default
@@ -184,10 +190,12 @@ def denoise(
     sigma = None
     share = 0.0  # coplanar face-pair share (Eq. N9) of the mesh the gate measured
     quiet = False  # the gate found no dense noise (level below min_noise)
+    tail = 1.0  # lower-tail ratio (Eq. N4) of the mesh the gate measured
     if min_noise > 0 and not is_soup(F, V.shape[0]):
         share = planar_share(V, F)
         if share < PLANAR_SHARE:
-            sigma, level = noise_sigma(V, F=F)
+            est = noise_estimate(V, F=F)
+            sigma, level, tail = est.sigma, est.level, est.tail
             if level < min_noise:
                 if not impulses:
                     return V.copy()  # no noise found: nothing to remove
@@ -202,7 +210,8 @@ def denoise(
         # against which the impulse repair is compared
         share = planar_share(Vw, Fw)
         if share < PLANAR_SHARE:
-            sigma, level = noise_sigma(Vw, F=Fw)
+            est = noise_estimate(Vw, F=Fw)
+            sigma, level, tail = est.sigma, est.level, est.tail
             if level < min_noise:
                 if not impulses:
                     return V.copy()
@@ -226,6 +235,11 @@ def denoise(
         return w.expand(rep.vertices) if welded else rep.vertices
     if impulses and min_noise > 0 and sigma is not None:
         rep = despike(Vw, Fw)
+        if rep.share < SPIKE_SHARE and tail < SPARSE_TAIL:
+            # nearly empty lower tail (Eq. N4) but no impulses to repair: the patches that fit
+            # exactly are the surface's own (module notes of _guard, "Nearly empty lower tail
+            # without impulses")
+            return V.copy()
         if rep.share >= SPIKE_SHARE:
             sigma_r, level_r = noise_sigma(rep.vertices, F=Fw)
             if level_r < min_noise:
