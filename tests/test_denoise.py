@@ -8,7 +8,7 @@ from spectrageo import denoise, io, metrics, noise
 from spectrageo._errors import InvalidInputError
 from spectrageo.denoise import _normals, bilateral, gnf, smoothing, tsgsp
 from spectrageo.geometry import face_normals
-from spectrageo.geometry._numba_kernels import patch_moments, sym3_eigenvalues
+from spectrageo.geometry._numba_kernels import patch_bimodality, patch_moments, sym3_eigenvalues
 
 from conftest import cube, grid, icosphere
 
@@ -242,6 +242,57 @@ def test_curved_gate_stops_on_a_sphere(noisy_sphere):
     assert not np.array_equal(gated, tsgsp.fine(Xc, Fs, n_outer=3, curved_gate=None))
     # (on the noisy cube fixture the gate also stops after round 1 since the coarse step
     # follows Algorithm 1's residual rule; the shared pairs' theta is unchanged by it)
+
+
+def test_patch_bimodality_tells_a_crease_from_curvature():
+    """Sarle's coefficient of the normals projected on their main spread: 1 for two groups of
+    normals whatever their split (a crease, centred or not), 5/9 for a continuous, uniform spread
+    (a curved patch), 0 where the normals do not vary; the same whatever the members' order."""
+    rng = np.random.default_rng(0)
+
+    def unit(a):  # normals at angle a (radians) in the xz-plane
+        return np.c_[np.sin(a), np.zeros_like(a), np.cos(a)]
+
+    k = 60
+    crease = unit(np.where(np.arange(k) < 45, -0.6, 0.6))  # a 75/25 split
+    curved = unit(np.arcsin(np.linspace(-0.56, 0.56, k)))  # uniform projections
+    flat = unit(np.zeros(k))
+    N = np.vstack([crease, curved, flat])
+    nb = np.arange(3 * k).reshape(3, k)
+    b = patch_bimodality(N, nb, patch_moments(N, nb))
+    assert b[0] == pytest.approx(1.0, abs=1e-9)
+    assert b[1] == pytest.approx(5 / 9, abs=0.01)
+    assert b[2] == 0.0
+    shuffled = np.array([rng.permutation(row) for row in nb])
+    np.testing.assert_allclose(patch_bimodality(N, shuffled, patch_moments(N, shuffled)), b)
+
+
+def test_tsgsp_keeps_curved_regions_out_of_the_features():
+    """Reading choice (f): on a noisy sphere (no crease) the 3-means calls many faces features;
+    the bimodality test leaves less than half of them, and the smoother result is closer to the
+    sphere. On a noisy cube at least 90 % of the faces along its edges that the 3-means calls
+    features stay features (noise blurs the two groups of a face whose patch barely reaches
+    across the edge)."""
+    V, F = icosphere(4)
+    Vn = noise.apply(V, F, kind="gaussian", level=0.3, rng=1)
+    lit, f_lit = tsgsp.fine(Vn, F, bimodality=None, n_outer=1, return_features=True)
+    new, f_new = tsgsp.fine(Vn, F, n_outer=1, return_features=True)
+    assert f_lit.mean() > 0.2 and f_new.mean() < 0.5 * f_lit.mean()
+    assert metrics.theta_deg(new, V, F) < metrics.theta_deg(lit, V, F)
+    Vc, Fc = cube(4)
+    Vcn = noise.apply(Vc, Fc, kind="gaussian", level=0.2, rng=1)
+    _, fc_lit = tsgsp.fine(Vcn, Fc, bimodality=None, n_outer=1, return_features=True)
+    _, fc = tsgsp.fine(Vcn, Fc, n_outer=1, return_features=True)
+    on_edge = _faces_near_cube_edges(Vc, Fc)
+    assert fc[on_edge].mean() > 0.9 * fc_lit[on_edge].mean()  # 0.68 of 0.73 here
+
+
+def _faces_near_cube_edges(V, F):
+    c = V[F].mean(axis=1)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    h = 1.5 * np.median(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1))
+    near = (np.abs(c - lo) < h) | (np.abs(c - hi) < h)
+    return near.sum(axis=1) >= 2
 
 
 def test_tsgsp_input_weight_recovers_acute_ridges():

@@ -54,9 +54,10 @@ def vertex_update_kernel(V, F, N, inv_deg, n_iter):  # pragma: no cover - jitted
 
 
 @numba.njit(cache=True, nogil=True)
-def min_eigvec3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
-    """``(lambda_min, x, y, z)``: smallest eigenvalue of a symmetric 3x3 matrix and its unit
-    eigenvector (cyclic Jacobi rotations, backward stable also for repeated eigenvalues)."""
+def jacobi3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
+    """``(A, V)``: cyclic Jacobi rotations of a symmetric 3x3 matrix (backward stable also for
+    repeated eigenvalues); the eigenvalues are on the diagonal of ``A``, the unit eigenvectors
+    the columns of ``V``, unsorted."""
     A = np.empty((3, 3))
     A[0, 0], A[1, 1], A[2, 2] = a00, a11, a22
     A[0, 1] = A[1, 0] = a01
@@ -89,6 +90,14 @@ def min_eigvec3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
                 vip, viq = V[i, p], V[i, q]
                 V[i, p] = c * vip - s * viq
                 V[i, q] = s * vip + c * viq
+    return A, V
+
+
+@numba.njit(cache=True, nogil=True)
+def min_eigvec3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
+    """``(lambda_min, x, y, z)``: smallest eigenvalue of a symmetric 3x3 matrix and its unit
+    eigenvector (:func:`jacobi3`)."""
+    A, V = jacobi3(a00, a11, a22, a01, a02, a12)
     j = 0
     if A[1, 1] < A[j, j]:
         j = 1
@@ -370,6 +379,49 @@ def patch_moments(N, nb_sorted):  # pragma: no cover - jitted
         out[i, 3] = a3 / k
         out[i, 4] = a4 / k
         out[i, 5] = a5 / k
+    return out
+
+
+@numba.njit(cache=True, parallel=True)
+def patch_bimodality(N, nb, S):  # pragma: no cover - jitted
+    """Sarle's bimodality coefficient ``(g^2 + 1) / kappa`` (``g`` skewness, ``kappa`` kurtosis)
+    of the rows ``N[nb[i]]`` projected on the eigenvector of the middle eigenvalue of their
+    second-moment matrix ``S[i]`` ((m, 6) [xx, yy, zz, xy, xz, yz], :func:`patch_moments`), the
+    direction in which the patch's normals spread most. 1 for any two-valued projection, 5/9
+    for a uniform one, 1/3 for a Gaussian one; 0 where the projections do not vary."""
+    m, k = nb.shape
+    out = np.zeros(m)
+    for i in numba.prange(m):
+        A, V = jacobi3(S[i, 0], S[i, 1], S[i, 2], S[i, 3], S[i, 4], S[i, 5])
+        lo = 0
+        hi = 0
+        for j in range(1, 3):
+            if A[j, j] < A[lo, lo]:
+                lo = j
+            if A[j, j] >= A[hi, hi]:
+                hi = j
+        mid = 3 - lo - hi if lo != hi else 1
+        ex, ey, ez = V[0, mid], V[1, mid], V[2, mid]
+        mean = 0.0
+        for q in range(k):
+            g = nb[i, q]
+            mean += N[g, 0] * ex + N[g, 1] * ey + N[g, 2] * ez
+        mean /= k
+        m2 = 0.0
+        m3 = 0.0
+        m4 = 0.0
+        for q in range(k):
+            g = nb[i, q]
+            d = N[g, 0] * ex + N[g, 1] * ey + N[g, 2] * ez - mean
+            d2 = d * d
+            m2 += d2
+            m3 += d2 * d
+            m4 += d2 * d2
+        m2 /= k
+        m3 /= k
+        m4 /= k
+        if m2 > 1e-24 and m4 > 0.0:
+            out[i] = (m3 * m3 + m2 * m2 * m2) / (m4 * m2)
     return out
 
 
