@@ -13,7 +13,9 @@ Fig. 5.4 (:func:`spectrageo.spectral.reassemble`).
 
 **Fine step** (:func:`fine`, Algorithm 2 lines 4-7). Faces of the coarse mesh are classified into
 features (edges, corners) and flat areas with 3-means on patch eigenvalues (Eq. 4.14-4.15,
-:func:`spectrageo.geometry.features.classify_faces`). A flat face keeps its ``k`` nearest faces as
+:func:`spectrageo.geometry.features.classify_faces`); a feature face whose patch normals vary
+continuously rather than in two groups is curvature, not a crease, and counts as flat (reading
+choice (f) of :func:`fine`). A flat face keeps its ``k`` nearest faces as
 neighbourhood; a feature face searches the kNN patches that contain it for the one maximising
 Eq. (5.16)-(5.19). The binary neighbourhood matrix is weighted with bilateral weights
 (Eq. 5.20-5.22), the normals are filtered with ``(D^-1 C_w)^zeta`` (Eq. 5.23) and the
