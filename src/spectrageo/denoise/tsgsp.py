@@ -803,7 +803,9 @@ def fine(
     rotor with Gaussian noise in random directions +2.3, joint +1.3, octagonal_pocket +1.3;
     camel, elephant, rotor up to -1.5). Costs: a synthetic bicone (642 vertices, a rim
     between two cones, Gaussian noise 0.3) 4.28 -> 5.27 degrees; the run time of tsgsp +5-10 %
-    (one more pass over the patches per round).
+    (the coefficient itself is one pass over the patches per round, 9 ms on 54k faces; most of
+    the cost is rounds 2-3, which the curved-surface gate of reading choice (c) now lets run on
+    some curved parts, e.g. the screwdriver).
     ``bimodality=None`` gives the classification of Eq. (4.14)-(4.15) alone.
 
     Parameters
