@@ -150,8 +150,9 @@ def denoise(
         nearly empty lower tail (ratio of Eq. N4 below
         :data:`spectrageo.denoise._guard.SPARSE_TAIL`, 0.12) and on which the repair flags fewer
         than 1 % of the vertices is returned unchanged (no impulses to repair, and no dense
-        noise: module notes of ``_guard``, "Nearly empty lower tail without impulses"). False: the method sees the input as
-        before, and a mesh the gate calls clean comes back unchanged.
+        noise: module notes of ``_guard``, "Nearly empty lower tail without impulses").
+        False: the method sees the input as before, and a mesh the gate calls clean comes back
+        unchanged.
     **options
         Keyword options of the method. ``trust`` (noise standard deviations of Eq. 5.15, default
         6; None disables it) bounds every vertex displacement of the feature-preserving
