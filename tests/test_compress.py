@@ -9,7 +9,7 @@ import zlib
 import numpy as np
 import pytest
 
-from spectrageo import InvalidInputError, compress, datasets, io
+from spectrageo import InvalidInputError, compress, datasets, io, metrics
 from spectrageo.cli.main import main
 from spectrageo.compress import _container
 
@@ -153,6 +153,35 @@ def test_feature_mask_beats_zero_deltas(fandisk):
     a = compress.decode(compress.encode(V, F, method="feature", step=1e-3, ratio=0.0))[0]
     b = compress.decode(compress.encode(V, F, method="feature", step=1e-3))[0]
     assert _rms(V, b) < _rms(V, a)
+
+
+def test_feature_rate_control_chooses_the_level_of_detail(fandisk):
+    """Algorithm 9 step 5 under ``bpv=``: at a few geometry bits per vertex, sending the salient
+    deltas and zeroing the rest (Eq. 5.53) beats quantising every delta coarsely; at a high rate
+    the codec sends every delta, i.e. it falls back to uniform quantisation."""
+    V, F = fandisk
+    uni = {"feature_fraction": 1.0, "ratio": 1.0}
+    conn = compress.info(compress.encode(V, F, method="feature", step=1.0, **uni))[
+        "connectivity_bpv"
+    ]
+    low = conn + 3.0
+    a = compress.encode(V, F, method="feature", bpv=low)
+    b = compress.encode(V, F, method="feature", bpv=low, **uni)
+    for d in (a, b):
+        assert abs(8 * len(d) / V.shape[0] - low) <= 0.05 * low
+    share = compress.info(a)["parameters"]["sent_share"]
+    assert 0.05 < share < 1.0
+    assert compress.info(b)["parameters"]["sent_share"] == 1.0
+    Va, Vb = compress.decode(a)[0], compress.decode(b)[0]
+    assert _rms(V, Va) < 0.9 * _rms(V, Vb)
+    assert metrics.theta_deg(Va, V, F) < 0.9 * metrics.theta_deg(Vb, V, F)
+    high = conn + 16.0
+    c = compress.encode(V, F, method="feature", bpv=high)
+    assert compress.info(c)["parameters"]["sent_share"] == 1.0
+    assert c == compress.encode(V, F, method="feature", bpv=high, **uni)
+    # an explicit level is kept as given
+    d = compress.encode(V, F, method="feature", bpv=low, feature_fraction=0.2, ratio=0.0)
+    assert abs(compress.info(d)["parameters"]["sent_share"] - 0.2) < 1e-3
 
 
 # ----------------------------------------------------------------------------- progressive

@@ -55,3 +55,36 @@ def test_equal_error_rows_interpolate_without_extrapolating():
     assert np.isnan(out["draco-ordered q=16"]["ratio"])
     assert abs(out["draco q=8"]["ours_bpv"] - 8.0) < 1e-9
     assert out["draco q=8"]["ours"] == "spectral-reorder"
+
+
+def test_feature_rows_pair_the_same_rate_request():
+    def row(method, setting, bpv, hd, th, share=float("nan")):
+        return {
+            "split": "t",
+            "model": "m",
+            "method": method,
+            "setting": setting,
+            "bpv": bpv,
+            "hausdorff": hd,
+            "theta_deg": th,
+            "sent_share": share,
+        }
+
+    rows = [
+        row("feature", "bpv=conn+2", 5.0, 0.01, 4.0, 0.3),
+        row("uniform-delta", "bpv=conn+2", 5.1, 0.02, 8.0, 1.0),
+        row("feature", "bpv=conn+4", 7.0, 0.01, 9.0, 0.5),
+        row("uniform-delta", "bpv=conn+4", 7.0, 0.02, 8.0, 1.0),
+        row("feature", "bpv=conn+8", 11.0, 0.005, 2.0, 1.0),
+        row("uniform-delta", "bpv=conn+8", 11.0, 0.005, 2.0, 1.0),
+        row("feature", "bpv=conn+12", 15.0, 0.003, 1.0, 0.75),
+        row("uniform-delta", "bpv=conn+12", 15.0, 0.002, 0.9, 1.0),
+        row("feature", "bpv=conn+16", 19.0, 0.001, 0.5, 1.0),  # no uniform point: left out
+    ]
+    out = {r["rate"]: r for r in ev.feature_rows(rows)}
+    assert list(out) == ["conn+2", "conn+4", "conn+8", "conn+12"]
+    assert out["conn+2"]["feature_better"] == "both"
+    assert out["conn+4"]["feature_better"] == "hausdorff"
+    assert out["conn+8"]["feature_better"] == "same"
+    assert out["conn+12"]["feature_better"] == "neither"
+    assert out["conn+2"]["sent_share"] == 0.3

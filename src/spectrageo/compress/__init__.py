@@ -8,7 +8,10 @@
   and ``"saliency"`` (saliency classes choose the delta coordinates that are sent, Algorithm 10).
 * Rate control: ``bpv=`` (whole file, connectivity included) or ``error=`` (RMS vertex error as
   a fraction of the bounding-box diagonal); the quantisation step is found by bisection so that
-  the request is met within 5 %.
+  the request is met within 5 %. ``feature`` also chooses its level of detail (the share of the
+  vertices whose delta coordinates are sent, Algorithm 9 step 5) unless ``feature_fraction``,
+  ``ratio`` or ``mask`` is given: the level with the smallest RMS error for ``bpv=``, the
+  smallest file for ``error=`` (see :mod:`spectrageo.compress._feature`).
 * The vertex order and the faces (order and corner order) are kept exactly unless
   ``reorder=True``, which lets the codec renumber vertices and faces for a smaller connectivity
   stream (:func:`info` then reports ``"reordered": true``).
@@ -101,7 +104,8 @@ def encode(
         Target size in bits per vertex of the whole file (header and connectivity included).
     error : float, optional
         Target RMS vertex error ``sqrt(mean ||v - v'||^2)`` as a fraction of the bounding-box
-        diagonal.
+        diagonal. With either, ``feature`` without ``feature_fraction`` / ``ratio`` / ``mask``
+        tries the levels of :data:`spectrageo.compress._feature.LEVELS` and keeps the best.
     reorder : bool
         Let the codec renumber vertices and faces (smaller connectivity); the decoded mesh is then
         the same surface with another vertex and face order.
@@ -143,46 +147,65 @@ def encode(
     mod = _module(method)
     plan = mod.make_plan(X, F, method, options)
 
-    def build(s: float) -> bytes:
+    def build(s: float, p=plan) -> bytes:
         c = _container.Container(
             method,
             V.shape[0],
             F.shape[0],
             tuple(float(x) for x in origin),
             float(scale),
-            plan.params(s),
+            p.params(s),
             bool(reorder),
-            [(TAG_CONNECTIVITY, conn), *plan.chunks(s)],
+            [(TAG_CONNECTIVITY, conn), *p.chunks(s)],
         )
         return c.to_bytes()
 
     n = V.shape[0]
     if bpv is None and error is None:
         return build(DEFAULT_STEP[method] if step is None else float(step))
-    if bpv is not None:
-        target = float(bpv)
+    # the feature codec chooses its level of detail (Algorithm 9 step 5) unless it is given
+    chosen = method == "feature" and not {"feature_fraction", "ratio", "mask"} & set(options)
+    plans = plan.levels() if chosen else [plan]
 
-        def measure(s):
-            data = build(s)
-            return 8.0 * len(data) / n, data
+    def rms(p, s) -> float:  # s=None: unquantised (the floor of the method)
+        d = p.reconstruct(s) - X
+        return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
 
-        s, data = _bisect(measure, target, increasing=False, what="bpv")
-        return data
-    target = float(error)
+    best, failure = None, None
+    for p in plans:
+        try:
+            if bpv is not None:
+                s, data = _bisect(
+                    lambda s, p=p: (8.0 * len(build(s, p)) / n, None),
+                    float(bpv),
+                    increasing=False,
+                    what="bpv",
+                )
+                key = rms(p, s)
+            else:
+                s = _error_step(lambda s, p=p: rms(p, s), float(error), method)
+                key = len(build(s, p))
+        except InvalidInputError as exc:
+            failure = exc  # the last level (uniform) reaches the widest range of requests
+            continue
+        if best is None or key < best[0]:
+            best = (key, p, s)
+    if best is None:
+        raise failure
+    return build(best[2], best[1])
 
-    def measure_err(s):
-        d = plan.reconstruct(s) - X  # s=None: unquantised (the floor of the method)
-        return float(np.sqrt(np.mean(np.sum(d * d, axis=1)))), None
 
-    floor = measure_err(None)[0]
+def _error_step(measure, target: float, method: str) -> float:
+    """The quantisation step whose RMS error (``measure(step)``) is within 3 % of ``target``."""
+    floor = measure(None)
     if floor > (1 - _AIM) * target:
         raise InvalidInputError(
             f"`error` = {target:g} is below what method {method!r} reaches with these options "
             f"(about {floor:.3g} at the finest step); "
             + ("raise `k` or `submesh_size`." if method == "spectral" else "lower `step`.")
         )
-    s, _ = _bisect(measure_err, target, increasing=True, what="error")
-    return build(s)
+    s, _ = _bisect(lambda s: (measure(s), None), target, increasing=True, what="error")
+    return s
 
 
 def _bisect(measure, target: float, *, increasing: bool, what: str):
@@ -266,11 +289,18 @@ def decode(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
 
 
 def info(data) -> dict:
-    """Header summary of ``.sgc`` bytes: method, version, counts, size, bpv, parameters."""
+    """Header summary of ``.sgc`` bytes: method, version, counts, size, bpv, parameters.
+
+    For ``feature`` and ``saliency`` files ``parameters`` also holds ``sent_share``, the share of
+    the vertices whose delta coordinates are sent at the fine step (the level of detail).
+    """
     c = _parse(data, False)
     mod = _module(c.method)
     size = len(data)
     conn = len(c.chunks[0][1])
+    params = mod.describe(c.params, c.method)
+    if c.method != "spectral":
+        params["sent_share"] = round(mod.sent_share(c.chunks[1:], c.n_vertices), 6)
     return {
         "format": "sgc",
         "version": _container.FORMAT_VERSION,
@@ -284,7 +314,7 @@ def info(data) -> dict:
         "reordered": c.reordered,
         "order_preserved": not c.reordered,
         "n_layers": len(c.chunks) - 1,
-        "parameters": mod.describe(c.params, c.method),
+        "parameters": params,
     }
 
 

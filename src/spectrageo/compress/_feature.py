@@ -16,6 +16,18 @@ Encoder:
    deltas are quantised with ``ratio * step`` (``ratio = 0``: set to zero, as in Eq. 5.53), and
    sent in a second layer (the progressive refinement of Algorithm 9, step 5).
 
+Level of detail under rate control (``feature`` with ``bpv=`` or ``error=`` and none of
+``feature_fraction``, ``ratio``, ``mask`` given): Algorithm 9 sends the feature deltas first and
+then, level by level, those of more vertices "in order" (step 5). The encoder tries the levels
+:data:`LEVELS` -- the share of the vertices, most salient first, whose deltas are sent, the rest
+set to zero as in Eq. (5.53); ``1`` sends every delta, i.e. uniform high-pass quantisation -- finds
+for each the step that meets the request, and keeps the one with the smallest RMS vertex error
+(``bpv=``) or the smallest file (``error=``). Setting the non-feature deltas to zero leaves a
+membrane between the features, which at a few bits per vertex is closer to the surface than
+quantising every delta coarsely (whose rounding noise the solve of Eq. 5.54 turns into
+low-frequency drift); at higher rates sending every delta wins, so the choice moves to ``1``.
+The grid was chosen on the compression tuning split (fandisk, partLp) only.
+
 Decoder: the sparse least-squares system ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54) through its
 normal equations ``(L^T L + I_a^T I_a) v = L^T delta + I_a^T v_a``, factorised once.
 
@@ -39,6 +51,9 @@ TAG_DELTA_COARSE = 7
 
 _P = struct.Struct("<ffdI")
 _MIN_FACES = 8  # below this the saliency patches are meaningless
+
+#: shares of the vertices whose deltas are sent, tried by the rate control (see the module notes)
+LEVELS = (0.1, 0.15, 0.2, 0.3, 0.5, 0.75, 1.0)
 
 _DEFAULTS = {
     "feature": {"anchor_fraction": 0.01, "feature_fraction": 0.15, "ratio": 4.0},
@@ -98,16 +113,22 @@ class _Solver:
         return self.lu.solve(np.asarray(self.L.T @ delta + self.P.T @ va))
 
 
-def _mask_feature(V, F, fraction: float, seed: int) -> np.ndarray:
-    n = V.shape[0]
-    if fraction >= 1.0 or F.shape[0] < _MIN_FACES:  # too small for patches: every delta is sent
-        return np.ones(n, dtype=bool)
+def _feature_rank(V, F, seed: int) -> np.ndarray | None:
+    """Vertices by decreasing RPCA geometric saliency (Algorithm 9 steps 1-2); ``None`` on meshes
+    too small for patches (every delta is then sent)."""
+    if F.shape[0] < _MIN_FACES:
+        return None
     from ..saliency import geometric_saliency
 
     s = geometric_saliency(V, F, k=min(25, F.shape[0] - 1), rng=seed)
-    k = int(round(fraction * n))
+    return np.argsort(-s, kind="stable")
+
+
+def _mask_from_rank(rank: np.ndarray | None, n: int, fraction: float) -> np.ndarray:
+    if fraction >= 1.0 or rank is None:
+        return np.ones(n, dtype=bool)
     mask = np.zeros(n, dtype=bool)
-    mask[np.argsort(-s, kind="stable")[:k]] = True
+    mask[rank[: int(round(fraction * n))]] = True
     return mask
 
 
@@ -143,10 +164,32 @@ class FeaturePlan:
                 raise InvalidInputError(f"`mask` must be a boolean array of shape ({n},).")
             self.mask = mask.copy()
         elif method == "feature":
-            self.mask = _mask_feature(X, F, float(o["feature_fraction"]), self.seed)
+            fraction = float(o["feature_fraction"])
+            self._x, self._f = X, F
+            self._rank = _feature_rank(X, F, self.seed) if fraction < 1.0 else False
+            self.mask = _mask_from_rank(None if fraction >= 1.0 else self._rank, n, fraction)
         else:
             self.mask = _mask_saliency(X, F, int(o["n_classes"]), o["class_keep"], self.seed)
         self.solver = _Solver(self.L, self.a)
+
+    def levels(self) -> list[FeaturePlan]:
+        """The plans of :data:`LEVELS` (same anchors, Laplacian and factorisation; masks from the
+        same saliency ranking), for the rate control."""
+        import copy
+
+        if self.method != "feature":
+            return [self]
+        if self._rank is False:  # not ranked yet (the plan was made for uniform quantisation)
+            self._rank = _feature_rank(self._x, self._f, self.seed)
+        if self._rank is None:  # too small for patches: every delta is sent at every level
+            return [self]
+        out = []
+        for f in LEVELS:
+            p = copy.copy(self)
+            p.mask = _mask_from_rank(self._rank, self.n, f)
+            p.ratio = 0.0 if f < 1.0 else 1.0
+            out.append(p)
+        return out
 
     def params(self, step: float) -> bytes:
         return _P.pack(self.anchor_fraction, self.ratio, float(step), self.seed)
@@ -238,6 +281,20 @@ def describe(params: bytes, method: str) -> dict:
     return {"anchor_fraction": round(af, 6), "ratio": round(ratio, 6), "step": step}
 
 
+def _read_mask(body: dict, n: int) -> np.ndarray:
+    if TAG_MASK not in body:
+        raise InvalidInputError(".sgc feature stream lacks its mask.")
+    raw = zstd_decompress(body[TAG_MASK], (n + 7) // 8, "feature mask")
+    if len(raw) != (n + 7) // 8:
+        raise InvalidInputError(".sgc feature mask has the wrong size.")
+    return np.unpackbits(np.frombuffer(raw, dtype=np.uint8))[:n].astype(bool)
+
+
+def sent_share(chunks, n: int) -> float:
+    """Share of the vertices whose deltas are sent at the fine step (the mask's ones)."""
+    return float(_read_mask(dict(chunks), n).sum()) / max(n, 1)
+
+
 def _unpack(params: bytes):
     if len(params) != _P.size:
         raise InvalidInputError(f".sgc {_P.size}-byte parameters expected; got {len(params)}.")
@@ -257,10 +314,7 @@ def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str) -> np.ndar
     if tags[:2] != need:
         raise InvalidInputError(".sgc feature stream lacks its mask or anchors.")
     body = dict(chunks)
-    raw = zstd_decompress(body[TAG_MASK], (n + 7) // 8, "feature mask")
-    if len(raw) != (n + 7) // 8:
-        raise InvalidInputError(".sgc feature mask has the wrong size.")
-    mask = np.unpackbits(np.frombuffer(raw, dtype=np.uint8))[:n].astype(bool)
+    mask = _read_mask(body, n)
     a = anchors(F, n, af, seed)
     va = _dec3(body[TAG_ANCHORS], a.size, "anchors") * step
     L = _laplacian(F, n)
