@@ -222,3 +222,26 @@ def test_evaluate_compress_animation_tuning(shared_data, tmp_path):
     assert all(b[1] < a[1] for a, b in zip(ours, ours[1:]))
     assert all(r["order_kept"] for r in rows if r["method"] == "quant-delta-zstd")
     assert (tmp_path / "ra.md").exists() and (tmp_path / "ra.csv").exists()
+
+
+def test_at_draco12_takes_targeted_points_within_the_rate_tolerance():
+    from spectrageo.evaluate import compress_animation as ev
+
+    def row(method, setting, bpvf, kg):
+        return {"model": "m", "method": method, "setting": setting, "bpvf": bpvf, "kg": kg}
+
+    rows = [
+        row("draco", "q=12", 20.0, 0.04),
+        row("pca-qp", "step=0.001", 3.0, 0.2),
+        row("pca-qp", "step=0.0001", 9.0, 0.03),
+        row("pca-qp", "kg=draco12", 6.0, 0.041),  # 2.5 % above: the rate control's tolerance
+        row("blocks", "step=0.0001", 7.0, 0.041),  # a step point above the reference: no
+        row("blocks", "kg=draco12", 8.0, 0.045),  # 12.5 % above: no
+    ]
+    out = {r["method"]: r for r in ev.at_draco12(rows)}
+    assert out["pca-qp"]["bpvf_at_draco12_kg"] == 6.0
+    assert out["pca-qp"]["kg_there"] == 0.041
+    assert out["blocks"]["bpvf_at_draco12_kg"] is None
+    assert out["draco"]["bpvf_at_draco12_kg"] == 20.0
+    md = ev.format_markdown([{**r, "split": "t"} for r in rows])
+    assert "not reached" in md
