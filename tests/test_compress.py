@@ -304,6 +304,13 @@ def test_cli_round_trip(tmp_path, capsys):
     assert main(["compress", str(src), str(tmp_path / "r.sgc"), "--reorder", "-q"]) == 0
     assert main(["info", str(tmp_path / "r.sgc"), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["reordered"] is True
+    # the feature codec says which level of detail its rate control chose
+    assert main(["compress", str(src), str(tmp_path / "h.sgc"), "--method", "feature"]
+                + ["--bpv", "6"]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert "feature (deltas of" in err and "% of the vertices sent)" in err
+    assert main(["info", str(tmp_path / "h.sgc"), "--json"]) == 0
+    assert 0 < json.loads(capsys.readouterr().out)["parameters"]["sent_share"] < 1
 
 
 def test_cli_errors(tmp_path, capsys):

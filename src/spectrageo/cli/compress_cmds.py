@@ -160,9 +160,11 @@ def cmd_compress(args) -> int:
         if d["reordered"]
         else "vertex and face order kept"
     )
+    share = d["parameters"].get("sent_share")
+    level = "" if share is None else f" (deltas of {100 * share:.0f} % of the vertices sent)"
     _status(
         f"wrote {args.output}: {d['bytes']} bytes, {d['bpv']:.2f} bpv "
-        f"(connectivity {d['connectivity_bpv']:.2f}), {method}, {order}, {dt:.2f} s"
+        f"(connectivity {d['connectivity_bpv']:.2f}), {method}{level}, {order}, {dt:.2f} s"
     )
     return 0
 
