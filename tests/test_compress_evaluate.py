@@ -28,17 +28,22 @@ def test_evaluate_compress_tuning(shared_data, tmp_path):
     assert (tmp_path / "rd.csv").read_text().splitlines()[0].startswith("split,model")
 
 
-def test_equal_error_rows_interpolate_without_extrapolating():
-    def row(method, setting, bpv, hd):
-        return {
-            "split": "t",
-            "model": "m",
-            "method": method,
-            "setting": setting,
-            "bpv": bpv,
-            "hausdorff": hd,
-        }
+def _point(method, setting, bpv, hd, th=float("nan"), share=float("nan")):
+    """One rate point of mesh "m" in split "t"."""
+    return {
+        "split": "t",
+        "model": "m",
+        "method": method,
+        "setting": setting,
+        "bpv": bpv,
+        "hausdorff": hd,
+        "theta_deg": th,
+        "sent_share": share,
+    }
 
+
+def test_equal_error_rows_interpolate_without_extrapolating():
+    row = _point
     rows = [
         row("spectral", "a", 10.0, 1e-2),
         row("spectral", "b", 20.0, 1e-3),
@@ -58,17 +63,7 @@ def test_equal_error_rows_interpolate_without_extrapolating():
 
 
 def test_feature_rows_pair_the_same_rate_request():
-    def row(method, setting, bpv, hd, th, share=float("nan")):
-        return {
-            "split": "t",
-            "model": "m",
-            "method": method,
-            "setting": setting,
-            "bpv": bpv,
-            "hausdorff": hd,
-            "theta_deg": th,
-            "sent_share": share,
-        }
+    row = _point
 
     rows = [
         row("feature", "bpv=conn+2", 5.0, 0.01, 4.0, 0.3),
