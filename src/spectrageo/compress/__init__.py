@@ -181,10 +181,10 @@ def encode(
                     increasing=False,
                     what="bpv",
                 )
-                key = rms(p, s)
+                key = rms(p, s) if len(plans) > 1 else 0.0
             else:
                 s = _error_step(lambda s, p=p: rms(p, s), float(error), method)
-                key = len(build(s, p))
+                key = len(build(s, p)) if len(plans) > 1 else 0
         except InvalidInputError as exc:
             failure = exc  # the last level (uniform) reaches the widest range of requests
             continue
