@@ -154,6 +154,7 @@ class FeaturePlan:
         self.anchor_fraction = float(np.float32(o["anchor_fraction"]))
         self.ratio = float(np.float32(o["ratio"]))
         self.seed = int(o.get("seed", 0))
+        self._rank: np.ndarray | None | bool = None  # saliency ranking (feature method)
         self.a = anchors(F, n, self.anchor_fraction, self.seed)
         self.L = _laplacian(F, n)
         self.delta = np.asarray(self.L @ X)
