@@ -325,3 +325,20 @@ def test_cli_errors(tmp_path, capsys):
     assert main(["compress", str(src), str(tmp_path / "f.sgc"), "--bpv", "1"]) == 2
     assert "cannot be reached" in capsys.readouterr().err
     assert not (tmp_path / "f.sgc").exists()
+
+
+def test_saliency_rate_control_scales_the_class_shares(fandisk):
+    """Algorithm 10 under ``bpv=``: the share of deltas sent follows the rate (the per-class
+    ratios scaled to it), and a high rate is no longer held at the fixed shares' error floor."""
+    V, F = fandisk
+    fixed = {"class_keep": [0.1, 0.4, 0.7, 1.0]}
+    shares, errs = [], []
+    for bpv in (6.0, 20.0):
+        a = compress.encode(V, F, method="saliency", bpv=bpv)
+        b = compress.encode(V, F, method="saliency", bpv=bpv, **fixed)
+        assert abs(8 * len(a) / V.shape[0] - bpv) <= 0.05 * bpv
+        shares.append(compress.info(a)["parameters"]["sent_share"])
+        errs.append((_rms(V, compress.decode(a)[0]), _rms(V, compress.decode(b)[0])))
+        assert abs(compress.info(b)["parameters"]["sent_share"] - 0.55) < 0.01
+    assert shares[0] < shares[1]
+    assert errs[0][0] < errs[0][1] and errs[1][0] < 0.5 * errs[1][1]

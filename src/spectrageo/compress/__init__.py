@@ -8,10 +8,11 @@
   and ``"saliency"`` (saliency classes choose the delta coordinates that are sent, Algorithm 10).
 * Rate control: ``bpv=`` (whole file, connectivity included) or ``error=`` (RMS vertex error as
   a fraction of the bounding-box diagonal); the quantisation step is found by bisection so that
-  the request is met within 5 %. ``feature`` also chooses its level of detail (the share of the
-  vertices whose delta coordinates are sent, Algorithm 9 step 5) unless ``feature_fraction``,
-  ``ratio`` or ``mask`` is given: the level with the smallest RMS error for ``bpv=``, the
-  smallest file for ``error=`` (see :mod:`spectrageo.compress._feature`).
+  the request is met within 5 %. ``feature`` and ``saliency`` also choose their level of detail
+  (the share of the vertices whose delta coordinates are sent, Algorithm 9 step 5, Algorithm 10
+  steps 4-5) unless ``feature_fraction`` / ``class_keep``, ``ratio`` or ``mask`` is given: the
+  level with the smallest RMS error for ``bpv=``, the smallest file for ``error=`` (see
+  :mod:`spectrageo.compress._feature`).
 * The vertex order and the faces (order and corner order) are kept exactly unless
   ``reorder=True``, which lets the codec renumber vertices and faces for a smaller connectivity
   stream (:func:`info` then reports ``"reordered": true``).
@@ -104,8 +105,9 @@ def encode(
         Target size in bits per vertex of the whole file (header and connectivity included).
     error : float, optional
         Target RMS vertex error ``sqrt(mean ||v - v'||^2)`` as a fraction of the bounding-box
-        diagonal. With either, ``feature`` without ``feature_fraction`` / ``ratio`` / ``mask``
-        tries the levels of :data:`spectrageo.compress._feature.LEVELS` and keeps the best.
+        diagonal. With either, ``feature`` (without ``feature_fraction``, ``ratio``, ``mask``)
+        and ``saliency`` (without ``class_keep``, ``ratio``, ``mask``) try the levels of
+        :data:`spectrageo.compress._feature.LEVELS` and keep the best.
     reorder : bool
         Let the codec renumber vertices and faces (smaller connectivity); the decoded mesh is then
         the same surface with another vertex and face order.
@@ -163,8 +165,10 @@ def encode(
     n = V.shape[0]
     if bpv is None and error is None:
         return build(DEFAULT_STEP[method] if step is None else float(step))
-    # the feature codec chooses its level of detail (Algorithm 9 step 5) unless it is given
-    chosen = method == "feature" and not {"feature_fraction", "ratio", "mask"} & set(options)
+    # the delta codecs choose their level of detail (Algorithm 9 step 5, Algorithm 10 steps
+    # 4-5) unless it is given
+    given = {"feature": "feature_fraction", "saliency": "class_keep"}.get(method)
+    chosen = given is not None and not {given, "ratio", "mask"} & set(options)
     plans = plan.levels() if chosen else [plan]
 
     def rms(p, s) -> float:  # s=None: unquantised (the floor of the method)
@@ -202,7 +206,11 @@ def _error_step(measure, target: float, method: str) -> float:
         raise InvalidInputError(
             f"`error` = {target:g} is below what method {method!r} reaches with these options "
             f"(about {floor:.3g} at the finest step); "
-            + ("raise `k` or `submesh_size`." if method == "spectral" else "lower `step`.")
+            + (
+                "raise `k` or `submesh_size`."
+                if method == "spectral"
+                else "send more deltas (`feature_fraction`, `class_keep`) or give `ratio` >= 1."
+            )
         )
     s, _ = _bisect(lambda s: (measure(s), None), target, increasing=True, what="error")
     return s

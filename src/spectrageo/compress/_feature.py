@@ -17,7 +17,8 @@ Encoder:
    sent in a second layer (the progressive refinement of Algorithm 9, step 5).
 
 Level of detail under rate control (``feature`` with ``bpv=`` or ``error=`` and none of
-``feature_fraction``, ``ratio``, ``mask`` given): Algorithm 9 sends the feature deltas first and
+``feature_fraction``, ``ratio``, ``mask`` given; ``saliency`` likewise without ``class_keep``,
+``ratio``, ``mask``, its per-class shares scaled to each level): Algorithm 9 sends the feature deltas first and
 then, level by level, those of more vertices "in order" (step 5). The encoder tries the levels
 :data:`LEVELS` -- the share of the vertices, most salient first, whose deltas are sent, the rest
 set to zero as in Eq. (5.53); ``1`` sends every delta, i.e. uniform high-pass quantisation -- finds
@@ -132,15 +133,24 @@ def _mask_from_rank(rank: np.ndarray | None, n: int, fraction: float) -> np.ndar
     return mask
 
 
-def _mask_saliency(V, F, n_classes: int, keep, seed: int) -> np.ndarray:
+def _saliency_classes(V, F, n_classes: int, seed: int):
+    """Combined saliency and its quantile classes (Algorithm 10 steps 2-3); ``None`` on meshes
+    too small for patches."""
     from ..saliency import saliency, saliency_classes
 
     if F.shape[0] < _MIN_FACES:
-        return np.ones(V.shape[0], dtype=bool)
+        return None
     s = saliency(V, F, k=min(25, F.shape[0] - 1), rng=seed)
-    cls = saliency_classes(s, n_classes, class_edges="quantile")
-    mask = np.zeros(V.shape[0], dtype=bool)
-    for c in range(n_classes):
+    return s, saliency_classes(s, n_classes, class_edges="quantile")
+
+
+def _mask_from_classes(sal, n: int, keep) -> np.ndarray:
+    """The fractions ``keep`` of every class, most salient first (Algorithm 10 steps 4-5)."""
+    if sal is None:
+        return np.ones(n, dtype=bool)
+    s, cls = sal
+    mask = np.zeros(n, dtype=bool)
+    for c in range(len(keep)):
         idx = np.flatnonzero(cls == c)
         k = int(round(keep[c] * idx.size))
         mask[idx[np.argsort(-s[idx], kind="stable")[:k]]] = True
@@ -170,24 +180,39 @@ class FeaturePlan:
             self._rank = _feature_rank(X, F, self.seed) if fraction < 1.0 else False
             self.mask = _mask_from_rank(None if fraction >= 1.0 else self._rank, n, fraction)
         else:
-            self.mask = _mask_saliency(X, F, int(o["n_classes"]), o["class_keep"], self.seed)
+            self._sal = _saliency_classes(X, F, int(o["n_classes"]), self.seed)
+            self._profile = np.asarray(o["class_keep"], dtype=np.float64)
+            self.mask = _mask_from_classes(self._sal, n, self._profile)
         self.solver = _Solver(self.L, self.a)
 
     def levels(self) -> list[FeaturePlan]:
         """The plans of :data:`LEVELS` (same anchors, Laplacian and factorisation; masks from the
-        same saliency ranking), for the rate control."""
+        same saliency ranking or classes), for the rate control. ``saliency``: every class keeps
+        ``min(1, a * class_keep[c])`` of its vertices, ``a`` set so that the share of the level
+        is kept (Algorithm 10 steps 4-5: the ratios per class follow the scenario's total)."""
         import copy
 
-        if self.method != "feature":
-            return [self]
-        if self._rank is False:  # not ranked yet (the plan was made for uniform quantisation)
-            self._rank = _feature_rank(self._x, self._f, self.seed)
-        if self._rank is None:  # too small for patches: every delta is sent at every level
+        from ..saliency.simplify import class_keep_fractions
+
+        if self.method == "feature":
+            if self._rank is False:  # not ranked yet (the plan was made for uniform quantisation)
+                self._rank = _feature_rank(self._x, self._f, self.seed)
+            if self._rank is None:  # too small for patches: every delta is sent at every level
+                return [self]
+        elif getattr(self, "_sal", None) is None:  # a given mask, or too small for patches
             return [self]
         out = []
         for f in LEVELS:
             p = copy.copy(self)
-            p.mask = _mask_from_rank(self._rank, self.n, f)
+            if self.method == "feature":
+                p.mask = _mask_from_rank(self._rank, self.n, f)
+            elif f >= 1.0:
+                p.mask = np.ones(self.n, dtype=bool)
+            else:
+                counts = np.bincount(self._sal[1], minlength=self._profile.size)
+                weights = np.maximum(self._profile, 1e-3)
+                keep = class_keep_fractions(counts, int(round(f * self.n)), weights=weights)
+                p.mask = _mask_from_classes(self._sal, self.n, keep)
             p.ratio = 0.0 if f < 1.0 else 1.0
             out.append(p)
         return out

@@ -11,10 +11,12 @@ Methods (this package): ``spectral`` (quantisation steps :data:`STEPS`), ``spect
 ``uniform-delta`` (Algorithm 9 and its feature-unaware baseline, ``feature_fraction=1``; CAD parts
 and the tuning meshes only; both at the whole-file rates ``connectivity + g`` bits per vertex for
 ``g`` in :data:`GEOMETRY_BPV`, through the rate control, so that the two are compared at equal
-rate and ``feature`` chooses its level of detail as a user's ``--bpv`` would), ``saliency`` (Algorithm 10; meshes up to 30k vertices). Peers, run in
-the same session when installed (``bench`` extra): Draco through DracoPy at 8-16 quantisation bits
-with its default (reordering, compression level 7) and order-preserving (``preserve_order=True``)
-modes, and uniform quantisation of the coordinates + zstd (level 19) of vertices and faces.
+rate and ``feature`` chooses its level of detail as a user's ``--bpv`` would), ``saliency``
+(Algorithm 10, at the same rates, its level chosen the same way; meshes up to 30k vertices).
+Peers, run in the same session when installed (``bench`` extra): Draco through DracoPy at 8-16
+quantisation bits with its default (reordering, compression level 7) and order-preserving
+(``preserve_order=True``) modes, and uniform quantisation of the coordinates + zstd (level 19) of
+vertices and faces.
 
 Splits are fixed here: :data:`TUNING_SPLIT` (fandisk, partLp), on which the defaults of the
 codecs (``submesh_size=300``, ``k=300``, ``overlap=0.1``; ``feature_fraction=0.15``,
@@ -57,7 +59,6 @@ PEERS = ("draco", "draco-ordered", "quant-zstd")
 STEPS = {
     "spectral": (3e-3, 1e-3, 3e-4, 1e-4),
     "spectral-reorder": (1e-2, 3e-3, 1e-3, 3e-4, 1e-4),
-    "saliency": (1e-3,),
 }
 #: geometry rates (bits per vertex above the connectivity) of the feature / uniform-delta points
 GEOMETRY_BPV = (2, 3, 4, 6, 8, 12, 16, 20)
@@ -201,7 +202,7 @@ def evaluate(
                 continue
             if m == "saliency" and n > 30000:
                 continue
-            if m in ("feature", "uniform-delta"):
+            if m in ("feature", "uniform-delta", "saliency"):
                 if conn_bpv is None:
                     conn_bpv = _connectivity_bpv(V, F)
                 jobs += [
