@@ -23,8 +23,9 @@ HELP = {
         "unless --reorder. --bpv counts the whole file; --error is the RMS vertex error as a\n"
         "fraction of the bounding-box diagonal; both are met within 5 %.\n"
         "Animations (.npz or a folder of frames) go to a .sga file: eigen-trajectory coding of\n"
-        "delta coordinates (Sec. 5.2.2: pca, pca-q, pca-qs, pca-qp, blocks [default]) or the\n"
-        "scalable layered streaming codec (Sec. 5.2.4: layered, one segment per frame); --bpvf\n"
+        "delta coordinates (Sec. 5.2.2: pca, pca-q, pca-qs, pca-qp, blocks [default]),\n"
+        "eigen-trajectories in the partitioned GFT basis (pca-spectral: Sec. 5.2.1 + 5.2.2) or\n"
+        "the scalable layered streaming codec (Sec. 5.2.4: layered, one segment per frame); --bpvf\n"
         "is the whole file in bits per vertex per frame, --error the KG error in percent.",
         "spectrageo compress fandisk.off fandisk.sgc --bpv 20\n"
         "spectrageo compress part.obj part.sgc --method feature --error 0.002\n"

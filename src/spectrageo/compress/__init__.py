@@ -344,16 +344,19 @@ def encode_animation(
     """Compress a mesh animation with fixed connectivity into ``.sga`` bytes (Section 5.2.2).
 
     Delta coordinates projected on eigen-trajectories (Eq. 5.46-5.52; see
-    :mod:`spectrageo.compress._animation` for the methods and the file layout), or the scalable
+    :mod:`spectrageo.compress._animation` for the methods and the file layout), the scalable
     layered streaming codec of Section 5.2.4 (``method="layered"``, Algorithm 11; see
-    :mod:`spectrageo.compress._layered`).
+    :mod:`spectrageo.compress._layered`), or ``"pca-spectral"``: eigen-trajectories of the
+    whole sequence with the partitioned GFT of Section 5.2.1 as the spatial transform (a
+    combination of the two sections, not a method of the thesis; see
+    :mod:`spectrageo.compress._pca_spectral`).
 
     Parameters
     ----------
     frames : (T, n, 3) float or MeshAnimation
     F : (m, 3) int
         Shared faces; vertex order and faces are kept exactly.
-    method : {"pca", "pca-q", "pca-qs", "pca-qp", "blocks", "layered"}
+    method : {"pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "layered"}
     bpvf : float, optional
         Target size of the whole file in bits per vertex per frame (met within 5 %).
     error : float, optional

@@ -63,14 +63,12 @@ from . import _connectivity, _container
 from ._container import Reader, varint
 from ._entropy import decode_groups, encode_groups, zstd_compress, zstd_decompress
 
-METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks")
+METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral")
 #: with the scalable layered codec of Section 5.2.4 (:mod:`._layered`)
 ALL_METHODS = (*METHODS, "layered")
 #: method ids in the container's method byte; the animation ids start at 16, clear of the static
 #: codecs' ids (0-2) that share the container.
-METHOD_IDS = {
-    m: _container.METHOD_IDS[m] for m in ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "layered")
-}
+METHOD_IDS = {m: _container.METHOD_IDS[m] for m in ALL_METHODS}
 
 TAG_CONNECTIVITY = 1
 TAG_ANCHOR_INDEX = 2
@@ -581,6 +579,13 @@ def read_header(c: _container.Container) -> StreamState:
 
 def reconstruct_block(st: StreamState, chunks, nf: int, step: float, serial: bool) -> np.ndarray:
     """Frames (nf, n, 3) of one block segment, in original coordinates."""
+    if st.method == "pca-spectral":
+        from . import _pca_spectral
+
+        X = _pca_spectral.reconstruct(st.F, st.n, chunks, nf, step)
+        if not np.isfinite(X).all():
+            raise InvalidInputError(".sga data decodes to non-finite coordinates (corrupted).")
+        return X * st.scale + st.origin
     deltas, apos = decode_block(chunks, st.params, nf, st.n, st.anchors, step)
     X = np.empty((nf, st.n, 3))
     D = np.concatenate(deltas, axis=1)  # (n, 3 nf): columns c*nf + t
@@ -746,8 +751,44 @@ def _check_options(method: str, options: dict) -> dict:
     return out
 
 
+class PcaSpectralFileEncoder(AnimationEncoder):
+    """``pca-spectral`` (:mod:`._pca_spectral`): the whole sequence in one block segment."""
+
+    def __init__(self, frames, F) -> None:  # the parent's per-block analysis is not used
+        from ._pca_spectral import PcaSpectralEncoder
+
+        self.method = "pca-spectral"
+        self.T, self.n = frames.shape[:2]
+        self.F = F
+        lo, hi = frames.min(axis=(0, 1)), frames.max(axis=(0, 1))
+        self.origin = 0.5 * (lo + hi)
+        diag = float(np.linalg.norm(hi - lo))
+        self.scale = diag if diag > 0 else 1.0
+        X = (frames - self.origin) / self.scale
+        self.L = _laplacian(F, self.n)
+        self.anchors = _component_anchors(self.L)  # the header's; the decoder does not use them
+        self.blk = self.T
+        self.ratio, self.weight, self.basis, self.n_iter = DEFAULT_ANCHOR_RATIO, 1.0, 1, 1
+        self.enc = PcaSpectralEncoder(X, F)
+
+    def build(self, step: float) -> bytes:
+        m = self.F.shape[0]
+        o = tuple(self.origin)
+        p = self.params(step)
+        head = header_segment(self.method, self.n, m, o, self.scale, p, self.F, self.anchors)
+        seg = block_segment(
+            self.method, self.n, m, o, self.scale, 0, 0, self.T, step, self.enc.chunks(step)
+        )
+        index = index_segment(
+            self.method, self.n, m, o, self.scale, [(0, self.T, len(head), len(seg))]
+        )
+        return head + seg + index
+
+
 def make_encoder(frames, F, method: str, options: dict) -> AnimationEncoder:
     o = _check_options(method, options)
+    if method == "pca-spectral":
+        return PcaSpectralFileEncoder(frames, F)
     return AnimationEncoder(
         frames,
         F,

@@ -44,6 +44,7 @@ METHOD_IDS = {
     "pca-qp": 19,
     "blocks": 20,
     "layered": 21,
+    "pca-spectral": 22,
 }
 METHOD_NAMES = {v: k for k, v in METHOD_IDS.items()}
 FLAG_REORDERED = 1

@@ -6,12 +6,13 @@ Gotsman), STED and NMSVE (Eq. 4.32, mean over frames), whether the vertex order 
 encode / decode wall time per frame.
 
 Methods (this package, Section 5.2.2): ``pca`` (kept-coefficient counts :data:`PCA_ROWS` x n),
-``pca-q``, ``pca-qs``, ``pca-qp``, ``blocks`` at the quantisation steps :data:`STEPS`, and the
-streaming ``layered`` codec (Section 5.2.4) at the layers :data:`LAYERS`; the methods of
-:data:`TARGETED` also once through their rate control with ``error=`` set to the KG error of
-Draco per frame at 12 bits (setting ``kg=draco12``), so that the bpvf they need for it is
-measured rather than bounded by the nearest step. Peers, in
-the same run: Draco per frame through DracoPy at 8-16 quantisation bits, in its default mode
+``pca-q``, ``pca-qs``, ``pca-qp``, ``blocks`` and ``pca-spectral`` (eigen-trajectories in the
+partitioned GFT basis, :mod:`spectrageo.compress._pca_spectral`; not a method of the thesis) at
+the quantisation steps :data:`STEPS`, and the streaming ``layered`` codec (Section 5.2.4) at the
+layers :data:`LAYERS`; the methods of :data:`TARGETED` also once through their rate control with
+``error=`` set to the KG error of Draco per frame at 12 bits (setting ``kg=draco12``), so that
+the bpvf they need for it is measured rather than bounded by the nearest step. Peers, in the
+same run: Draco per frame through DracoPy at 8-16 quantisation bits, in its default mode
 (``draco``: compression level 7, which reorders vertices; its KG error is measured after matching
 every decoded vertex to its nearest original vertex of the same frame, a lower bound of the true
 error, and flagged ``order_kept = no``) and order-preserving (``draco-ordered``); and
@@ -44,7 +45,7 @@ VALIDATION_SPLIT = (
     "animations/lion-poses.npz",
 )
 SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
-METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "layered")
+METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "layered")
 #: ``layered`` (Section 5.2.4): fraction of the vertices sent per frame
 LAYERS = (0.05, 0.1, 0.2)
 PEERS = ("draco", "draco-ordered", "quant-delta-zstd")
@@ -53,10 +54,11 @@ STEPS = {
     "pca-qs": (3e-4,),
     "pca-qp": (1e-3, 3e-4, 1e-4),
     "blocks": (1e-3, 3e-4, 1e-4),
+    "pca-spectral": (1e-3, 3e-4, 1e-4),
 }
 #: methods also run with ``error=`` set to Draco-12's KG error (their rate control; the
 #: other methods stay far from it on the shared animations)
-TARGETED = ("pca-qp", "blocks")
+TARGETED = ("pca-qp", "blocks", "pca-spectral")
 #: ``pca``: kept rows of U^ (the count of kept coefficients is rows x n)
 PCA_ROWS = (4, 16)
 DRACO_BITS = (8, 10, 12, 14, 16)

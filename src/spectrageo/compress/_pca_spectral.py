@@ -1,0 +1,171 @@
+"""``pca-spectral``: eigen-trajectories coded in the partitioned graph Fourier basis.
+
+Not a method of the thesis: a combination of two of its parts. Section 5.2.2 compacts an
+animation in time with eigen-trajectories and codes the projections as delta coordinates
+(``pca-q`` ... ``blocks``, :mod:`._animation`); Section 5.2.1 codes a static mesh with the
+partitioned GFT whose dictionaries the decoder recomputes from the connectivity
+(:mod:`._spectral`). Here the temporal part is a principal component analysis of the whole
+sequence and the spatial part is the partitioned GFT:
+
+    (P1)  X_t = M + sum_j U_tj G_j,   G_j = S_j v_j reshaped to (n, 3)
+
+with ``M`` the mean frame, ``D = [X_t - M]_t = U S V^T`` (thin SVD of the (T, 3n) matrix) and
+``v_j`` the rows of ``V^T``. ``M`` and every ``G_j`` are analysed in the dictionaries of
+:func:`spectrageo.compress._spectral.dictionaries` (300-vertex submeshes, 10 % overlap, complete
+bases, seed 0: fixed, not stored) and their coefficients quantised with the one step ``s`` (the
+rate knob; with orthonormal ``U`` the squared error of the frames is the sum of the coefficient
+errors, ``T`` times the mean's, so one step for all is the mean-squared-error choice). A
+component whose coefficients all quantise to zero is not sent. The temporal coefficients
+``U_tj`` of the sent components are quantised with ``c s sqrt(n) / ||G~_j||`` (``c`` =
+:data:`U_FACTOR`, chosen on the tuning animation horse-gallop only), so each adds an error of
+about ``c s`` per vertex. Entropy coding: quantised Laplace models per (signal, octave band) for
+the coefficients and per component for ``U`` (:mod:`._entropy`).
+
+Against ``pca-qp`` at Draco-12's KG error, measured while designing (scripts outside the
+package; horse-gallop was the only animation that informed a choice): horse-gallop about 6.0
+bpvf (7.5), crane about 6.7 (9.6), cat-poses about 21.6 (25.4), chickenCrossing about 5.9
+(4.6, worse: 400 frames of a 3k-vertex mesh, where the delta coordinates' anchors do better).
+See BENCHMARKS.md for the evaluated figures.
+
+File layout: the ``.sga`` segments of :mod:`._animation` (stream header with the connectivity and
+one anchor per connected component, unused here; one block segment holding the whole sequence;
+the frame index). The block segment has two chunks: ``TAG_BASIS`` (``k`` as a varint, the ``k``
+float32 steps of ``U``, then the quantised ``U`` (T, k) column by column) and ``TAG_COEFF`` (the
+quantised coefficients of ``M`` and the ``k`` components, layer order of :mod:`._spectral`).
+Memory holds the whole sequence (as ``pca-qp``); long streams use ``blocks``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from ._container import Reader, varint
+from ._entropy import decode_groups, encode_groups
+
+TAG_BASIS = 3
+TAG_COEFF = 4
+#: step of the temporal coefficients relative to ``s sqrt(n) / ||G_j||``
+U_FACTOR = 0.1
+_SUBMESH = 300
+_CACHE: dict = {}
+
+
+def _params(n: int):
+    from ._spectral import SpectralParams
+
+    p = SpectralParams(
+        submesh_size=_SUBMESH, overlap=0.1, seed=0, basis="oi", zeta=4, n_iter=1, k=_SUBMESH
+    )
+    p.direct = n >= 2
+    return p
+
+
+def _dictionaries(F: np.ndarray, n: int):
+    """``(subs, dic, layout, band, sizes)`` for the connectivity, cached for repeated decodes
+    of the same mesh (the rate control decodes many times)."""
+    from ._spectral import _band, _layout, dictionaries, layer_cutoffs
+
+    key = (n, hashlib.sha1(np.ascontiguousarray(F, dtype=np.int64).tobytes()).hexdigest())
+    if key not in _CACHE:
+        subs, dic = dictionaries(F, n, _params(n))
+        sizes = dic.sizes.copy()
+        layout = _layout(sizes, layer_cutoffs(int(sizes.max())))
+        col = np.concatenate([c for _s, c in layout])
+        band = _band(col) if col.size else np.zeros(0, np.int64)
+        band = band - (int(band.min()) if band.size else 0)
+        _CACHE.clear()  # one mesh at a time
+        _CACHE[key] = (subs, dic, layout, band, sizes)
+    return _CACHE[key]
+
+
+def _rows(coef: list[np.ndarray], layout, n_sub: int) -> np.ndarray:
+    """Coefficient rows of every layer, concatenated in layer order: (R, 3)."""
+    out = []
+    for sub, col in layout:
+        bounds = np.searchsorted(sub, np.arange(n_sub + 1))
+        out += [coef[i][col[bounds[i] : bounds[i + 1]]] for i in np.flatnonzero(np.diff(bounds))]
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def _synthesise(rows: np.ndarray, subs, dic, layout, sizes) -> np.ndarray:
+    from ..spectral import reassemble
+    from ._spectral import _scatter
+
+    vals, pos = [], 0
+    for sub, _col in layout:
+        vals.append(rows[pos : pos + sub.size])
+        pos += sub.size
+    return reassemble(dic.synthesise(_scatter(layout, vals, sizes)), subs)
+
+
+def _groups(band: np.ndarray, n_signals: int) -> tuple[np.ndarray, int]:
+    nb = int(band.max()) + 1 if band.size else 1
+    per = np.repeat(band, 3)  # row-major (R, 3)
+    g = (np.arange(n_signals)[:, None] * nb + per[None, :]).ravel()
+    return g, n_signals * nb
+
+
+class PcaSpectralEncoder:
+    """Analysis of a normalised animation ``X`` (T, n, 3); :meth:`chunks` codes it at a step."""
+
+    def __init__(self, X: np.ndarray, F: np.ndarray) -> None:
+        T, n = X.shape[:2]
+        self.T, self.n = T, n
+        subs, dic, layout, band, sizes = _dictionaries(F, n)
+        self.band = band
+        M = X.mean(axis=0)
+        D = (X - M).reshape(T, 3 * n)
+        U, S, Vt = np.linalg.svd(D, full_matrices=False)
+        live = np.flatnonzero(S > S[0] * 1e-12) if S.size and S[0] > 0 else np.zeros(0, int)
+        self.U = U[:, live]
+        signals = [M] + [(S[j] * Vt[j]).reshape(n, 3) for j in live]
+        n_sub = len(subs.parts)
+        self.values = [_rows(dic.analyse(G, subs.parts), layout, n_sub) for G in signals]
+
+    def chunks(self, step: float) -> list[tuple[int, bytes]]:
+        q = [np.rint(v / step).astype(np.int64) for v in self.values]
+        kept = [j for j in range(1, len(q)) if q[j].any()]
+        su = np.empty(len(kept), dtype=np.float32)
+        qU = []
+        for i, j in enumerate(kept):
+            norm = float(np.linalg.norm(q[j])) * step
+            su[i] = np.float32(min(U_FACTOR * step * math.sqrt(self.n) / norm, 0.25))
+            qU.append(np.rint(self.U[:, j - 1] / float(su[i])).astype(np.int64))
+        k = len(kept)
+        ug = np.repeat(np.arange(k), self.T)
+        basis = (
+            varint(k)
+            + su.astype("<f4").tobytes()
+            + encode_groups(np.concatenate(qU) if qU else np.zeros(0, np.int64), ug, max(k, 1))
+        )
+        sig = [q[0]] + [q[j] for j in kept]
+        g, ng = _groups(self.band, len(sig))
+        coef = encode_groups(np.concatenate([s.ravel() for s in sig]), g, ng)
+        return [(TAG_BASIS, basis), (TAG_COEFF, coef)]
+
+
+def reconstruct(F: np.ndarray, n: int, chunks, nf: int, step: float) -> np.ndarray:
+    """Normalised frames (nf, n, 3) of a ``pca-spectral`` block segment."""
+    tags = [t for t, _ in chunks]
+    if tags != [TAG_BASIS, TAG_COEFF]:
+        raise InvalidInputError(f".sga block has chunks {tags}; expected [3, 4].")
+    subs, dic, layout, band, sizes = _dictionaries(F, n)
+    r = Reader(chunks[0][1], "temporal coefficients")
+    k = r.varint()
+    if k > nf:
+        raise InvalidInputError(".sga temporal coefficients are malformed (too many components).")
+    su = np.frombuffer(r.take(4 * k), "<f4").astype(np.float64)
+    if not (np.isfinite(su).all() and (su > 0).all()):
+        raise InvalidInputError(".sga temporal coefficients are malformed (bad steps).")
+    qU = decode_groups(r.rest(), np.repeat(np.arange(k), nf), max(k, 1), "temporal coefficients")
+    U = qU.reshape(k, nf).T * su[None, :]
+    g, ng = _groups(band, k + 1)
+    q = decode_groups(chunks[1][1], g, ng, "spectral coefficients").astype(np.float64) * step
+    rows = q.reshape(k + 1, band.size, 3)
+    G = [_synthesise(rows[j], subs, dic, layout, sizes) for j in range(k + 1)]
+    X = G[0][None] + (np.einsum("tk,kij->tij", U, np.stack(G[1:])) if k else 0.0)
+    return np.asarray(X, dtype=np.float64)
