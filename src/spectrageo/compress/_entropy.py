@@ -3,9 +3,9 @@
 Integers are coded in *groups* (e.g. one frequency band of one coordinate): each group gets a
 quantised Laplace model with its own scale, fitted by the encoder and stored as a float16, and a
 symbol range ``[-R, R]`` stored as a varint. Large values are split into a high part (Laplace
-coded, at most :data:`MAX_HIGH` in magnitude) and ``shift`` raw low bits (uniform model), so that
-the model's alphabet stays small and every symbol keeps a usable probability in the coder's
-24-bit precision. The decoder needs the group of every symbol (it derives it from the structure
+coded, at most :data:`MAX_HIGH` in magnitude) and ``shift`` raw low bits (uniform model; in
+16-bit pieces when there are more than 23), so that the model's alphabet stays small and every
+symbol keeps a usable probability in the coder's 24-bit precision. The decoder needs the group of every symbol (it derives it from the structure
 it already knows) and reads the parameters from the stream.
 """
 
@@ -34,6 +34,18 @@ def _uniform(shift: int):
     return constriction.stream.model.Uniform(1 << shift)
 
 
+#: widest raw part the coder takes in one piece (its probabilities have 24 bits)
+_MAX_RAW = 23
+
+
+def _raw_widths(shift: int) -> list[int]:
+    """Bit widths of the raw low part, lowest bits first: one piece up to :data:`_MAX_RAW` bits
+    (the layout of every file written so far), 16-bit pieces beyond."""
+    if shift <= _MAX_RAW:
+        return [shift] if shift else []
+    return [16] * (shift // 16) + ([shift % 16] if shift % 16 else [])
+
+
 def encode_groups(symbols: np.ndarray, groups: np.ndarray, n_groups: int) -> bytes:
     """Code ``symbols`` (int64) whose group ids are ``groups`` (0..n_groups-1)."""
     from constriction import stream
@@ -55,6 +67,10 @@ def encode_groups(symbols: np.ndarray, groups: np.ndarray, n_groups: int) -> byt
         shift = max(0, int(R).bit_length() - MAX_HIGH.bit_length())
         hi = s >> shift
         Rh = int(np.abs(hi).max()) if hi.size else 0
+        if Rh > MAX_HIGH:  # the shift floors negative values: -32767 >> 3 is -4096
+            shift += 1
+            hi = s >> shift
+            Rh = int(np.abs(hi).max())
         scale = float(np.float16(max(np.abs(hi).mean() if hi.size else 0.0, 0.05)))
         if not np.isfinite(scale):  # float16 overflow cannot happen (|hi| <= MAX_HIGH)
             scale = float(MAX_HIGH)
@@ -64,8 +80,10 @@ def encode_groups(symbols: np.ndarray, groups: np.ndarray, n_groups: int) -> byt
     for hi, lo, Rh, shift, scale in reversed(plans):
         if hi.size == 0:
             continue
-        if shift:
-            coder.encode_reverse(lo.astype(np.int32), _uniform(shift))
+        widths = _raw_widths(shift)
+        offsets = np.cumsum([0, *widths])
+        for w, off in zip(reversed(widths), reversed(offsets[:-1])):  # last decoded, first coded
+            coder.encode_reverse(((lo >> int(off)) & ((1 << w) - 1)).astype(np.int32), _uniform(w))
         if Rh:
             coder.encode_reverse(hi.astype(np.int32), _model(Rh, scale))
     words = coder.get_compressed().astype("<u4").tobytes()
@@ -108,10 +126,12 @@ def decode_groups(buf: bytes, groups: np.ndarray, n_groups: int, what: str) -> n
                 if coder is None:
                     raise InvalidInputError(f".sgc {what} is malformed (no coded data).")
                 hi = coder.decode(_model(Rh, scale), k).astype(np.int64)
-            if shift:
+            off = 0
+            for w in _raw_widths(shift):
                 if coder is None:
                     raise InvalidInputError(f".sgc {what} is malformed (no coded data).")
-                lo = coder.decode(_uniform(shift), k).astype(np.int64)
+                lo += coder.decode(_uniform(w), k).astype(np.int64) << off
+                off += w
             out_sorted[pos : pos + k] = (hi << shift) + lo
             pos += k
     except (ValueError, RuntimeError, OverflowError) as exc:
