@@ -83,3 +83,12 @@ def test_feature_rows_pair_the_same_rate_request():
     assert out["conn+8"]["feature_better"] == "same"
     assert out["conn+12"]["feature_better"] == "neither"
     assert out["conn+2"]["sent_share"] == 0.3
+
+
+def test_only_unmet_requests_are_left_out_of_a_rate_curve():
+    from spectrageo import InvalidInputError
+    from spectrageo.evaluate._tables import unmet_request
+
+    assert unmet_request(InvalidInputError("`bpv` = 3 cannot be reached: the smallest value..."))
+    assert unmet_request(InvalidInputError("`error` = 1e-05 is below what method 'feature'..."))
+    assert not unmet_request(InvalidInputError(".sgc spectral layer has invalid parameters."))

@@ -65,6 +65,16 @@ def write_rate_outputs(out, markdown: str, rows: list[dict], columns: Sequence[s
     return md
 
 
+#: messages of a codec's rate control when a request lies outside what it can give
+_UNMET = ("cannot be reached", "could not be met", "is below what method")
+
+
+def unmet_request(exc: Exception) -> bool:
+    """True when ``exc`` says a rate or error request cannot be met (a point to leave out of a
+    rate curve); any other error, e.g. a file that does not decode, is a fault to report."""
+    return any(m in str(exc) for m in _UNMET)
+
+
 def have(module: str) -> bool:
     """True when ``module`` imports (optional peers and plotting)."""
     try:

@@ -36,7 +36,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._progress import progress
-from ._tables import check_names, have, markdown_table, write_rate_outputs
+from ._tables import check_names, have, markdown_table, unmet_request, write_rate_outputs
 
 TUNING_SPLIT = ("meshes/fandisk.off", "cad/partLp.obj")
 VALIDATION_SPLIT = (
@@ -219,11 +219,16 @@ def evaluate(
         for m, setting, fn, fargs in jobs:
             try:
                 n_bytes, V2, F2, te, td, ordered, conn, share = fn(*fargs)
+            except InvalidInputError as exc:
+                if not unmet_request(exc):
+                    raise
+                continue  # a rate the codec cannot meet on this mesh: no point
+            try:
                 quality = _metrics(V, F, V2, F2, ordered)
-            except InvalidInputError:
-                # a rate the codec cannot meet on this mesh, or one at which the decoded mesh
-                # has collapsed (every face degenerate): no point
-                continue
+            except InvalidInputError as exc:
+                if "theta is undefined" not in str(exc):
+                    raise
+                continue  # the decoded mesh collapsed (every face degenerate) at this rate
             row = {
                 "split": split,
                 "model": Path(rel).name.split(".")[0],
