@@ -636,6 +636,14 @@ def is_animation(data) -> bool:
 
 
 # ----------------------------------------------------------------------------- encoder
+def frame_box(frames: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(origin, scale)`` of the coordinate normalisation: the centre of the bounding box of
+    all frames and its diagonal (1 when every vertex of every frame coincides)."""
+    lo, hi = frames.min(axis=(0, 1)), frames.max(axis=(0, 1))
+    diag = float(np.linalg.norm(hi - lo))
+    return 0.5 * (lo + hi), diag if diag > 0 else 1.0
+
+
 class AnimationEncoder:
     """Analysis of a whole animation (normalised) shared by all rate points of a rate search."""
 
@@ -645,10 +653,7 @@ class AnimationEncoder:
         self.method = method
         self.T, self.n = frames.shape[:2]
         self.F = F
-        lo, hi = frames.min(axis=(0, 1)), frames.max(axis=(0, 1))
-        self.origin = 0.5 * (lo + hi)
-        diag = float(np.linalg.norm(hi - lo))
-        self.scale = diag if diag > 0 else 1.0
+        self.origin, self.scale = frame_box(frames)
         X = (frames - self.origin) / self.scale
         self.L = _laplacian(F, self.n)
         if _anchored(method):
@@ -760,10 +765,7 @@ class PcaSpectralFileEncoder(AnimationEncoder):
         self.method = "pca-spectral"
         self.T, self.n = frames.shape[:2]
         self.F = F
-        lo, hi = frames.min(axis=(0, 1)), frames.max(axis=(0, 1))
-        self.origin = 0.5 * (lo + hi)
-        diag = float(np.linalg.norm(hi - lo))
-        self.scale = diag if diag > 0 else 1.0
+        self.origin, self.scale = frame_box(frames)
         X = (frames - self.origin) / self.scale
         self.L = _laplacian(F, self.n)
         self.anchors = _component_anchors(self.L)  # the header's; the decoder does not use them

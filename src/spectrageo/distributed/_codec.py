@@ -126,10 +126,7 @@ class _BlockEncoder:
         self.client, self.method, self.n_threads = client, method, n_threads
         self.T, self.n = A.shape[:2]
         self.F = F
-        lo, hi = A.min(axis=(0, 1)), A.max(axis=(0, 1))
-        self.origin = 0.5 * (lo + hi)
-        diag = float(np.linalg.norm(hi - lo))
-        self.scale = diag if diag > 0 else 1.0
+        self.origin, self.scale = an.frame_box(A)
         L = an._laplacian(F, self.n)
         if an._anchored(method):
             X0 = (A[0] - self.origin) / self.scale
