@@ -21,11 +21,11 @@ component whose coefficients all quantise to zero is not sent. The temporal coef
 about ``c s`` per vertex. Entropy coding: quantised Laplace models per (signal, octave band) for
 the coefficients and per component for ``U`` (:mod:`._entropy`).
 
-Against ``pca-qp`` at Draco-12's KG error, measured while designing (scripts outside the
-package; horse-gallop was the only animation that informed a choice): horse-gallop about 6.0
-bpvf (7.5), crane about 6.7 (9.6), cat-poses about 21.6 (25.4), chickenCrossing about 5.9
-(4.6, worse: 400 frames of a 3k-vertex mesh, where the delta coordinates' anchors do better).
-See BENCHMARKS.md for the evaluated figures.
+Against ``pca-qp`` at Draco-12's KG error (``spectrageo evaluate compress-animation``, both by
+their ``error=`` rate control; horse-gallop is the animation ``U_FACTOR`` was chosen on):
+horse-gallop 6.10 bpvf (7.54), crane 8.08 (9.57), horse-collapse 6.68 (8.08), cat-poses 21.4
+(25.4), lion-poses 23.8 (27.6), chickenCrossing 5.59 (4.60: there, 400 frames of a 3k-vertex
+mesh, the delta coordinates with their anchors do better).
 
 File layout: the ``.sga`` segments of :mod:`._animation` (stream header with the connectivity and
 one anchor per connected component, unused here; one block segment holding the whole sequence;
