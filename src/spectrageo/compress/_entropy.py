@@ -5,8 +5,9 @@ quantised Laplace model with its own scale, fitted by the encoder and stored as 
 symbol range ``[-R, R]`` stored as a varint. Large values are split into a high part (Laplace
 coded, at most :data:`MAX_HIGH` in magnitude) and ``shift`` raw low bits (uniform model; in
 16-bit pieces when there are more than 23), so that the model's alphabet stays small and every
-symbol keeps a usable probability in the coder's 24-bit precision. The decoder needs the group of every symbol (it derives it from the structure
-it already knows) and reads the parameters from the stream.
+symbol keeps a usable probability in the coder's 24-bit precision. The decoder needs the group
+of every symbol (it derives it from the structure it already knows) and reads the parameters
+from the stream.
 """
 
 from __future__ import annotations
