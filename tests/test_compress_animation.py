@@ -166,6 +166,18 @@ def test_pca_spectral_hostile_bytes_and_rate_control(anim):
         compress.StreamEncoder(F, method="pca-spectral")
 
 
+def test_pca_spectral_keeps_every_frame_of_a_still_or_single_frame_sequence():
+    """No component is sent when nothing moves: the mean frame must still fill every frame."""
+    V, F = icosphere(2)
+    for T in (1, 5):
+        A = np.repeat(V[None], T, axis=0)
+        R, F2 = compress.decode_animation(
+            compress.encode_animation(A, F, method="pca-spectral", step=1e-4)
+        )
+        assert R.shape == A.shape and np.array_equal(F2, F)
+        assert np.abs(R - A).max() < 1e-3
+
+
 def test_pca_spectral_is_smaller_than_pca_qp_at_equal_error(shared_data):
     """On the tuning animation (horse-gallop, 12 frames of it) at a KG error of 0.1 %."""
     path = shared_data / "animations" / "horse-gallop.npz"

@@ -371,7 +371,8 @@ def encode_animation(
         of pca-qs / pca-qp / blocks, 0.01), ``anchor_ratio`` (anchor step / step, 0.5),
         ``weight`` (anchor weight in Eq. 5.51, 1), ``basis`` ("oi" orthogonal iterations started
         from the previous block, or "exact"), ``n_iter`` (2), ``rd`` (row-dropping strength, 1).
-        ``layered`` takes ``layer`` (fraction of the vertices sent per frame, 0.1; ``bpvf``
+        ``pca-spectral`` uses none of them (they are accepted, as ``pca`` accepts ``block``);
+        its ``step`` is that of the GFT coefficients. ``layered`` takes ``layer`` (fraction of the vertices sent per frame, 0.1; ``bpvf``
         chooses it per frame instead), ``refresh`` (a refresh frame every that many frames,
         16; 0 = never) and ``fine`` (the RPCA/ISVD fine reconstruction, off); its ``step``
         (default 1e-3) is a fraction of twice the first frame's diagonal.

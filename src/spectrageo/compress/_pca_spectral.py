@@ -24,8 +24,8 @@ the coefficients and per component for ``U`` (:mod:`._entropy`).
 Against ``pca-qp`` at Draco-12's KG error (``spectrageo evaluate compress-animation``, both by
 their ``error=`` rate control; horse-gallop is the animation ``U_FACTOR`` was chosen on):
 horse-gallop 6.10 bpvf (7.54), crane 8.08 (9.57), horse-collapse 6.68 (8.08), cat-poses 21.4
-(25.4), lion-poses 23.8 (27.6), chickenCrossing 5.59 (4.60: there, 400 frames of a 3k-vertex
-mesh, the delta coordinates with their anchors do better).
+(25.4), lion-poses 23.8 (27.6), chickenCrossing 5.59 (4.60: pca-qp does better on these 400
+frames of a 3k-vertex mesh).
 
 File layout: the ``.sga`` segments of :mod:`._animation` (stream header with the connectivity and
 one anchor per connected component, unused here; one block segment holding the whole sequence;
@@ -167,5 +167,7 @@ def reconstruct(F: np.ndarray, n: int, chunks, nf: int, step: float) -> np.ndarr
     q = decode_groups(chunks[1][1], g, ng, "spectral coefficients").astype(np.float64) * step
     rows = q.reshape(k + 1, band.size, 3)
     G = [_synthesise(rows[j], subs, dic, layout, sizes) for j in range(k + 1)]
-    X = G[0][None] + (np.einsum("tk,kij->tij", U, np.stack(G[1:])) if k else 0.0)
-    return np.asarray(X, dtype=np.float64)
+    X = np.repeat(G[0][None], nf, axis=0)  # every frame, also when no component was sent
+    if k:
+        X += np.einsum("tk,kij->tij", U, np.stack(G[1:]))
+    return X
