@@ -116,7 +116,9 @@ def decode_groups(buf: bytes, groups: np.ndarray, n_groups: int, what: str) -> n
     out_sorted = np.zeros(groups.size, dtype=np.int64)
     pos = 0
     try:
-        coder = AnsCoder(w) if w.size else None
+        # an empty word list is a valid coder state: constriction seals a state that holds
+        # little information (one symbol -4 of a Laplace model of scale 4) into no words
+        coder = AnsCoder(w)
         for g, (Rh, shift, scale) in enumerate(params):
             k = int(counts[g])
             if k == 0:
@@ -124,13 +126,9 @@ def decode_groups(buf: bytes, groups: np.ndarray, n_groups: int, what: str) -> n
             hi = np.zeros(k, dtype=np.int64)
             lo = np.zeros(k, dtype=np.int64)
             if Rh:
-                if coder is None:
-                    raise InvalidInputError(f".sgc {what} is malformed (no coded data).")
                 hi = coder.decode(_model(Rh, scale), k).astype(np.int64)
             off = 0
             for w in _raw_widths(shift):
-                if coder is None:
-                    raise InvalidInputError(f".sgc {what} is malformed (no coded data).")
                 lo += coder.decode(_uniform(w), k).astype(np.int64) << off
                 off += w
             out_sorted[pos : pos + k] = (hi << shift) + lo
