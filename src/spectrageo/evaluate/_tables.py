@@ -75,6 +75,24 @@ def unmet_request(exc: Exception) -> bool:
     return any(m in str(exc) for m in _UNMET)
 
 
+def rate_at_error(points, e: float) -> float:
+    """Rate at error ``e`` on a rate curve ``[(rate, error)]``, linear in log-log (sorted by
+    error); NaN outside the curve's range (no extrapolation) or with fewer than two usable
+    points."""
+    import numpy as np
+
+    pts = sorted(
+        (float(err), float(r))
+        for r, err in points
+        if r is not None and err is not None and np.isfinite(err) and err > 0
+    )
+    if len(pts) < 2 or not pts[0][0] <= e <= pts[-1][0]:
+        return float("nan")
+    le = np.log([p[0] for p in pts])
+    lr = np.log([p[1] for p in pts])
+    return float(np.exp(np.interp(np.log(e), le, lr)))
+
+
 def have(module: str) -> bool:
     """True when ``module`` imports (optional peers and plotting)."""
     try:

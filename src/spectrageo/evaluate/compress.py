@@ -36,7 +36,14 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._progress import progress
-from ._tables import check_names, have, markdown_table, unmet_request, write_rate_outputs
+from ._tables import (
+    check_names,
+    have,
+    markdown_table,
+    rate_at_error,
+    unmet_request,
+    write_rate_outputs,
+)
 
 TUNING_SPLIT = ("meshes/fandisk.off", "cad/partLp.obj")
 VALIDATION_SPLIT = (
@@ -258,17 +265,6 @@ def evaluate(
     return rows
 
 
-def _interp_bpv(points: list[tuple[float, float]], h: float) -> float:
-    """bpv at Hausdorff ``h`` on a rate curve ``[(bpv, hausdorff)]``, log-log linear; NaN
-    outside the curve's range (no extrapolation)."""
-    pts = sorted((hd, b) for b, hd in points if np.isfinite(hd) and hd > 0)
-    if len(pts) < 2 or not pts[0][0] <= h <= pts[-1][0]:
-        return float("nan")
-    lh = np.log([p[0] for p in pts])
-    lb = np.log([p[1] for p in pts])
-    return float(np.exp(np.interp(np.log(h), lh, lb)))
-
-
 def equal_error_rows(rows: list[dict]) -> list[dict]:
     """Our size at each Draco point's Hausdorff: order kept against ``draco-ordered``
     (best of the order-keeping methods), ``spectral-reorder`` against ``draco``."""
@@ -280,7 +276,7 @@ def equal_error_rows(rows: list[dict]) -> list[dict]:
             for p in (r for r in mine if r["method"] == peer):
                 best, who = float("nan"), "-"
                 for m in ours:
-                    b = _interp_bpv(
+                    b = rate_at_error(
                         [(r["bpv"], r["hausdorff"]) for r in mine if r["method"] == m],
                         p["hausdorff"],
                     )
