@@ -51,6 +51,8 @@ TAG_COEFF = 4
 #: step of the temporal coefficients relative to ``s sqrt(n) / ||G_j||``
 U_FACTOR = 0.1
 _SUBMESH = 300
+#: coefficients held per call of the dictionaries when signals are transformed together
+_BATCH_BYTES = 64 << 20
 _CACHE: dict = {}
 
 
@@ -83,23 +85,56 @@ def _dictionaries(F: np.ndarray, n: int):
 
 
 def _rows(coef: list[np.ndarray], layout, n_sub: int) -> np.ndarray:
-    """Coefficient rows of every layer, concatenated in layer order: (R, 3)."""
+    """Coefficient rows of every layer, concatenated in layer order: (R, d)."""
     out = []
     for sub, col in layout:
         bounds = np.searchsorted(sub, np.arange(n_sub + 1))
         out += [coef[i][col[bounds[i] : bounds[i + 1]]] for i in np.flatnonzero(np.diff(bounds))]
-    return np.concatenate(out) if out else np.zeros((0, 3))
+    d = coef[0].shape[1] if coef else 3
+    return np.concatenate(out) if out else np.zeros((0, d))
 
 
-def _synthesise(rows: np.ndarray, subs, dic, layout, sizes) -> np.ndarray:
+def _batch(n_rows: int, n_signals: int) -> int:
+    """Signals transformed per call: the submesh decompositions are recomputed at every call of
+    the dictionary, so the signals share calls, as many as :data:`_BATCH_BYTES` of coefficients
+    allow (at least one)."""
+    return max(1, min(n_signals, _BATCH_BYTES // max(1, 8 * 3 * n_rows)))
+
+
+def _analyse_many(signals: np.ndarray, subs, dic, layout) -> np.ndarray:
+    """Coefficient rows (J, R, 3) of the signals (J, n, 3), in layer order."""
+    J, n = signals.shape[:2]
+    n_sub = len(subs.parts)
+    rows = int(sum(sub.size for sub, _c in layout))
+    out = np.empty((J, rows, 3))
+    step = _batch(max(rows, n), J)
+    for a in range(0, J, step):
+        b = min(J, a + step)
+        X = np.ascontiguousarray(signals[a:b].transpose(1, 0, 2).reshape(n, 3 * (b - a)))
+        R = _rows(dic.analyse(X, subs.parts), layout, n_sub)
+        out[a:b] = R.reshape(rows, b - a, 3).transpose(1, 0, 2)
+    return out
+
+
+def _synthesise_many(rows: np.ndarray, n: int, subs, dic, layout, sizes) -> np.ndarray:
+    """Signals (J, n, 3) from their coefficient rows (J, R, 3) in layer order (the inverse of
+    :func:`_analyse_many`, with the degree-weighted reassembly of Algorithm 8)."""
     from ..spectral import reassemble
     from ._spectral import _scatter
 
-    vals, pos = [], 0
-    for sub, _col in layout:
-        vals.append(rows[pos : pos + sub.size])
-        pos += sub.size
-    return reassemble(dic.synthesise(_scatter(layout, vals, sizes)), subs)
+    J, R = rows.shape[:2]
+    out = np.empty((J, n, 3))
+    step = _batch(max(R, n), J)
+    for a in range(0, J, step):
+        b = min(J, a + step)
+        flat = rows[a:b].transpose(1, 0, 2).reshape(R, 3 * (b - a))
+        vals, pos = [], 0
+        for sub, _col in layout:
+            vals.append(flat[pos : pos + sub.size])
+            pos += sub.size
+        X = reassemble(dic.synthesise(_scatter(layout, vals, sizes)), subs)
+        out[a:b] = X.reshape(n, b - a, 3).transpose(1, 0, 2)
+    return out
 
 
 def _groups(band: np.ndarray, n_signals: int) -> tuple[np.ndarray, int]:
@@ -122,9 +157,8 @@ class PcaSpectralEncoder:
         U, S, Vt = np.linalg.svd(D, full_matrices=False)
         live = np.flatnonzero(S > S[0] * 1e-12) if S.size and S[0] > 0 else np.zeros(0, int)
         self.U = U[:, live]
-        signals = [M] + [(S[j] * Vt[j]).reshape(n, 3) for j in live]
-        n_sub = len(subs.parts)
-        self.values = [_rows(dic.analyse(G, subs.parts), layout, n_sub) for G in signals]
+        signals = np.concatenate([M[None], (S[live, None] * Vt[live]).reshape(-1, n, 3)])
+        self.values = list(_analyse_many(signals, subs, dic, layout))
 
     def chunks(self, step: float) -> list[tuple[int, bytes]]:
         q = [np.rint(v / step).astype(np.int64) for v in self.values]
@@ -165,9 +199,8 @@ def reconstruct(F: np.ndarray, n: int, chunks, nf: int, step: float) -> np.ndarr
     U = qU.reshape(k, nf).T * su[None, :]
     g, ng = _groups(band, k + 1)
     q = decode_groups(chunks[1][1], g, ng, "spectral coefficients").astype(np.float64) * step
-    rows = q.reshape(k + 1, band.size, 3)
-    G = [_synthesise(rows[j], subs, dic, layout, sizes) for j in range(k + 1)]
+    G = _synthesise_many(q.reshape(k + 1, band.size, 3), n, subs, dic, layout, sizes)
     X = np.repeat(G[0][None], nf, axis=0)  # every frame, also when no component was sent
     if k:
-        X += np.einsum("tk,kij->tij", U, np.stack(G[1:]))
+        X += (U @ G[1:].reshape(k, 3 * n)).reshape(nf, n, 3)
     return X

@@ -451,8 +451,10 @@ def decode(
 
 
 def _scatter(layout, vals, sizes) -> list[np.ndarray]:
-    """Per-submesh coefficient matrices from the per-layer rows (missing rows stay zero)."""
-    coefs = [np.zeros((int(s), 3)) for s in sizes]
+    """Per-submesh coefficient matrices from the per-layer rows (missing rows stay zero); as many
+    columns as the rows have (3 for one signal, more when signals are batched)."""
+    d = vals[0].shape[1] if len(vals) else 3
+    coefs = [np.zeros((int(s), d)) for s in sizes]
     for (sub, col), v in zip(layout, vals):
         bounds = np.searchsorted(sub, np.arange(len(sizes) + 1))  # rows are submesh-major
         for i in np.flatnonzero(np.diff(bounds)):
