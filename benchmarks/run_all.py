@@ -71,6 +71,7 @@ SECTIONS = [
     ("bench_outliers_speed", [*_script("bench_outliers_speed"), "--repeat", "3", "--large"]),
     ("saliency", _script("saliency")),
     ("compress", _evaluate("compress", "compress")),
+    ("compress_large", _script("compress_large")),
     ("connectivity", _script("connectivity")),
     ("compress_animation", _evaluate("compress-animation", "compress_animation")),
     ("complete", _evaluate("complete", "complete")),
