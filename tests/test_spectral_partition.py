@@ -293,3 +293,19 @@ def test_validation_submesh_helpers():
         submesh_laplacian(C, np.arange(3), kind="cotangent")
     with pytest.raises(InvalidInputError, match="tuple"):
         submesh_laplacian((1, 2, 3), np.arange(3))
+
+
+def test_metis_notes_do_not_reach_standard_output(capfd):
+    """METIS prints notes ("***You are trying to partition a graph into too many parts!") from C
+    straight to descriptor 1, where they mixed with a command's own output; the partition
+    silences that descriptor for the call only and restores it."""
+    import os
+
+    from spectrageo.spectral.partition import _quiet_c_stdout
+
+    os.write(1, b"before\n")
+    with _quiet_c_stdout():
+        os.write(1, b"***a note from C\n")
+    os.write(1, b"after\n")
+    out = capfd.readouterr().out
+    assert out == "before\nafter\n"

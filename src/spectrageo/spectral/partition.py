@@ -11,7 +11,10 @@ with the degree weights of Algorithm 8 (:func:`reassemble`).
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -273,12 +276,36 @@ def metis_cores(pattern: sp.csr_matrix, size: int, overlap: float, seed: int) ->
     )
 
 
+@contextlib.contextmanager
+def _quiet_c_stdout():
+    """File descriptor 1 sent to the null device for the duration (METIS prints notes such as
+    "***You are trying to partition a graph into too many parts!" from C, straight to the
+    process's standard output, where they would mix with a command's own output, e.g. JSON; the
+    parts it returns are valid, and empty parts are dropped by :func:`_split`)."""
+    try:
+        if sys.stdout is not None:
+            sys.stdout.flush()
+        saved = os.dup(1)
+        null = os.open(os.devnull, os.O_WRONLY)
+    except (OSError, ValueError):  # no descriptor 1 (a daemon) or a closed stream
+        yield
+        return
+    try:
+        os.dup2(null, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
+
+
 def _metis(pattern: sp.csr_matrix, n_parts: int, seed: int) -> np.ndarray:
     import pymetis
 
     opts = pymetis.Options(seed=seed)
     adj = pymetis.CSRAdjacency(pattern.indptr.astype(np.int32), pattern.indices.astype(np.int32))
-    _, membership = pymetis.part_graph(n_parts, adjacency=adj, options=opts)
+    with _quiet_c_stdout():
+        _, membership = pymetis.part_graph(n_parts, adjacency=adj, options=opts)
     return np.asarray(membership, dtype=np.int64)
 
 
