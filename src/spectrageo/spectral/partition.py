@@ -285,9 +285,14 @@ def _quiet_c_stdout():
     try:
         if sys.stdout is not None:
             sys.stdout.flush()
-        saved = os.dup(1)
         null = os.open(os.devnull, os.O_WRONLY)
-    except (OSError, ValueError):  # no descriptor 1 (a daemon) or a closed stream
+    except (OSError, ValueError):  # a closed stream or no null device
+        yield
+        return
+    try:
+        saved = os.dup(1)
+    except OSError:  # no descriptor 1 (a daemon)
+        os.close(null)
         yield
         return
     try:
