@@ -423,3 +423,12 @@ def test_evaluate_real_data_spectral(shared_data):
     rows = evaluate(shared_data, methods=["spectral"], models=("fandisk",))
     assert rows[0]["pearson"] > 0.85 and rows[0]["spearman"] > 0.85
     assert rows[0]["invariance"] >= 0.99
+
+
+def test_simplify_refuses_a_mesh_whose_faces_all_collapse():
+    """A mesh of degenerate faces (every triangle repeats a vertex) left an empty mesh, which
+    the CLI then failed to write with an unrelated message ("`vertices` is empty")."""
+    V, F = grid(8, 8)
+    Fd = np.c_[F[:, 0], F[:, 0], F[:, 1]]
+    with pytest.raises(InvalidInputError, match="no triangle survives"):
+        simplify(V, Fd, ratio=0.5, method="geometric", k=10, rng=0)

@@ -208,6 +208,11 @@ def simplify(
     Fm = src[F]
     ok = (Fm[:, 0] != Fm[:, 1]) & (Fm[:, 1] != Fm[:, 2]) & (Fm[:, 0] != Fm[:, 2])
     Fm = Fm[ok]
+    if Fm.shape[0] == 0:
+        raise InvalidInputError(
+            "no triangle survives the simplification (every face collapsed onto one or two kept "
+            "vertices: a mesh of degenerate faces, or too few vertices kept); lower `ratio`."
+        )
     if Fm.size:  # drop duplicate triangles (same vertex set), keep the first orientation seen
         _, first = np.unique(np.sort(Fm, axis=1), axis=0, return_index=True)
         Fm = Fm[np.sort(first)]
