@@ -402,3 +402,21 @@ def test_isolated_triangles_give_a_plain_cause(tmp_path, capsys):
     io.write(tmp_path / "s.ply", Mesh(V, F))
     code, _, err = run_cli(capsys, "denoise", tmp_path / "s.ply", tmp_path / "o.ply")
     assert code == 2 and "triangle soup that welding did not join" in err
+
+
+def test_point_rows_without_coordinates_in_register_and_elsewhere(tmp_path, capsys):
+    """A scan saved as .xyz with NaN rows (no measurement): register leaves them out and says
+    so; a command that needs every row refuses with advice a command line can follow (the
+    reader's "pass nan_points='drop'" names a Python argument no command has)."""
+    V, _F = icosphere(3)
+    rows = np.r_[V, [[np.nan, np.nan, np.nan]], V[:5] * 1.01]
+    scan = tmp_path / "scan.xyz"
+    np.savetxt(scan, rows)
+    target = tmp_path / "target.xyz"
+    np.savetxt(target, V)
+    code, _, err = run_cli(capsys, "register", scan, target, "--out", tmp_path / "T.json")
+    assert code == 0, err
+    assert "1 of" in err and "left out" in err
+    assert json.loads((tmp_path / "T.json").read_text())
+    code, _, err = run_cli(capsys, "convert", scan, tmp_path / "o.ply")
+    assert code == 2 and "remove those rows first" in err and "nan_points" not in err

@@ -79,8 +79,15 @@ _BACKTICKED = re.compile(r"`([A-Za-z_][A-Za-z0-9_]*)`")
 def cli_message(message: str, options: dict[str, str]) -> str:
     """Replace a Python argument name in backticks with the command's option (`patch` -> --patch).
 
-    Names the command has no option for are left as they are.
+    Names the command has no option for are left as they are. The reader's advice to pass
+    ``nan_points='drop'`` (a Python argument no command has) becomes advice a command line can
+    follow.
     """
+    message = message.replace(
+        "pass nan_points='drop' to drop them.",
+        "this command needs every row; remove those rows first (`spectrageo outliers`, "
+        "`register` and `identify` leave them out).",
+    )
     return _BACKTICKED.sub(
         lambda m: options[m.group(1)] if m.group(1) in options else m.group(0), message
     )

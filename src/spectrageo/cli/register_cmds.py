@@ -64,7 +64,9 @@ def _read_geometry(path: str, name: str):
 
     if not Path(path).is_file():
         raise InvalidInputError(f"{name}: file not found: {path}")
-    obj, _ = _read(path)
+    # rows without coordinates (NaN, as scanners write for no measurement) carry nothing to
+    # align; they are left out, and the status line says how many
+    obj, _ = _read(path, nan_points="drop")
     if not isinstance(obj, Mesh | PointCloud):
         raise InvalidInputError(
             f"{name}: {Path(path).name} is a {type(obj).__name__}; register needs a mesh or a "

@@ -154,7 +154,9 @@ def _geometry_points(x, name: str, rng) -> tuple[np.ndarray, float]:
         p = Path(x)
         if not p.is_file():
             raise InvalidInputError(f"`{name}`: file not found: {x}")
-        x = io.read(p)
+        # point rows without coordinates (NaN) are left out, as in PCD files; segment indices
+        # then count the kept rows
+        x = io.read(p, nan_points="drop")
     if isinstance(x, tuple) and len(x) == 2:  # (V, F)
         x = _VF(*x)
     faces = getattr(x, "faces", None)
