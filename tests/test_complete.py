@@ -637,3 +637,28 @@ def test_completion_report_header_names_where_matrix_completion_wins():
     assert "except on some cases of b (" in _header(rows)
     rows[2]["rms"] = 3.0
     assert "Laplacian interpolation on every case" in _header(rows)
+
+
+def test_cli_complete_reads_the_archives_every_command_reads(tmp_path):
+    """`complete` had its own archive reader, which refused frames stored under `frames` and
+    gzip-compressed archives that every other command reads."""
+    import gzip
+
+    from spectrageo.cli.main import main
+
+    V, F = icosphere(2)
+    T = 4
+    A = np.stack([V * (1.0 + 0.05 * t) for t in range(T)])
+    known = np.arange(0, V.shape[0], 3)
+    kp = tmp_path / "known.npy"
+    np.save(kp, known)
+    np.savez(tmp_path / "anim.npz", frames=A, faces=F)
+    with open(tmp_path / "anim.npz", "rb") as f:
+        (tmp_path / "anim.npz.gz").write_bytes(gzip.compress(f.read()))
+    for name in ("anim.npz", "anim.npz.gz"):
+        out = tmp_path / f"out_{name}.npz"
+        assert main(["complete", str(tmp_path / name), str(out), "--known", str(kp), "-q"]) == 0
+        with np.load(out) as d:
+            got = d["vertices"] if "vertices" in d.files else d["frames"]
+        assert got.shape == A.shape and np.isfinite(got).all()
+        assert np.allclose(got[:, known], A[:, known])

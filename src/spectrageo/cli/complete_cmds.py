@@ -68,17 +68,26 @@ def _read_partial_mesh(path: str):
 
 def _read_partial_frames(path: str):
     """``(frames, faces or None)`` of an ``.npz`` animation/sequence, NaN entries allowed."""
+    import io as _bytes_io
+    import zipfile
+
+    from ..io._common import read_bytes
+
     p = Path(path)
     if not p.is_file():
         raise InvalidInputError(f"file not found: {path}")
     try:
-        with np.load(p, allow_pickle=False) as d:
+        # the same archives as every other command: optionally gzip-compressed, frames under
+        # `vertices` or `frames`
+        data = read_bytes(p, p.name.lower().endswith(".gz"))
+        with np.load(_bytes_io.BytesIO(data), allow_pickle=False) as d:
             keys = set(d.files)
-            if "vertices" in keys:
-                A = np.asarray(d["vertices"], dtype=np.float64)
+            vkey = "vertices" if "vertices" in keys else "frames" if "frames" in keys else None
+            if vkey is not None:
+                A = np.asarray(d[vkey], dtype=np.float64)
                 F = np.asarray(d["faces"], dtype=np.int64) if "faces" in keys else None
                 if F is None:
-                    raise InvalidInputError(f"{p.name}: has `vertices` but no `faces`.")
+                    raise InvalidInputError(f"{p.name}: has `{vkey}` but no `faces`.")
             elif "points" in keys:
                 if "counts" in keys:
                     raise InvalidInputError(
@@ -88,10 +97,10 @@ def _read_partial_frames(path: str):
                 A, F = np.asarray(d["points"], dtype=np.float64), None
             else:
                 raise InvalidInputError(
-                    f"{p.name}: expected arrays `vertices` + `faces` (animation) or `points` "
-                    f"(sequence); got {', '.join(sorted(keys)) or 'none'}."
+                    f"{p.name}: expected arrays `vertices` (or `frames`) + `faces` (animation) or "
+                    f"`points` (sequence); got {', '.join(sorted(keys)) or 'none'}."
                 )
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
         raise InvalidInputError(f"{p.name}: not a readable .npz archive ({exc}).") from exc
     if A.ndim != 3 or A.shape[2] != 3:
         raise InvalidInputError(f"{p.name}: frames must have shape (T, n, 3); got {A.shape}.")
