@@ -420,3 +420,14 @@ def test_point_rows_without_coordinates_in_register_and_elsewhere(tmp_path, caps
     assert json.loads((tmp_path / "T.json").read_text())
     code, _, err = run_cli(capsys, "convert", scan, tmp_path / "o.ply")
     assert code == 2 and "remove those rows first" in err and "nan_points" not in err
+
+
+@pytest.mark.parametrize("area", ["compress", "compress-animation", "outliers", "complete"])
+def test_evaluate_on_a_folder_without_its_data_is_an_error(tmp_path, capsys, area):
+    """Several areas wrote empty tables and exited 0 when `--data` held none of their files."""
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    out = tmp_path / "ev"
+    code, _, err = run_cli(capsys, "evaluate", area, "--data", empty, "--out", out)
+    assert code == 2 and "no " in err and "benchmark data found" in err
+    assert not list(tmp_path.glob("ev.*"))  # no empty tables left behind

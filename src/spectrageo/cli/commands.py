@@ -541,6 +541,7 @@ def cmd_evaluate(args) -> int:
         )
         print(ev.format_generality(res))
         return 0
+    before = _outputs(args.out)
     if args.what == "denoise":
         from ..evaluate import denoise as ev
 
@@ -560,8 +561,24 @@ def cmd_evaluate(args) -> int:
         except ModuleNotFoundError as exc:
             raise _err(f"no evaluation named {args.what!r}.") from exc
         rows = ev.evaluate(data, methods=methods, out=args.out)
+    if not rows:  # nothing of this area under --data: empty tables help no one
+        for f in _outputs(args.out) - before:
+            f.unlink(missing_ok=True)
+        raise _err(
+            f"no {args.what} benchmark data found under {data} (its models and scans are "
+            "read from the shared data folder's layout; see the README, Data and licences)."
+        )
     print(ev.format_markdown(rows))
     return 0
+
+
+def _outputs(out) -> set:
+    """The files an evaluation writes for ``--out`` (``.md``, ``.csv``, ``.png``) that exist."""
+    if not out:
+        return set()
+    base = Path(out)
+    base = base.with_suffix("") if base.suffix in (".md", ".csv", ".png") else base
+    return {f for f in (base.with_suffix(x) for x in (".md", ".csv", ".png")) if f.exists()}
 
 
 def _generality_options(args) -> dict | None:
