@@ -431,3 +431,13 @@ def test_evaluate_on_a_folder_without_its_data_is_an_error(tmp_path, capsys, are
     code, _, err = run_cli(capsys, "evaluate", area, "--data", empty, "--out", out)
     assert code == 2 and "no " in err and "benchmark data found" in err
     assert not list(tmp_path.glob("ev.*"))  # no empty tables left behind
+
+
+def test_batch_errors_name_the_batch_options(tmp_path, capsys):
+    """`batch CMD` has its options one parser down; its errors said `suffix`, not --suffix."""
+    pytest.importorskip("dask")
+    V, F = icosphere(1)
+    p = tmp_path / "in.ply"
+    io.write(p, Mesh(V, F))
+    code, _, err = run_cli(capsys, "batch", "convert", p, "--out", tmp_path / "o")
+    assert code == 2 and "--suffix" in err and "`suffix`" not in err

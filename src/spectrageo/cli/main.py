@@ -69,7 +69,21 @@ def _option_names(parser: argparse.ArgumentParser, command: str) -> dict[str, st
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction) and command in action.choices:
             sp = action.choices[command]
-            return {a.dest: max(a.option_strings, key=len) for a in sp._actions if a.option_strings}
+            out = {}
+            for a in sp._actions:
+                if isinstance(a, argparse._SubParsersAction):  # `batch denoise`, ...: theirs too
+                    for sub in a.choices.values():
+                        out.update(
+                            {
+                                b.dest: max(b.option_strings, key=len)
+                                for b in sub._actions
+                                if b.option_strings
+                            }
+                        )
+            out.update(
+                {a.dest: max(a.option_strings, key=len) for a in sp._actions if a.option_strings}
+            )
+            return out
     return {}
 
 
