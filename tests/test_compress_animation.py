@@ -271,11 +271,13 @@ def test_evaluate_compress_animation_tuning(shared_data, tmp_path):
     assert (tmp_path / "ra.md").exists() and (tmp_path / "ra.csv").exists()
 
 
+def row(method, setting, bpvf, kg):
+    """One rate point of model ``m`` for the summary tests."""
+    return {"model": "m", "method": method, "setting": setting, "bpvf": bpvf, "kg": kg}
+
+
 def test_at_draco12_takes_targeted_points_within_the_rate_tolerance():
     from spectrageo.evaluate import compress_animation as ev
-
-    def row(method, setting, bpvf, kg):
-        return {"model": "m", "method": method, "setting": setting, "bpvf": bpvf, "kg": kg}
 
     rows = [
         row("draco", "q=12", 20.0, 0.04),
@@ -300,9 +302,6 @@ def test_baseline_ratio_interpolates_the_baseline_at_draco12_kg():
     import math
 
     from spectrageo.evaluate import compress_animation as ev
-
-    def row(method, setting, bpvf, kg):
-        return {"model": "m", "method": method, "setting": setting, "bpvf": bpvf, "kg": kg}
 
     rows = [
         row("draco", "q=12", 20.0, 0.04),
