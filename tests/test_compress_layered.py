@@ -133,6 +133,21 @@ def test_error_target_within_5_percent(anim):
     assert abs(kg_error(compress.decode_animation(data)[0], A) - 1.0) <= 0.05
 
 
+def test_error_below_the_default_steps_floor_is_met_by_a_finer_step(anim):
+    """With every vertex sent, the default step's rounding bounds the KG error from below;
+    `error=` under that floor refused ("try a smaller `step`"), now the step is bisected."""
+    A, F = anim
+    floor = kg_error(
+        compress.decode_animation(compress.encode_animation(A, F, method="layered", layer=1.0))[0],
+        A,
+    )
+    target = floor / 8
+    data = compress.encode_animation(A, F, method="layered", error=target)
+    assert abs(kg_error(compress.decode_animation(data)[0], A) - target) <= 0.05 * target
+    params = compress.info_animation(data)["parameters"]
+    assert params["step"] < 1e-3 and params["mean_layer"] == 1.0
+
+
 def test_damaged_and_truncated_layered_streams(anim):
     A, F = anim
     data = compress.encode_animation(A, F, method="layered", layer=0.1)

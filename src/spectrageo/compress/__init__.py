@@ -375,7 +375,9 @@ def encode_animation(
         its ``step`` is that of the GFT coefficients. ``layered`` takes ``layer`` (fraction of the vertices sent per frame, 0.1; ``bpvf``
         chooses it per frame instead), ``refresh`` (a refresh frame every that many frames,
         16; 0 = never) and ``fine`` (the RPCA/ISVD fine reconstruction, off); its ``step``
-        (default 1e-3) is a fraction of twice the first frame's diagonal.
+        (default 1e-3) is a fraction of twice the first frame's diagonal; ``error`` bisects the
+        layer, or, below what every vertex sent at the default step gives, the step with every
+        vertex sent.
 
     Returns
     -------
