@@ -148,6 +148,17 @@ def test_error_below_the_default_steps_floor_is_met_by_a_finer_step(anim):
     assert params["step"] < 1e-3 and params["mean_layer"] == 1.0
 
 
+def test_bpvf_above_every_vertex_at_the_default_step_is_met_by_a_finer_step(anim):
+    """A rate above what every vertex of every frame gives at the default step refused ("use
+    a smaller `step`"); now the step is bisected with every vertex sent."""
+    A, F = anim
+    n_vf = A.shape[0] * A.shape[1]
+    top = 8.0 * len(compress.encode_animation(A, F, method="layered", layer=1.0)) / n_vf
+    data = compress.encode_animation(A, F, method="layered", bpvf=2.0 * top)
+    assert abs(8.0 * len(data) / n_vf - 2.0 * top) <= 0.05 * 2.0 * top
+    assert compress.info_animation(data)["parameters"]["step"] < 1e-3
+
+
 def test_damaged_and_truncated_layered_streams(anim):
     A, F = anim
     data = compress.encode_animation(A, F, method="layered", layer=0.1)

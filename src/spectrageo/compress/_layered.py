@@ -681,7 +681,9 @@ def encode(frames, F, *, step=None, bpvf=None, error=None, **options) -> bytes:
         return b"".join(enc.push(A[t]) for t in range(T)) + enc.close()
 
     if bpvf is not None:
-        return _whole_file_rate(build, float(bpvf), A.shape[1] * T, "layer" in options)
+        return _whole_file_rate(
+            build, float(bpvf), A.shape[1] * T, "layer" in options, step_given=step is not None
+        )
     if error is None:
         return build()
     if "layer" in options:
@@ -750,9 +752,47 @@ def _error_by_step(build, A, target: float, best) -> bytes:
     return best[1]
 
 
-def _whole_file_rate(build, target: float, nvf: int, fixed_layer: bool) -> bytes:
+def _rate_by_step(build, target: float, nvf: int, budget: float, best) -> bytes:
+    """``bpvf`` above what the default step gives with every vertex sent (a per-frame
+    ``budget`` that sends them all): bisection (log scale) on the step, within 5 %."""
+    lo, hi = _STEP_MIN, DEFAULT_STEP  # the rate falls as the step grows
+    finest = build(step=lo, bpvf=budget)
+    r_top = 8.0 * len(finest) / nvf
+    if r_top < target * 0.95:
+        raise InvalidInputError(
+            f"`bpvf` = {target:g} cannot be reached with 'layered': every vertex of every frame "
+            f"at the smallest step ({lo:g}) gives {r_top:.3g} bpvf here."
+        )
+    for _ in range(40):
+        mid = math.sqrt(lo * hi)
+        data = build(step=mid, bpvf=budget)
+        r = 8.0 * len(data) / nvf
+        gap = abs(r - target) / target
+        if gap < best[0]:
+            best = (gap, data)
+        if gap <= _AIM:
+            break
+        if r > target:
+            lo = mid
+        else:
+            hi = mid
+        if hi / lo < 1.0001:
+            break
+    if best[0] > 0.05:
+        raise InvalidInputError(
+            f"`bpvf` = {target:g} could not be met within 5 % with 'layered' (closest: "
+            f"{best[0]:.1%} away)."
+        )
+    return best[1]
+
+
+def _whole_file_rate(
+    build, target: float, nvf: int, fixed_layer: bool, *, step_given: bool = True
+) -> bytes:
     """``bpvf`` for a whole file: bisection on the per-frame budget of the rate adaptation so
-    that the file -- header and whole first frame included -- is within 5 % of ``target``."""
+    that the file -- header and whole first frame included -- is within 5 % of ``target``. A
+    target above what every vertex of every frame gives at the default step (``step`` not
+    given) is met by bisecting the step with every vertex sent."""
     if fixed_layer:
         raise InvalidInputError("`layer` cannot be combined with `bpvf`.")
 
@@ -768,6 +808,8 @@ def _whole_file_rate(build, target: float, nvf: int, fixed_layer: bool) -> bytes
             f"first frame alone give {r_lo:.3g} bpvf here (more frames amortise them)."
         )
     r_hi, d_hi = rate(hi)
+    if r_hi < target * 0.95 and not step_given:
+        return _rate_by_step(build, target, nvf, hi, (abs(r_hi - target) / target, d_hi))
     if r_hi < target * 0.95:
         raise InvalidInputError(
             f"`bpvf` = {target:g} cannot be reached with 'layered': sending every vertex of "
