@@ -22,7 +22,10 @@ diagonal) and entropy coded; the decoder turns them into the motion vectors of E
 layer of every frame is chosen for a target rate (``bpvf``: the largest layer whose frame fits
 the budget), which is the per-frame rate adaptation of Algorithm 11 line 5 (for a whole file,
 :func:`encode` searches the per-frame budget that brings the whole file -- header and first
-frame included -- to ``bpvf``). Every ``refresh`` frames (default 16; 0 = never) a refresh frame
+frame included -- to ``bpvf``; ``error=`` bisects the layer fraction against the KG error).
+When a whole-file request lies beyond what every vertex at the default step gives (a rate
+above it, an error below it) and no ``step`` is given, the step is bisected instead with every
+vertex sent. Every ``refresh`` frames (default 16; 0 = never) a refresh frame
 also sends the quantised residual of every other vertex against the decoder's prediction, which
 bounds the drift of the vertices that are never transmitted (the thesis streams without it; the
 residuals are mostly zero and cheap).
