@@ -725,23 +725,22 @@ def encode(frames, F, *, step=None, bpvf=None, error=None, **options) -> bytes:
     return best[1]
 
 
-def _error_by_step(build, A, target: float, best) -> bytes:
-    """``error=`` below what the default step gives with every vertex sent: bisection (log
-    scale) on the step at layer 1, within 5 % of the KG error ``target``; ``best`` is the
-    (relative gap, data) of the default step."""
-    from ..metrics import kg_error
-
-    lo, hi = _STEP_MIN, DEFAULT_STEP  # the error grows with the step
+def _by_step(make, measure, target: float, best, what: str) -> bytes:
+    """Bisection (log scale) on the step between :data:`_STEP_MIN` and :data:`DEFAULT_STEP`
+    until ``measure(make(step))`` is within 3 % of ``target`` (5 % is the contract); ``measure``
+    grows with the step (an error) or falls with it (a rate: pass its negative and a negative
+    target). ``best`` is the (relative gap, data) to beat; ``what`` names the request."""
+    lo, hi = _STEP_MIN, DEFAULT_STEP
     for _ in range(40):
         mid = math.sqrt(lo * hi)
-        data = build(step=mid, layer=1.0)
-        err = kg_error(decode(data)[0], A)
-        gap = abs(err - target) / target
+        data = make(mid)
+        value = measure(data)
+        gap = abs(value - target) / abs(target)
         if gap < best[0]:
             best = (gap, data)
         if gap <= _AIM:
             break
-        if err > target:
+        if value > target:
             hi = mid
         else:
             lo = mid
@@ -749,44 +748,44 @@ def _error_by_step(build, A, target: float, best) -> bytes:
             break
     if best[0] > 0.05:
         raise InvalidInputError(
-            f"`error` = {target:g} could not be met within 5 % with 'layered' (closest: "
+            f"`{what}` = {abs(target):g} could not be met within 5 % with 'layered' (closest: "
             f"{best[0]:.1%} away)."
         )
     return best[1]
+
+
+def _error_by_step(build, A, target: float, best) -> bytes:
+    """``error=`` below what the default step gives with every vertex sent: the step is
+    bisected at layer 1, within 5 % of the KG error ``target``; ``best`` is the (relative gap,
+    data) of the default step."""
+    from ..metrics import kg_error
+
+    return _by_step(
+        lambda s: build(step=s, layer=1.0),
+        lambda data: kg_error(decode(data)[0], A),
+        target,
+        best,
+        "error",
+    )
 
 
 def _rate_by_step(build, target: float, nvf: int, budget: float, best) -> bytes:
     """``bpvf`` above what the default step gives with every vertex sent (a per-frame
-    ``budget`` that sends them all): bisection (log scale) on the step, within 5 %."""
-    lo, hi = _STEP_MIN, DEFAULT_STEP  # the rate falls as the step grows
-    finest = build(step=lo, bpvf=budget)
+    ``budget`` that sends them all): the step is bisected, within 5 %."""
+    finest = build(step=_STEP_MIN, bpvf=budget)
     r_top = 8.0 * len(finest) / nvf
     if r_top < target * 0.95:
         raise InvalidInputError(
             f"`bpvf` = {target:g} cannot be reached with 'layered': every vertex of every frame "
-            f"at the smallest step ({lo:g}) gives {r_top:.3g} bpvf here."
+            f"at the smallest step ({_STEP_MIN:g}) gives {r_top:.3g} bpvf here."
         )
-    for _ in range(40):
-        mid = math.sqrt(lo * hi)
-        data = build(step=mid, bpvf=budget)
-        r = 8.0 * len(data) / nvf
-        gap = abs(r - target) / target
-        if gap < best[0]:
-            best = (gap, data)
-        if gap <= _AIM:
-            break
-        if r > target:
-            lo = mid
-        else:
-            hi = mid
-        if hi / lo < 1.0001:
-            break
-    if best[0] > 0.05:
-        raise InvalidInputError(
-            f"`bpvf` = {target:g} could not be met within 5 % with 'layered' (closest: "
-            f"{best[0]:.1%} away)."
-        )
-    return best[1]
+    return _by_step(
+        lambda s: build(step=s, bpvf=budget),
+        lambda data: -8.0 * len(data) / nvf,  # the rate falls as the step grows
+        -target,
+        best,
+        "bpvf",
+    )
 
 
 def _whole_file_rate(
