@@ -26,9 +26,9 @@ their ``error=`` rate control; horse-gallop is the animation ``U_FACTOR`` was ch
 horse-gallop 6.10 bpvf (7.54), crane 8.08 (9.57), horse-collapse 6.68 (8.08), cat-poses 21.4
 (25.4), lion-poses 23.8 (27.6), chickenCrossing 5.59 (4.60: pca-qp does better on these 400
 frames of a 3k-vertex mesh). The error is spread differently: at those points its STED (local
-edge-length deviation of Vasa & Skala, Section 4.9) is 3-6x pca-qp's and about that of Draco-12 (0.7-1.0x), since
-quantised GFT coefficients leave a fine, spatially white roughness where quantised delta
-coordinates leave a smooth, low-frequency drift.
+edge-length deviation of Vasa & Skala, Section 4.9) is 3-6x pca-qp's and about that of
+Draco-12 (0.7-1.0x), since quantised GFT coefficients leave a fine, spatially white roughness
+where quantised delta coordinates leave a smooth, low-frequency drift.
 
 File layout: the ``.sga`` segments of :mod:`._animation` (stream header with the connectivity and
 one anchor per connected component, unused here; one block segment holding the whole sequence;
