@@ -694,49 +694,40 @@ def encode(frames, F, *, step=None, bpvf=None, error=None, **options) -> bytes:
     from ..metrics import kg_error
 
     target = float(error)
+    best = None
     if step is None:
         full = build(layer=1.0)
         e_full = kg_error(decode(full)[0], A)
+        best = (abs(e_full - target) / target, full)  # a candidate for the layer search too
         if e_full > target * (1 + _AIM):
             # even sending every vertex of every frame, the default step's rounding is above
             # the request: every vertex is sent and the step is bisected instead
-            return _error_by_step(build, A, target, (abs(e_full - target) / target, full))
+            return _error_by_step(build, A, target, best)
     # the KG error falls as the layer grows: bisection on the layer fraction, within 5 %
-    lo, hi = 1e-3, 1.0
-    best = None
-    for _ in range(14):
-        mid = math.sqrt(lo * hi)
-        data = build(layer=mid)
-        err = kg_error(decode(data)[0], A)
-        gap = abs(err - target) / target
-        if best is None or gap < best[0]:
-            best = (gap, data)
-        if gap <= 0.03:
-            break
-        if err > target:
-            lo = mid
-        else:
-            hi = mid
-    if best[0] > 0.05:
-        raise InvalidInputError(
-            f"`error` = {target:g} could not be met within 5 % with 'layered' (closest: "
-            f"{best[0]:.1%} away); the step bounds the error from below, try a smaller `step`."
-        )
-    return best[1]
+    return _bisect_log(
+        lambda f: build(layer=f),
+        lambda data: -kg_error(decode(data)[0], A),
+        -target,
+        1e-3,
+        1.0,
+        best,
+        "error",
+        iters=14,
+        hint="; the step bounds the error from below, try a smaller `step`",
+    )
 
 
-def _by_step(make, measure, target: float, best, what: str) -> bytes:
-    """Bisection (log scale) on the step between :data:`_STEP_MIN` and :data:`DEFAULT_STEP`
-    until ``measure(make(step))`` is within 3 % of ``target`` (5 % is the contract); ``measure``
-    grows with the step (an error) or falls with it (a rate: pass its negative and a negative
-    target). ``best`` is the (relative gap, data) to beat; ``what`` names the request."""
-    lo, hi = _STEP_MIN, DEFAULT_STEP
-    for _ in range(40):
+def _bisect_log(make, measure, target, lo, hi, best, what, *, iters=40, hint=""):
+    """Bisection (log scale) of a knob in ``[lo, hi]`` until ``measure(make(knob))`` is within 3 %
+    of ``target`` (5 % is the contract). ``measure`` must grow with the knob (pass the negatives
+    of a measure that falls, and of its target). ``best`` is ``None`` or the (relative gap,
+    data) to beat; ``what`` names the request in the error raised when 5 % is not met."""
+    for _ in range(iters):
         mid = math.sqrt(lo * hi)
         data = make(mid)
         value = measure(data)
         gap = abs(value - target) / abs(target)
-        if gap < best[0]:
+        if best is None or gap < best[0]:
             best = (gap, data)
         if gap <= _AIM:
             break
@@ -749,7 +740,7 @@ def _by_step(make, measure, target: float, best, what: str) -> bytes:
     if best[0] > 0.05:
         raise InvalidInputError(
             f"`{what}` = {abs(target):g} could not be met within 5 % with 'layered' (closest: "
-            f"{best[0]:.1%} away)."
+            f"{best[0]:.1%} away){hint}."
         )
     return best[1]
 
@@ -760,10 +751,12 @@ def _error_by_step(build, A, target: float, best) -> bytes:
     data) of the default step."""
     from ..metrics import kg_error
 
-    return _by_step(
+    return _bisect_log(
         lambda s: build(step=s, layer=1.0),
         lambda data: kg_error(decode(data)[0], A),
         target,
+        _STEP_MIN,
+        DEFAULT_STEP,
         best,
         "error",
     )
@@ -779,10 +772,12 @@ def _rate_by_step(build, target: float, nvf: int, budget: float, best) -> bytes:
             f"`bpvf` = {target:g} cannot be reached with 'layered': every vertex of every frame "
             f"at the smallest step ({_STEP_MIN:g}) gives {r_top:.3g} bpvf here."
         )
-    return _by_step(
+    return _bisect_log(
         lambda s: build(step=s, bpvf=budget),
         lambda data: -8.0 * len(data) / nvf,  # the rate falls as the step grows
         -target,
+        _STEP_MIN,
+        DEFAULT_STEP,
         best,
         "bpvf",
     )
@@ -818,26 +813,16 @@ def _whole_file_rate(
             f"every frame gives {r_hi:.3g} bpvf here (use a smaller `step`)."
         )
     best = min((abs(r_lo - target) / target, d_lo), (abs(r_hi - target) / target, d_hi))
-    for _ in range(30):
-        mid = math.sqrt(lo * hi)
-        r, d = rate(mid)
-        gap = abs(r - target) / target
-        if gap < best[0]:
-            best = (gap, d)
-        if gap <= 0.03:
-            break
-        if r < target:
-            lo = mid
-        else:
-            hi = mid
-        if hi / lo < 1.0001:
-            break
-    if best[0] > 0.05:
-        raise InvalidInputError(
-            f"`bpvf` = {target:g} could not be met within 5 % with 'layered' (closest: "
-            f"{best[0]:.1%} away)."
-        )
-    return best[1]
+    return _bisect_log(
+        lambda b: build(bpvf=b),
+        lambda data: 8.0 * len(data) / nvf,
+        target,
+        lo,
+        hi,
+        best,
+        "bpvf",
+        iters=30,
+    )
 
 
 # ----------------------------------------------------------------------------- decoder
