@@ -463,7 +463,8 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
 
     Parameters
     ----------
-    scene : (n, 3) array, PointCloud, Mesh or path of a point-cloud/mesh file.
+    scene : (n, 3) array, PointCloud, Mesh or path of a point-cloud/mesh file (a file's point
+        rows without coordinates, NaN, are left out; segment indices count the kept rows).
     models : list of arrays/PointClouds/Meshes/paths, or a dict name -> geometry. Meshes are
         sampled uniformly by area; point clouds are used as they are (a partial scan works).
     rng : seed or numpy Generator (RANSAC hypotheses, mesh sampling).
