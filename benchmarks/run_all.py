@@ -72,6 +72,7 @@ SECTIONS = [
     ("saliency", _script("saliency")),
     ("compress", _evaluate("compress", "compress")),
     ("compress_large", _script("compress_large")),
+    ("doi_codec", _script("doi_codec")),
     ("connectivity", _script("connectivity")),
     ("compress_animation", _evaluate("compress-animation", "compress_animation")),
     ("complete", _evaluate("complete", "complete")),
