@@ -125,12 +125,12 @@ def main() -> None:
     md = [
         "## DOI against the exact decomposition in the spectral codec (Fig. 5.58)",
         "",
-        "`python benchmarks/doi_codec.py`: `compress.encode(V, F, method=\"spectral\", "
+        '`python benchmarks/doi_codec.py`: `compress.encode(V, F, method="spectral", '
         "error=E, ...)` with 300-vertex submeshes. `exact (complete)` is the default (every "
         "submesh's complete eigendecomposition, computed directly); `exact k`, `oi k` and "
         f"`doi k` keep the {K} lowest eigenvectors per submesh, from a dense decomposition, "
         "from orthogonal iterations tracked submesh to submesh (Algorithm 6), and from the same "
-        "iterations with per-submesh sizes chosen by the encoder (`basis=\"doi\"`, the decodable "
+        'iterations with per-submesh sizes chosen by the encoder (`basis="doi"`, the decodable '
         "reading of Algorithm 7). `E` is the smallest RMS error (fraction of the bounding-box "
         "diagonal) of "
         + ", ".join(f"{e:g}" for e in ERRORS)
