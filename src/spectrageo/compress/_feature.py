@@ -183,11 +183,21 @@ class FeaturePlan:
             self._sal = _saliency_classes(X, F, int(o["n_classes"]), self.seed)
             self._profile = np.asarray(o["class_keep"], dtype=np.float64)
             self.mask = _mask_from_classes(self._sal, n, self._profile)
-        self.solver = _Solver(self.L, self.a)
+        # the factorisation of Eq. (5.54) is made when a reconstruction is first asked for (rate
+        # control); a file coded at a given step never needs it. The box is shared by the level
+        # plans of :meth:`levels` (shallow copies), so it is factorised once.
+        self._solver_box: list[_Solver] = []
+
+    @property
+    def solver(self) -> _Solver:
+        if not self._solver_box:
+            self._solver_box.append(_Solver(self.L, self.a))
+        return self._solver_box[0]
 
     def levels(self) -> list[FeaturePlan]:
-        """The plans of :data:`LEVELS` (same anchors, Laplacian and factorisation; masks from the
-        same saliency ranking or classes), for the rate control. ``saliency``: every class keeps
+        """The plans of :data:`LEVELS` (same anchors, Laplacian and factorisation, made once for
+        all of them when first needed; masks from the same saliency ranking or classes), for the
+        rate control. ``saliency``: every class keeps
         ``min(1, a * class_keep[c])`` of its vertices, ``a`` set so that the share of the level
         is kept (Algorithm 10 steps 4-5: the ratios per class follow the scenario's total)."""
         import copy
