@@ -182,6 +182,65 @@ def test_delta_codecs_factorise_only_for_rate_control(monkeypatch, method):
     assert len(made) == 1
 
 
+@pytest.mark.parametrize("method", ["feature", "saliency"])
+def test_files_with_the_first_anchor_scheme_decode_as_before(method):
+    """Files coded before the anchor-scheme byte existed (METIS, one part per anchor) keep
+    decoding to what they decoded to then; new files record scheme 1 and round trip."""
+    from pathlib import Path
+
+    here = Path(__file__).parent / "data" / "sgc"
+    old = (here / f"{method}_anchors_v0.sgc").read_bytes()
+    want = np.load(here / f"{method}_anchors_v0_decoded.npy")
+    assert compress.info(old)["parameters"]["anchor_scheme"] == 0
+    np.testing.assert_array_equal(compress.decode(old)[0], want)
+    V, F = icosphere(3)
+    V = V + 0.01 * np.random.default_rng(1).standard_normal(V.shape)  # the fixtures' mesh
+    new = compress.encode(V, F, method=method)
+    assert compress.info(new)["parameters"]["anchor_scheme"] == 1
+    W, F2 = compress.decode(new)
+    np.testing.assert_array_equal(F2, F)
+    assert _rms(V, W) < 2 * _rms(V, want) + 1e-4
+
+
+def test_anchor_scheme_1_spreads_anchors_over_every_part_and_component():
+    """Scheme 1: about ``fraction * n`` anchors, deterministic, one in every connected
+    component, and no vertex far (in hops) from an anchor on a regular grid."""
+    from scipy.sparse.csgraph import shortest_path
+
+    from spectrageo.compress._feature import anchors
+    from spectrageo.graph import adjacency_matrix
+
+    V, F = grid(40)
+    V2, F2 = icosphere(2)
+    Vb = np.r_[V, V2 + 5.0]
+    Fb = np.r_[F, F2 + V.shape[0]]
+    n = Vb.shape[0]
+    for frac in (0.005, 0.05, 0.3):
+        a = anchors(Fb, n, frac, 0, 1)
+        np.testing.assert_array_equal(a, anchors(Fb, n, frac, 0, 1))
+        assert abs(a.size - frac * n) <= 0.1 * frac * n + 2
+        assert (a < V.shape[0]).any() and (a >= V.shape[0]).any()  # both components
+    a = anchors(F, V.shape[0], 0.05, 0, 1)
+    C = adjacency_matrix(F, V.shape[0])
+    hops = shortest_path(C, unweighted=True, indices=a).min(axis=0)
+    # 80 anchors on a 40 x 40 grid: one per 20 vertices, a disc of radius ~3 hops each
+    assert hops.max() <= 8
+    assert anchors(F, V.shape[0], 1.0, 0, 1).size == V.shape[0]
+
+
+def test_feature_parameters_from_a_newer_anchor_scheme_are_refused():
+    from spectrageo.compress import _feature
+
+    V, F = icosphere(2)
+    data = compress.encode(V, F, method="feature")
+    p = _feature._P1.pack(0.01, 4.0, 4e-4, 0, 7)
+    with pytest.raises(InvalidInputError, match="anchor scheme 7"):
+        _feature._unpack(p)
+    with pytest.raises(InvalidInputError, match="parameters expected"):
+        _feature._unpack(p[:-2])
+    assert compress.decode(data)[0].shape == V.shape
+
+
 def test_feature_rate_control_chooses_the_level_of_detail(fandisk):
     """Algorithm 9 step 5 under ``bpv=``: at a few geometry bits per vertex, sending the salient
     deltas and zeroing the rest (Eq. 5.53) beats quantising every delta coarsely; at a high rate

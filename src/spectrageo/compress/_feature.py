@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import struct
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 
@@ -50,7 +51,8 @@ TAG_ANCHORS = 5
 TAG_DELTA_FINE = 6
 TAG_DELTA_COARSE = 7
 
-_P = struct.Struct("<ffdI")
+_P = struct.Struct("<ffdI")  # files without the anchor-scheme byte (scheme 0)
+_P1 = struct.Struct("<ffdIB")  # anchor_fraction, ratio, step, seed, anchor scheme
 _MIN_FACES = 8  # below this the saliency patches are meaningless
 
 #: shares of the vertices whose deltas are sent, tried by the rate control (see the module notes)
@@ -74,9 +76,28 @@ def _laplacian(F: np.ndarray, n: int) -> sp.csr_matrix:
     return laplacian_from_adjacency(C).tocsr()
 
 
-def anchors(F: np.ndarray, n: int, fraction: float, seed: int) -> np.ndarray:
-    """Anchor vertices from the connectivity: the smallest index of each METIS part, plus the
-    smallest index of every connected component without one (sorted, unique)."""
+#: anchor choice recorded in the parameters (a byte after them; files without it use scheme 0):
+#: 0 = one METIS part per anchor, 1 = METIS parts of about :data:`ANCHORS_PER_PART` anchors, each
+#: sampled by graph farthest-point sampling (see :func:`anchors`)
+ANCHOR_SCHEME = 1
+ANCHORS_PER_PART = 32
+
+
+def anchors(F: np.ndarray, n: int, fraction: float, seed: int, scheme: int = ANCHOR_SCHEME):
+    """Anchor vertices from the connectivity alone (sorted, unique): about ``fraction * n``
+    vertices spread over the mesh, plus the smallest index of every connected component
+    without one.
+
+    ``scheme=0`` (files coded before the scheme byte existed): METIS splits the graph into one
+    part per anchor and each part gives its smallest index. METIS's time grows with the number of
+    parts: 44k parts (10 % of the 437k-vertex dragon) took 17-18 s at each end of the codec.
+    ``scheme=1``: METIS splits the graph into ``ceil(n_a / ANCHORS_PER_PART)`` parts; part ``p``
+    gets ``max(1, round(n_a |p| / n))`` anchors by farthest-point sampling in hops inside the part
+    (the first is its smallest index; each next one the vertex of the part farthest from the
+    anchors chosen so far, ties to the smallest index), which spreads them as evenly as one part
+    each (mean distance from a vertex to its nearest anchor on the dragon at 10 %: 0.00049 vs
+    0.00051 of the first scheme, in 1.5 s instead of 18 s).
+    """
     from scipy.sparse.csgraph import connected_components
 
     from ..graph import adjacency_matrix
@@ -85,17 +106,80 @@ def anchors(F: np.ndarray, n: int, fraction: float, seed: int) -> np.ndarray:
     C = adjacency_matrix(F, n).tocsr()
     C.data[:] = 1.0
     n_a = max(1, int(np.ceil(fraction * n)))
-    if n_a >= 2 and n > n_a:
-        membership = _metis(C, n_a, int(seed))
-        picks = [int(p.min()) for p in _split(membership, n_a)]
+    if n_a >= n:
+        picks = np.arange(n, dtype=np.int64)
+    elif scheme == 0:
+        if n_a >= 2:
+            membership = _metis(C, n_a, int(seed))
+            picks = np.array([int(p.min()) for p in _split(membership, n_a)], dtype=np.int64)
+        else:
+            picks = np.zeros(1, dtype=np.int64)
     else:
-        picks = [0] if n_a < n else list(range(n))
+        n_parts = -(-n_a // ANCHORS_PER_PART)
+        if n_parts >= 2:
+            label = _metis(C, n_parts, int(seed))
+        else:
+            label = np.zeros(n, dtype=np.int64)
+        order = np.lexsort((np.arange(n), label))  # by part, ascending index inside
+        counts = np.bincount(label, minlength=int(label.max()) + 1)
+        starts = np.r_[0, np.cumsum(counts)].astype(np.int64)
+        want = np.maximum(1, np.rint(n_a * counts / n)).astype(np.int64)
+        out = np.empty(int(np.minimum(want, counts).sum()), dtype=np.int64)
+        k = _fps_parts(
+            C.indptr.astype(np.int64), C.indices.astype(np.int64), label, order, starts, want, out
+        )
+        picks = out[:k]
     ncomp, lab = connected_components(C, directed=False)
     first = np.full(ncomp, n, dtype=np.int64)
     np.minimum.at(first, lab, np.arange(n))
     have = np.zeros(ncomp, dtype=bool)
-    have[lab[np.asarray(picks, dtype=np.int64)]] = True
-    return np.unique(np.r_[np.asarray(picks, dtype=np.int64), first[~have]])
+    have[lab[picks]] = True
+    return np.unique(np.r_[picks, first[~have]])
+
+
+@numba.njit(cache=True)
+def _fps_parts(indptr, indices, label, order, starts, want, out):  # pragma: no cover - jitted
+    """Farthest-point sampling in hops inside every part (scheme 1 of :func:`anchors`). The
+    distances to the chosen anchors are updated by a breadth-first search from each new anchor
+    that stops where it improves nothing (the distance map obeys the triangle inequality).
+    Returns the number of anchors written to ``out``."""
+    n = label.size
+    far = n + 1
+    dist = np.full(n, far, dtype=np.int64)
+    queue = np.empty(n, dtype=np.int64)
+    k = 0
+    for p in range(starts.size - 1):
+        s, e = starts[p], starts[p + 1]
+        for t in range(want[p]):
+            if t == 0:
+                a = order[s]
+            else:
+                a = -1
+                best = 0
+                for q in range(s, e):
+                    v = order[q]
+                    if dist[v] > best:
+                        best = dist[v]
+                        a = v
+                if a < 0:  # every vertex of the part is an anchor
+                    break
+            out[k] = a
+            k += 1
+            dist[a] = 0
+            head = 0
+            tail = 1
+            queue[0] = a
+            while head < tail:
+                u = queue[head]
+                head += 1
+                nd = dist[u] + 1
+                for j in range(indptr[u], indptr[u + 1]):
+                    w = indices[j]
+                    if label[w] == p and nd < dist[w]:
+                        dist[w] = nd
+                        queue[tail] = w
+                        tail += 1
+    return k
 
 
 class _Solver:
@@ -165,7 +249,8 @@ class FeaturePlan:
         self.ratio = float(np.float32(o["ratio"]))
         self.seed = int(o.get("seed", 0))
         self._rank: np.ndarray | None | bool = None  # saliency ranking (feature method)
-        self.a = anchors(F, n, self.anchor_fraction, self.seed)
+        self.scheme = ANCHOR_SCHEME
+        self.a = anchors(F, n, self.anchor_fraction, self.seed, self.scheme)
         self.L = _laplacian(F, n)
         self.delta = np.asarray(self.L @ X)
         self.va = X[self.a]
@@ -228,7 +313,7 @@ class FeaturePlan:
         return out
 
     def params(self, step: float) -> bytes:
-        return _P.pack(self.anchor_fraction, self.ratio, float(step), self.seed)
+        return _P1.pack(self.anchor_fraction, self.ratio, float(step), self.seed, self.scheme)
 
     def _quant(self, step: float):
         qa = np.rint(self.va / step).astype(np.int64)
@@ -313,8 +398,13 @@ def make_plan(X, F, method: str, options: dict) -> FeaturePlan:
 
 
 def describe(params: bytes, method: str) -> dict:
-    af, ratio, step, _seed = _unpack(params)
-    return {"anchor_fraction": round(af, 6), "ratio": round(ratio, 6), "step": step}
+    af, ratio, step, _seed, scheme = _unpack(params)
+    return {
+        "anchor_fraction": round(af, 6),
+        "ratio": round(ratio, 6),
+        "step": step,
+        "anchor_scheme": scheme,
+    }
 
 
 def _read_mask(body: dict, n: int) -> np.ndarray:
@@ -332,16 +422,27 @@ def sent_share(chunks, n: int) -> float:
 
 
 def _unpack(params: bytes):
-    if len(params) != _P.size:
-        raise InvalidInputError(f".sgc {_P.size}-byte parameters expected; got {len(params)}.")
-    af, ratio, step, seed = _P.unpack(params)
+    if len(params) == _P.size:
+        af, ratio, step, seed = _P.unpack(params)
+        scheme = 0
+    elif len(params) == _P1.size:
+        af, ratio, step, seed, scheme = _P1.unpack(params)
+        if scheme > ANCHOR_SCHEME:
+            raise InvalidInputError(
+                f".sgc feature stream uses anchor scheme {scheme}, newer than this version of "
+                f"spectrageo reads (up to {ANCHOR_SCHEME})."
+            )
+    else:
+        raise InvalidInputError(
+            f".sgc {_P.size}- or {_P1.size}-byte parameters expected; got {len(params)}."
+        )
     if not (0 < af <= 1 and (ratio == 0 or 1 <= ratio <= 1e4) and np.isfinite(step) and step > 0):
         raise InvalidInputError(".sgc feature parameters are out of range.")
-    return af, ratio, step, seed
+    return af, ratio, step, seed, scheme
 
 
 def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str) -> np.ndarray:
-    af, ratio, step, seed = _unpack(params)
+    af, ratio, step, seed, scheme = _unpack(params)
     tags = [t for t, _ in chunks]
     need = [TAG_MASK, TAG_ANCHORS]
     allowed = {TAG_MASK, TAG_ANCHORS, TAG_DELTA_FINE, TAG_DELTA_COARSE}
@@ -351,7 +452,7 @@ def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str) -> np.ndar
         raise InvalidInputError(".sgc feature stream lacks its mask or anchors.")
     body = dict(chunks)
     mask = _read_mask(body, n)
-    a = anchors(F, n, af, seed)
+    a = anchors(F, n, af, seed, scheme)
     va = _dec3(body[TAG_ANCHORS], a.size, "anchors") * step
     L = _laplacian(F, n)
     d = np.zeros((n, 3))
