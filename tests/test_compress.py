@@ -228,6 +228,19 @@ def test_anchor_scheme_1_spreads_anchors_over_every_part_and_component():
     assert anchors(F, V.shape[0], 1.0, 0, 1).size == V.shape[0]
 
 
+def test_anchor_sampling_skips_empty_parts():
+    """METIS may leave a part empty; the sampler must not take the next part's first vertex."""
+    from spectrageo.compress._feature import _fps_parts
+
+    i64 = np.int64
+    indptr, indices = np.array([0, 1, 2, 2], i64), np.array([1, 0], i64)
+    label, order = np.array([0, 0, 2], i64), np.array([0, 1, 2], i64)
+    starts, want = np.array([0, 2, 2, 3, 3], i64), np.ones(4, i64)
+    out = np.empty(4, i64)
+    k = _fps_parts(indptr, indices, label, order, starts, want, out)
+    np.testing.assert_array_equal(out[:k], [0, 2])
+
+
 def test_feature_parameters_from_a_newer_anchor_scheme_are_refused():
     from spectrageo.compress import _feature
 

@@ -150,6 +150,8 @@ def _fps_parts(indptr, indices, label, order, starts, want, out):  # pragma: no 
     k = 0
     for p in range(starts.size - 1):
         s, e = starts[p], starts[p + 1]
+        if s == e:  # METIS may leave a part empty
+            continue
         for t in range(want[p]):
             if t == 0:
                 a = order[s]
