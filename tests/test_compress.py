@@ -228,17 +228,23 @@ def test_anchor_scheme_1_spreads_anchors_over_every_part_and_component():
     assert anchors(F, V.shape[0], 1.0, 0, 1).size == V.shape[0]
 
 
-def test_anchor_sampling_skips_empty_parts():
-    """METIS may leave a part empty; the sampler must not take the next part's first vertex."""
-    from spectrageo.compress._feature import _fps_parts
+def test_farthest_point_anchors_on_a_path_and_across_components():
+    """Scheme 1 is farthest-point sampling in hops: on a path 0-1-...-8 the anchors are 0, then
+    8, then 4; a second component gets its first vertex before any other second anchor."""
+    from spectrageo.compress._feature import _farthest_points
+    from spectrageo.graph import adjacency_matrix
 
     i64 = np.int64
-    indptr, indices = np.array([0, 1, 2, 2], i64), np.array([1, 0], i64)
-    label, order = np.array([0, 0, 2], i64), np.array([0, 1, 2], i64)
-    starts, want = np.array([0, 2, 2, 3, 3], i64), np.ones(4, i64)
+    path = np.array([[i, i + 1, i + 1] for i in range(8)])  # degenerate faces = the path's edges
+    C = adjacency_matrix(path, 9).tocsr()
+    out = np.empty(3, i64)
+    k = _farthest_points(C.indptr.astype(i64), C.indices.astype(i64), 3, out)
+    np.testing.assert_array_equal(out[:k], [0, 8, 4])
+    two = np.r_[path, path + 9]
+    C = adjacency_matrix(two, 18).tocsr()
     out = np.empty(4, i64)
-    k = _fps_parts(indptr, indices, label, order, starts, want, out)
-    np.testing.assert_array_equal(out[:k], [0, 2])
+    k = _farthest_points(C.indptr.astype(i64), C.indices.astype(i64), 4, out)
+    np.testing.assert_array_equal(out[:k], [0, 9, 8, 17])
 
 
 def test_feature_parameters_from_a_newer_anchor_scheme_are_refused():
