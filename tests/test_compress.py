@@ -228,23 +228,44 @@ def test_anchor_scheme_1_spreads_anchors_over_every_part_and_component():
     assert anchors(F, V.shape[0], 1.0, 0, 1).size == V.shape[0]
 
 
-def test_farthest_point_anchors_on_a_path_and_across_components():
-    """Scheme 1 is farthest-point sampling in hops: on a path 0-1-...-8 the anchors are 0, then
-    8, then 4; a second component gets its first vertex before any other second anchor."""
+def test_farthest_point_anchors_on_a_path_and_per_component():
+    """Scheme 1 is farthest-point sampling in hops, per connected component: on a path 0-1-...-8
+    the anchors are 0, then 8, then 4; each component gets its share of the anchors."""
     from spectrageo.compress._feature import _farthest_points
     from spectrageo.graph import adjacency_matrix
 
     i64 = np.int64
     path = np.array([[i, i + 1, i + 1] for i in range(8)])  # degenerate faces = the path's edges
     C = adjacency_matrix(path, 9).tocsr()
+    ip, ix = C.indptr.astype(i64), C.indices.astype(i64)
     out = np.empty(3, i64)
-    k = _farthest_points(C.indptr.astype(i64), C.indices.astype(i64), 3, out)
+    k = _farthest_points(ip, ix, np.arange(9, dtype=i64), np.array([0, 9], i64), np.array([3]), out)
     np.testing.assert_array_equal(out[:k], [0, 8, 4])
-    two = np.r_[path, path + 9]
-    C = adjacency_matrix(two, 18).tocsr()
-    out = np.empty(4, i64)
-    k = _farthest_points(C.indptr.astype(i64), C.indices.astype(i64), 4, out)
-    np.testing.assert_array_equal(out[:k], [0, 9, 8, 17])
+    C = adjacency_matrix(np.r_[path, path + 9], 18).tocsr()
+    ip, ix = C.indptr.astype(i64), C.indices.astype(i64)
+    out = np.empty(5, i64)
+    starts, want = np.array([0, 9, 18], i64), np.array([3, 2], i64)
+    k = _farthest_points(ip, ix, np.arange(18, dtype=i64), starts, want, out)
+    np.testing.assert_array_equal(out[:k], [0, 8, 4, 9, 17])
+
+
+def test_unused_vertices_do_not_take_the_surface_anchors():
+    """Scans hold many unused vertices and tiny pieces (the Stanford bunny: 1113 of its 1114
+    components are single vertices). Each needs an anchor of its own; the surface keeps its
+    share of ``fraction * n`` and the codec's error on it stays what it is without them."""
+    from spectrageo.compress._feature import anchors
+
+    V, F = icosphere(3)
+    V = V + 0.01 * np.random.default_rng(3).standard_normal(V.shape)
+    n0 = V.shape[0]
+    extra = np.random.default_rng(4).random((300, 3))
+    Vx = np.r_[V, extra]
+    a = anchors(F, Vx.shape[0], 0.05, 0, 1)
+    assert (a < n0).sum() >= int(round(0.05 * Vx.shape[0] * n0 / Vx.shape[0])) - 1
+    assert (a >= n0).sum() == 300
+    plain = compress.decode(compress.encode(V, F, method="feature"))[0]
+    mixed = compress.decode(compress.encode(Vx, F, method="feature"))[0]
+    assert _rms(V, mixed[:n0]) <= 1.5 * _rms(V, plain) + 1e-5
 
 
 def test_feature_parameters_from_a_newer_anchor_scheme_are_refused():
