@@ -228,25 +228,24 @@ def test_anchor_scheme_1_spreads_anchors_over_every_part_and_component():
     assert anchors(F, V.shape[0], 1.0, 0, 1).size == V.shape[0]
 
 
-def test_farthest_point_anchors_on_a_path_and_per_component():
-    """Scheme 1 is farthest-point sampling in hops, per connected component: on a path 0-1-...-8
-    the anchors are 0, then 8, then 4; each component gets its share of the anchors."""
+def test_farthest_point_anchors_on_a_path_and_across_components():
+    """Scheme 1 is farthest-point sampling in hops from one seed per component: on a path
+    0-1-...-8 seeded at 0 the next anchors are 8, then 4; with a second path seeded at 9 the
+    two ends tie at 8 hops and the smaller index goes first."""
     from spectrageo.compress._feature import _farthest_points
     from spectrageo.graph import adjacency_matrix
 
     i64 = np.int64
     path = np.array([[i, i + 1, i + 1] for i in range(8)])  # degenerate faces = the path's edges
     C = adjacency_matrix(path, 9).tocsr()
-    ip, ix = C.indptr.astype(i64), C.indices.astype(i64)
-    out = np.empty(3, i64)
-    k = _farthest_points(ip, ix, np.arange(9, dtype=i64), np.array([0, 9], i64), np.array([3]), out)
-    np.testing.assert_array_equal(out[:k], [0, 8, 4])
+    out = np.empty(2, i64)
+    k = _farthest_points(C.indptr.astype(i64), C.indices.astype(i64), np.array([0], i64), 2, out)
+    np.testing.assert_array_equal(out[:k], [8, 4])
     C = adjacency_matrix(np.r_[path, path + 9], 18).tocsr()
-    ip, ix = C.indptr.astype(i64), C.indices.astype(i64)
-    out = np.empty(5, i64)
-    starts, want = np.array([0, 9, 18], i64), np.array([3, 2], i64)
-    k = _farthest_points(ip, ix, np.arange(18, dtype=i64), starts, want, out)
-    np.testing.assert_array_equal(out[:k], [0, 8, 4, 9, 17])
+    out = np.empty(3, i64)
+    seeds = np.array([0, 9], i64)
+    k = _farthest_points(C.indptr.astype(i64), C.indices.astype(i64), seeds, 3, out)
+    np.testing.assert_array_equal(out[:k], [8, 17, 4])
 
 
 def test_unused_vertices_do_not_take_the_surface_anchors():
