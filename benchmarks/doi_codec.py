@@ -1,7 +1,7 @@
 """DOI against the exact per-submesh decomposition inside the spectral codec (issue 16, Fig. 5.58):
 encode and decode time, whole-file and geometry bits per vertex at equal RMS error.
 
-    python benchmarks/doi_codec.py      # writes benchmarks/_out/doi_codec.md (about 4 min)
+    python benchmarks/doi_codec.py      # writes benchmarks/_out/doi_codec.md (about 9 min)
 
 Variants of ``compress.encode(V, F, method="spectral", error=E, ...)`` on 300-vertex submeshes:
 
