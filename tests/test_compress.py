@@ -202,7 +202,7 @@ def test_files_with_the_first_anchor_scheme_decode_as_before(method):
     assert _rms(V, W) < 2 * _rms(V, want) + 1e-4
 
 
-def test_anchor_scheme_1_spreads_anchors_over_every_part_and_component():
+def test_anchor_scheme_1_spreads_anchors_over_every_component():
     """Scheme 1: about ``fraction * n`` anchors, deterministic, one in every connected
     component, and no vertex far (in hops) from an anchor on a regular grid."""
     from scipy.sparse.csgraph import shortest_path
