@@ -56,7 +56,7 @@ def available_commands() -> list[str]:
 def _readable_suffixes() -> tuple[str, ...]:
     from ..io import supported_formats
 
-    return tuple(s for s in supported_formats()["read"] if s.startswith(".")) + (".sgc", ".sga")
+    return tuple(s for s in supported_formats()["read"] if s.startswith("."))
 
 
 def _split_name(p: Path) -> tuple[str, str]:

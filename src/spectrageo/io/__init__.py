@@ -19,6 +19,10 @@ extension   read                                       write
 ``.npz``    MeshAnimation (``vertices``, ``faces``)    MeshAnimation, PointCloudSequence
             or PointCloudSequence (``points``
             (T, n, 3), or (N, 3) + ``counts`` (T,))
+``.sgc``    mesh compressed by spectrageo.compress,    (``spectrageo compress``: lossy, takes
+            decoded (order as coded)                   a method and a rate)
+``.sga``    animation compressed by                    (``spectrageo compress``)
+            spectrageo.compress, decoded
 folder/     numbered frames (``frame_000.obj`` ...,    MeshAnimation, PointCloudSequence
             natural order) -> animation when all have  (``frame_format=".ply"`` default)
             faces (shared connectivity), else sequence

@@ -55,6 +55,7 @@ _READER_SPECS: dict[str, tuple[str, str, dict[str, Any]]] = {
     ".glb": ("_trimesh_formats", "read_glb", {}),
     ".gltf": ("_trimesh_formats", "read_gltf", {}),
     ".3mf": ("_trimesh_formats", "read_3mf", {}),
+    ".sgc": ("_sgc", "read_sgc", {}),
 }
 
 
@@ -76,13 +77,14 @@ def supported_formats() -> dict[str, Any]:
     Returns
     -------
     dict
-        ``"read"``: extensions of single files (each also readable gzip-compressed, ``.ply.gz``...) plus
-        ``".npz"`` (animation or sequence) and ``"<folder>/"`` (numbered frame files);
+        ``"read"``: extensions of single files (each also readable gzip-compressed, ``.ply.gz``...;
+        ``.sgc``: a compressed mesh, decoded) plus ``".npz"`` (animation or sequence), ``".sga"``
+        (a compressed animation, decoded) and ``"<folder>/"`` (numbered frame files);
         ``"write"``: extensions per object type (``"mesh"``, ``"points"``, ``"animation"``,
         ``"sequence"``); ``"compression"``: ``[".gz"]``, appendable to every single-file format.
     """
     return {
-        "read": [*_READER_SPECS, ".npz", "<folder>/"],
+        "read": [*_READER_SPECS, ".npz", ".sga", "<folder>/"],
         "write": {
             "mesh": list(_MESH_WRITE),
             "points": list(_POINTS_WRITE),
@@ -162,8 +164,9 @@ def read(
     ----------
     path : str or path-like
         A file (``.ply .obj .off .stl .pcd .xyz .npy .las .laz .glb .gltf .3mf``, each optionally
-        ``.gz``), a ``.npz``
-        animation/sequence, or a folder of numbered frame files.
+        ``.gz``), a ``.npz`` animation/sequence, a compressed mesh (``.sgc``) or animation
+        (``.sga``) of :mod:`spectrageo.compress` (decoded whole; a cut file is an error, see
+        ``decode(..., partial=True)``), or a folder of numbered frame files.
     kind : {"mesh", "points", "animation", "sequence"} or None
         Force the interpretation. None: a file with faces gives a :class:`Mesh`, without faces a
         :class:`PointCloud`; ``.npz`` with ``faces`` a :class:`MeshAnimation`, with ``points`` a
@@ -285,8 +288,11 @@ def _read_with_report(
     if suffix == ".npz":
         geom = _read_npz(p, gz, kind=kind)
         return geom, ReadReport(n_input_vertices=_n_rows(geom))
+    if suffix == ".sga":
+        geom = _read_sga(p, gz, kind=kind)
+        return geom, ReadReport(n_input_vertices=_n_rows(geom))
     if suffix not in _READER_SPECS:
-        raise _unsupported(p, suffix, [*_READER_SPECS, ".npz"])
+        raise _unsupported(p, suffix, [*_READER_SPECS, ".npz", ".sga"])
     if kind in ("animation", "sequence"):
         raise InvalidInputError(
             f"{p.name}: a single {suffix} file cannot be read as {kind!r}; "
@@ -504,6 +510,15 @@ def _npz_array(d, key: str, name: str) -> np.ndarray:
     ) as exc:
         raise InvalidInputError(f"{name}: cannot read array {key!r} ({exc_text(exc)}).") from exc
     return parse_npy(raw, f"{name}: cannot read array {key!r}")
+
+
+def _read_sga(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCloudSequence:
+    data = read_bytes(p, gz)
+    if not data:
+        raise InvalidInputError(f"{p.name}: empty file.")
+    from ._sgc import read_sga
+
+    return read_sga(data, p.name, kind=kind)
 
 
 def _read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCloudSequence:
@@ -782,6 +797,10 @@ def write(path: str | os.PathLike, obj: Any, *, binary: bool = True, **kw: Any) 
             _write_folder(p, geom, binary=binary, **kw)
             return
         suffix, gz = split_suffix(p)
+        if suffix in (".sga", ".sgc"):
+            from ._sgc import WRITE_ADVICE
+
+            raise UnsupportedFormatError(f"{p.name}: {WRITE_ADVICE}")
         if suffix != ".npz":
             raise _unsupported(p, suffix, [".npz", "<folder>/"])
         _write_npz(p, geom, gz=gz, compress=bool(kw.get("compress", False)))
@@ -798,6 +817,10 @@ def write(path: str | os.PathLike, obj: Any, *, binary: bool = True, **kw: Any) 
 
 def _serialise(p: Path, geom: Mesh | PointCloud, suffix: str, *, binary: bool, **kw: Any) -> bytes:
     dtype = kw.get("dtype")
+    if suffix in (".sgc", ".sga"):
+        from ._sgc import WRITE_ADVICE
+
+        raise UnsupportedFormatError(f"{p.name}: {WRITE_ADVICE}")
     if isinstance(geom, Mesh):
         if suffix not in _MESH_WRITE:
             extra = (
