@@ -159,3 +159,23 @@ def test_viewer_session_opens_compressed_uploads(sphere_sgc, wave_sga):
     assert isinstance(a.obj, MeshAnimation) and a.obj.n_frames == 12
     with pytest.raises(InvalidInputError, match=r"could not read cut\.sgc: .*truncated"):
         s.load_bytes(sphere_sgc[2][:-40], "cut.sgc")
+
+
+def test_compress_no_weld_keeps_a_soup_and_hints_name_real_options(tmp_path, capsys):
+    V, F = icosphere(1)
+    soup = Mesh(V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3))
+    src = tmp_path / "soup.obj"
+    io.write(src, soup)
+    capsys.readouterr()
+    assert main(["compress", str(src), str(tmp_path / "w.sgc")]) == 0
+    err = capsys.readouterr().err
+    assert "welded 240 vertices into 42 (triangle soup; --no-weld keeps them apart)" in err
+    assert io.read(tmp_path / "w.sgc", weld=False).n_vertices == 42
+    assert main(["compress", str(src), str(tmp_path / "s.sgc"), "--no-weld"]) == 0
+    assert "welded" not in capsys.readouterr().err
+    raw = io.read(tmp_path / "s.sgc", weld=False)
+    assert raw.n_vertices == 240 and np.array_equal(raw.faces, soup.faces)
+    # metrics has no --no-weld: the message does not offer it
+    assert main(["metrics", str(src), str(src)]) == 0
+    err = capsys.readouterr().err
+    assert "(triangle soup)" in err and "--no-weld" not in err

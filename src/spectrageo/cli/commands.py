@@ -49,18 +49,19 @@ def _status(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
 
-def _read(path, *, kind=None, weld=None, nan_points=None):
-    """Read through :func:`spectrageo.io.read_with_report` and say on stderr what was repaired."""
+def _read(path, *, kind=None, weld=None, nan_points=None, no_weld_option=False):
+    """Read through :func:`spectrageo.io.read_with_report` and say on stderr what was repaired
+    (``no_weld_option``: the command has ``--no-weld``, which the message then mentions)."""
     from .. import io
 
     obj, rep = io.read_with_report(path, kind=kind, weld=weld, nan_points=nan_points)
     name = Path(path).name
     if rep.n_merged_vertices:
         extra = f", {rep.n_dropped_faces} collapsed faces dropped" if rep.n_dropped_faces else ""
+        keep = "; --no-weld keeps them apart" if no_weld_option else ""
         _status(
             f"{name}: welded {rep.n_input_vertices} vertices into "
-            f"{rep.n_input_vertices - rep.n_merged_vertices} (triangle soup; --no-weld keeps "
-            f"them apart){extra}"
+            f"{rep.n_input_vertices - rep.n_merged_vertices} (triangle soup{keep}){extra}"
         )
     if rep.n_nonfinite_rows:
         _status(
@@ -193,7 +194,7 @@ def cmd_convert(args) -> int:
 
     _check_outputs([args.input], [args.output])
     weld = True if args.weld else False if args.no_weld else None
-    obj, _rep = _read(args.input, kind=args.kind, weld=weld)
+    obj, _rep = _read(args.input, kind=args.kind, weld=weld, no_weld_option=True)
     suffix = split_suffix(Path(args.output))[0]
     if isinstance(obj, Mesh) and suffix in _POINTS_WRITE and suffix not in _MESH_WRITE:
         raise _err(
@@ -296,7 +297,7 @@ def cmd_denoise(args) -> int:
     from ..geometry import Mesh, MeshAnimation, PointCloud
 
     _check_outputs([args.input], [args.output])
-    obj, _rep = _read(args.input, weld=False if args.no_weld else None)
+    obj, _rep = _read(args.input, weld=False if args.no_weld else None, no_weld_option=True)
     opts = {}
     if args.preset:
         opts["preset"] = args.preset

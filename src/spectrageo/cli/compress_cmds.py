@@ -47,11 +47,11 @@ def _status(msg: str) -> None:
     commands._status(msg)
 
 
-def _read_mesh(path: str):
+def _read_mesh(path: str, *, no_weld: bool = False):
     from ..geometry import Mesh
     from .commands import _read
 
-    obj, _rep = _read(path, kind="mesh")
+    obj, _rep = _read(path, kind="mesh", weld=False if no_weld else None, no_weld_option=True)
     if not isinstance(obj, Mesh):
         raise InvalidInputError(f"{path!r} is not a triangle mesh ({type(obj).__name__}).")
     return obj
@@ -143,7 +143,7 @@ def cmd_compress(args) -> int:
             f"--method {method!r} is an animation codec; meshes take one of "
             f"{list(compress.METHODS)}."
         )
-    mesh = _read_mesh(args.input)
+    mesh = _read_mesh(args.input, no_weld=args.no_weld)
     d, dt = _encode_to(
         args.output,
         compress.encode,
@@ -268,6 +268,12 @@ def register(sub) -> None:
         "--reorder",
         action="store_true",
         help="let the codec renumber vertices and faces for a smaller file",
+    )
+    p.add_argument(
+        "--no-weld",
+        action="store_true",
+        help="meshes: code the vertices as stored; by default STL files and triangle soups are "
+        "welded on reading (their corners merged), as every command reads them",
     )
     p.set_defaults(func=cmd_compress)
 
