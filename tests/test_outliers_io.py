@@ -11,6 +11,12 @@ from spectrageo.cli.main import main
 from spectrageo.geometry import PointCloud, PointCloudSequence
 
 
+def _soup_mesh(V):
+    from spectrageo.geometry import Mesh
+
+    return Mesh(V, np.arange(V.shape[0]).reshape(-1, 3))
+
+
 def _cloud(n=2000, seed=0):
     rng = np.random.default_rng(seed)
     P = rng.standard_normal((n, 3))
@@ -49,6 +55,22 @@ def test_cli_outliers_mask_scores_colours(tmp_path, capsys, method):
     np.testing.assert_allclose(out.points, pc.points[keep])
     np.testing.assert_array_equal(out.colors[:, :3], pc.colors[keep])
     assert "kept" in capsys.readouterr().err
+
+
+
+def test_cli_outliers_on_a_welded_soup_counts_what_the_mask_covers(tmp_path, capsys):
+    import trimesh
+
+    m = trimesh.creation.icosphere(2)
+    V = np.asarray(m.vertices)[np.asarray(m.faces)].reshape(-1, 3)
+    src = tmp_path / "soup.stl"
+    io.write(src, _soup_mesh(V))
+    mask = tmp_path / "keep.npy"
+    assert main(["outliers", str(src), str(tmp_path / "o.ply"), "--mask", str(mask)]) == 0
+    keep = np.load(mask)
+    err = capsys.readouterr().err
+    assert keep.shape == (162,)  # the welded vertices, not the 960 corners of the file
+    assert f"kept {int(keep.sum())} of 162 points" in err
 
 
 def test_cli_outliers_sequence(tmp_path):

@@ -433,9 +433,9 @@ def cmd_outliers(args) -> int:
         extra = f"; {int(kept_faces.sum())} of {obj.n_faces} faces kept (those of kept vertices)"
     else:
         out = res.points if isinstance(res.points, PointCloud) else obj.select(keep)
-    n_in = rep.n_input_vertices
     if rep.source_index is not None:
         # masks and scores cover every input row: rows without coordinates are not kept, score inf
+        n_in = rep.n_input_vertices
         full_keep = np.zeros(n_in, dtype=bool)
         full_keep[rep.source_index] = keep
         full_scores = np.full(n_in, np.inf)
@@ -454,8 +454,10 @@ def cmd_outliers(args) -> int:
             f"{i.get('n_cluster_outliers', 0)} in small outlier clusters, estimated "
             f"contamination {100 * i.get('contamination', 0.0):.1f} %"
         )
+    # of the rows the mask covers: every input row, or the vertices a triangle soup welded into
     _status(
-        f"wrote {args.output}: kept {int(np.sum(res.keep))} of {n_in} points ({args.method}){extra}"
+        f"wrote {args.output}: kept {int(np.sum(res.keep))} of {keep.shape[0]} points "
+        f"({args.method}){extra}"
     )
     return 0
 
