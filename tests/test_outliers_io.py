@@ -57,7 +57,6 @@ def test_cli_outliers_mask_scores_colours(tmp_path, capsys, method):
     assert "kept" in capsys.readouterr().err
 
 
-
 def test_cli_outliers_on_a_welded_soup_counts_what_the_mask_covers(tmp_path, capsys):
     import trimesh
 
