@@ -105,6 +105,24 @@ def test_batch_same_names_keep_folders(tmp_path):
     ]
 
 
+def test_batch_writes_compressed_inputs_decoded(tmp_path):
+    from spectrageo import compress
+
+    m = _grid_mesh()
+    (tmp_path / "m.sgc").write_bytes(compress.encode(m.vertices, m.faces))
+    outs = distributed.output_paths("denoise", [tmp_path / "m.sgc"], tmp_path / "o")
+    assert [o.name for o in outs] == ["m.ply"]
+    assert distributed.output_paths("compress", [tmp_path / "m.sgc"], tmp_path / "c")[0].name == (
+        "m.sgc"
+    )
+    assert distributed.output_paths("denoise", [tmp_path / "a.sga"], tmp_path / "o")[0].name == (
+        "a.npz"
+    )
+    recs = distributed.batch("denoise", [tmp_path / "m.sgc"], tmp_path / "o", processes=False)
+    assert recs[0]["status"] == "ok", recs[0]
+    assert io.read(tmp_path / "o" / "m.ply").n_vertices == m.n_vertices
+
+
 def test_batch_outliers_and_saliency(tmp_path):
     io.write(tmp_path / "c.ply", PointCloud(_cloud(1500, 50)))
     recs = distributed.batch("outliers", [tmp_path / "c.ply"], tmp_path / "o", processes=False)

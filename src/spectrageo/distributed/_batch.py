@@ -118,7 +118,13 @@ def _output_suffix(command: str, in_suffix: str, suffix: str | None) -> str:
     if command == "saliency":
         return ".npy"
     if command == "compress":
-        return ".sga" if in_suffix.lower().startswith(".npz") else ".sgc"
+        return ".sga" if in_suffix.lower().startswith((".npz", ".sga")) else ".sgc"
+    # a compressed input is written decoded: .sgc meshes as PLY, .sga animations as .npz (a
+    # command writes geometry, which only `compress` turns into a rate-controlled file)
+    if in_suffix.lower().startswith(".sgc"):
+        return ".ply"
+    if in_suffix.lower().startswith(".sga"):
+        return ".npz"
     return in_suffix
 
 
@@ -351,7 +357,8 @@ def batch(
         Skip inputs whose output exists (outputs are written atomically, so an existing output is
         a finished one).
     suffix : str, optional
-        Output format (``".ply"``); default the input's (``.npy`` for saliency, ``.sgc``/``.sga``
+        Output format (``".ply"``); default the input's (``.ply`` / ``.npz`` for compressed
+        ``.sgc`` / ``.sga`` inputs, ``.npy`` for saliency, ``.sgc``/``.sga``
         for compress; required for convert).
     summary : path, optional
         JSON summary (default ``out_dir/batch-summary.json``).
