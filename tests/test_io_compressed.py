@@ -179,3 +179,15 @@ def test_compress_no_weld_keeps_a_soup_and_hints_name_real_options(tmp_path, cap
     assert main(["metrics", str(src), str(src)]) == 0
     err = capsys.readouterr().err
     assert "(triangle soup)" in err and "--no-weld" not in err
+
+
+def test_compress_takes_sga_and_gzipped_npz_animations(wave_sga, tmp_path):
+    frames, F, data, p = wave_sga
+    out = tmp_path / "again.sga"
+    assert main(["compress", str(p), str(out), "--method", "pca", "--bpvf", "12"]) == 0
+    a = io.read(out)
+    assert isinstance(a, MeshAnimation) and a.n_frames == frames.shape[0]
+    npz = tmp_path / "w.npz.gz"
+    io.write(npz, MeshAnimation(frames, F))
+    assert main(["compress", str(npz), str(tmp_path / "w.sga")]) == 0
+    assert io.read(tmp_path / "w.sga").n_frames == frames.shape[0]

@@ -65,8 +65,11 @@ def _read_sgc(path: str) -> bytes:
 
 
 def _is_animation_input(path: str) -> bool:
+    """A folder of frames, a ``.npz`` or a ``.sga`` file (each optionally gzip-compressed)."""
+    from ..io._common import split_suffix
+
     p = Path(path)
-    return p.is_dir() or p.suffix.lower() == ".npz"
+    return p.is_dir() or split_suffix(p)[0] in (".npz", ".sga")
 
 
 def cmd_compress_animation(args) -> int:
