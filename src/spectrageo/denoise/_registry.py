@@ -20,6 +20,7 @@ from ._guard import (
     TRUST,
     apply_trust,
     despike,
+    is_folded,
     noise_estimate,
     noise_sigma,
     planar_share,
@@ -135,7 +136,12 @@ def denoise(
         coplanar, :func:`spectrageo.denoise._guard.planar_share`, Eq. N9: a CAD export, which
         dense noise would have tilted) is returned unchanged, or with only its sparse impulses
         repaired when ``impulses`` is set, the repair's first pass flags at least 1 % of the
-        vertices and the repaired mesh has more coplanar face pairs than the input.
+        vertices and the repaired mesh has more coplanar face pairs than the input. A folded
+        mesh (at least :data:`spectrageo.denoise._guard.FOLD_SHARE` of the face pairs sharing an
+        edge turned by more than 120 degrees against each other, on 50 vertices or more:
+        :func:`spectrageo.denoise._guard.is_folded`, Eq. N10; no clean mesh of the tuning data
+        comes near it) is never called clean: the gate's tests are skipped and the method runs
+        (``tsgsp`` then smooths it with :func:`spectrageo.denoise._guard.unfold`).
     impulses : bool
         Sparse impulses (:func:`spectrageo.denoise._guard.despike`, Eqs. N5-N8, not in the
         thesis): on a mesh the gate calls noisy, isolated spikes are pulled back first when at
@@ -192,9 +198,13 @@ def denoise(
     share = 0.0  # coplanar face-pair share (Eq. N9) of the mesh the gate measured
     quiet = False  # the gate found no dense noise (level below min_noise)
     tail = 1.0  # lower-tail ratio (Eq. N4) of the mesh the gate measured
+    folded = False  # folded mesh (Eq. N10): noisy whatever the gate's other tests say
+    gated = False  # the gate ran on the input as given
     if min_noise > 0 and not is_soup(F, V.shape[0]):
-        share = planar_share(V, F)
-        if share < PLANAR_SHARE:
+        gated = True
+        folded = is_folded(V, F)
+        share = 0.0 if folded else planar_share(V, F)
+        if not folded and share < PLANAR_SHARE:
             est = noise_estimate(V, F=F)
             sigma, level, tail = est.sigma, est.level, est.tail
             if level < min_noise:
@@ -206,11 +216,12 @@ def denoise(
     Vw, Fw = (w.vertices, w.faces) if welded else (V, F)
     if Fw.shape[0] == 0:
         return V.copy()  # every face collapsed when coincident vertices were merged
-    if welded and min_noise > 0 and sigma is None:
+    if welded and min_noise > 0 and (not gated or (sigma is None and not folded)):
         # a soup is gated here; a planar mesh's share is measured again on the welded mesh,
         # against which the impulse repair is compared
-        share = planar_share(Vw, Fw)
-        if share < PLANAR_SHARE:
+        folded = is_folded(Vw, Fw)
+        share = 0.0 if folded else planar_share(Vw, Fw)
+        if not folded and share < PLANAR_SHARE:
             est = noise_estimate(Vw, F=Fw)
             sigma, level, tail = est.sigma, est.level, est.tail
             if level < min_noise:

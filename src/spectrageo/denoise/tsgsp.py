@@ -53,7 +53,7 @@ from ..graph import adjacency_matrix
 from ..graph.adjacency import knn
 from ..linalg._common import single_thread_blas
 from ..spectral import overlapped_submeshes, reassemble, submesh_eigenbases
-from ._guard import apply_trust, noise_sigma
+from ._guard import apply_trust, is_folded, noise_sigma, unfold
 from ._normals import fast_update_vertices, mean_centroid_distance
 from ._registry import register
 from ._tsgsp_mbl import RULES, _mbl_search
@@ -1022,6 +1022,7 @@ def tsgsp(
     input_tangent: float | str = "auto",
     trust: float | None = 6.0,
     sigma_z: float | None = None,
+    folds: bool = True,
     rng=0,
     **fine_options,
 ) -> np.ndarray:
@@ -1063,6 +1064,16 @@ def tsgsp(
     sigma_z : float, optional
         The noise standard deviation of the trust bound when already estimated (by
         :func:`spectrageo.denoise.denoise`'s gate); default estimated here.
+    folds : bool
+        Folded meshes (not in the thesis; module notes of :mod:`spectrageo.denoise._guard`,
+        "Folded meshes", Eq. N10): when at least
+        :data:`~spectrageo.denoise._guard.FOLD_SHARE` (0.14) of the face pairs sharing an edge
+        turn by more than 120 degrees against each other (on meshes of 50 vertices or more,
+        :func:`~spectrageo.denoise._guard.is_folded`), the noise has flipped triangles and
+        the face normals Algorithm 2 filters carry no surface information; such a mesh is
+        smoothed by :func:`~spectrageo.denoise._guard.unfold` (Taubin's lambda|mu low-pass, a
+        polynomial graph spectral filter, until the folds are gone) instead, without the trust
+        bound (the noise estimate fails on such meshes). False: Algorithm 2 whatever the folds.
     rng : seed or Generator
         Seeds METIS and the subspace starts; results are deterministic for a seed.
     **fine_options
@@ -1104,6 +1115,10 @@ def tsgsp(
     if trust is not None:
         check_positive(trust, "trust")
     V = as_points(V, "V")
+    if not isinstance(folds, bool | np.bool_):
+        raise InvalidInputError(f"`folds` must be True or False; got {folds!r}.")
+    if folds and is_folded(V, F):
+        return unfold(V, F)
     if V.shape[0] < 8 and not coarse_options:
         # too few vertices for a spectrum: the fine step alone (documented in Notes)
         return fine(V, F, preset=preset, **fine_options)
