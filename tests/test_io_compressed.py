@@ -15,13 +15,16 @@ from spectrageo.geometry.data import Mesh, MeshAnimation, PointCloud, PointCloud
 from conftest import icosphere
 
 
+def _saved(tmp_path_factory, name: str, data: bytes):
+    p = tmp_path_factory.mktemp("compressed") / name
+    p.write_bytes(data)
+    return data, p
+
+
 @pytest.fixture(scope="module")
 def sphere_sgc(tmp_path_factory):
     V, F = icosphere(3)
-    data = compress.encode(V, F, method="spectral")
-    p = tmp_path_factory.mktemp("sgc") / "sphere.sgc"
-    p.write_bytes(data)
-    return V, F, data, p
+    return V, F, *_saved(tmp_path_factory, "sphere.sgc", compress.encode(V, F))
 
 
 @pytest.fixture(scope="module")
@@ -30,9 +33,7 @@ def wave_sga(tmp_path_factory):
     t = np.linspace(0.0, 1.0, 12)[:, None, None]
     frames = V[None] * (1.0 + 0.1 * np.sin(2 * np.pi * t + V[None, :, :1]))
     data = compress.encode_animation(frames, F, method="pca-qp")
-    p = tmp_path_factory.mktemp("sga") / "wave.sga"
-    p.write_bytes(data)
-    return frames, F, data, p
+    return frames, F, *_saved(tmp_path_factory, "wave.sga", data)
 
 
 def test_sgc_reads_as_the_decoded_mesh(sphere_sgc):

@@ -598,43 +598,37 @@ def noise_level(V, *, F=None, patch: int = 16, quantile: float = 0.25) -> float:
     return noise_sigma(V, F=F, patch=patch, quantile=quantile)[1]
 
 
-def _pair_cosines(V, F) -> tuple[np.ndarray, np.ndarray] | None:
-    """Cosines of the unit normals of the face pairs sharing an edge, and whether both faces
-    of a pair have a normal (are not degenerate); None when no edge is shared by two faces."""
+def _pair_share(V, F, angle: float, *, turned: bool) -> float:
+    """Share of the face pairs sharing an edge whose unit normals agree within ``angle`` degrees
+    (``turned=False``) or differ by more (``turned=True``); 0.0 when no edge is shared by two
+    faces. Degenerate faces (no normal) count in neither."""
+    check_positive(angle, "angle")
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     if F.shape[0] < 2:
-        return None
+        return 0.0
     A = sp.triu(face_adjacency(F), k=1).tocoo()
     if A.nnz == 0:
-        return None
+        return 0.0
     N = face_normals(V, F)
     ok = np.linalg.norm(N, axis=1) > 0.5
-    return np.einsum("ij,ij->i", N[A.row], N[A.col]), ok[A.row] & ok[A.col]
+    c = np.einsum("ij,ij->i", N[A.row], N[A.col])
+    t = np.cos(np.radians(angle))
+    return float(np.mean(((c < t) if turned else (c >= t)) & ok[A.row] & ok[A.col]))
 
 
 def planar_share(V, F, *, angle: float = PLANAR_DEG) -> float:
     """Share of the face pairs sharing an edge whose unit normals agree within ``angle``
     degrees (Eq. N9 of the module notes); 0.0 when no edge is shared by two faces. Degenerate
     faces (no normal) never count as coplanar."""
-    check_positive(angle, "angle")
-    pc = _pair_cosines(V, F)
-    if pc is None:
-        return 0.0
-    c, ok = pc
-    return float(np.mean((c >= np.cos(np.radians(angle))) & ok))
+    return _pair_share(V, F, angle, turned=False)
 
 
 def fold_share(V, F, *, angle: float = FOLD_DEG) -> float:
     """Share of the face pairs sharing an edge whose unit normals differ by more than ``angle``
     degrees (Eq. N10 of the module notes); 0.0 when no edge is shared by two faces. Degenerate
     faces (no normal) never count as folded."""
-    check_positive(angle, "angle")
-    pc = _pair_cosines(V, F)
-    if pc is None:
-        return 0.0
-    c, ok = pc
-    return float(np.mean((c < np.cos(np.radians(angle))) & ok))
+    return _pair_share(V, F, angle, turned=True)
 
 
 def is_folded(V, F) -> bool:
