@@ -192,3 +192,16 @@ def test_compress_takes_sga_and_gzipped_npz_animations(wave_sga, tmp_path):
     io.write(npz, MeshAnimation(frames, F))
     assert main(["compress", str(npz), str(tmp_path / "w.sga")]) == 0
     assert io.read(tmp_path / "w.sga").n_frames == frames.shape[0]
+
+
+def test_decompress_and_info_take_gzipped_files(sphere_sgc, tmp_path, capsys):
+    V, F, data, p = sphere_sgc
+    gz = tmp_path / "s.sgc.gz"
+    gz.write_bytes(gzip.compress(data))
+    assert main(["decompress", str(gz), str(tmp_path / "s.ply")]) == 0
+    assert np.allclose(io.read(tmp_path / "s.ply").vertices, compress.decode(data)[0])
+    capsys.readouterr()
+    assert main(["info", str(gz), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["method"] == "spectral"
+    assert main(["decompress", str(tmp_path / "missing.sgc"), str(tmp_path / "m.ply")]) == 2
+    assert "file not found" in capsys.readouterr().err

@@ -150,7 +150,7 @@ def describe(obj) -> dict:
 
 
 def cmd_info(args) -> int:
-    if str(args.file).lower().endswith((".sgc", ".sga")):  # compressed file: header summary
+    if str(args.file).lower().endswith((".sgc", ".sga", ".sgc.gz", ".sga.gz")):  # header summary
         from .compress_cmds import cmd_info_sgc
 
         return cmd_info_sgc(args)

@@ -58,10 +58,15 @@ def _read_mesh(path: str, *, no_weld: bool = False):
 
 
 def _read_sgc(path: str) -> bytes:
+    """The bytes of a .sgc / .sga file, gunzipped when its name ends with .gz."""
+    from ..io._common import read_bytes, split_suffix
+
     p = Path(path)
     if p.is_dir():
         raise InvalidInputError(f"{path!r} is a folder, not a .sgc file.")
-    return p.read_bytes()
+    if not p.exists():
+        raise InvalidInputError(f"file not found: {p}")
+    return read_bytes(p, split_suffix(p)[1])
 
 
 def _is_animation_input(path: str) -> bool:
