@@ -64,3 +64,20 @@ def test_clean_meshes_are_far_from_the_fold_rule(shared_data):
             worst = max(worst, fold_share(m.vertices, m.faces))
     # largest share among them: 0.070 (dragon_vrip_res3, a VRIP reconstruction)
     assert worst < FOLD_SHARE / 1.5
+
+
+def test_cli_says_when_the_folded_path_ran(tmp_path, capsys):
+    from spectrageo.cli.main import main
+    from spectrageo.geometry import Mesh
+
+    V, F = _rim_cylinder()
+    Vn = generate(V, F, kind="gaussian-normal", level=0.3, rng=1).vertices
+    src = tmp_path / "noisy.ply"
+    io.write(src, Mesh(Vn, F))
+    capsys.readouterr()
+    assert main(["denoise", str(src), str(tmp_path / "out.ply")]) == 0
+    assert "flipped triangles" in capsys.readouterr().err
+    assert np.allclose(io.read(tmp_path / "out.ply").vertices, denoise(Vn, F))
+    io.write(src, Mesh(V, F))
+    assert main(["denoise", str(src), str(tmp_path / "out.ply")]) == 0
+    assert "flipped triangles" not in capsys.readouterr().err

@@ -71,6 +71,15 @@ def _read(path, *, kind=None, weld=None, nan_points=None, no_weld_option=False):
     return obj, rep
 
 
+def _folded(V, F, weld: bool) -> bool:
+    """Whether TSGSP took its folded-mesh path on this input (as ``denoise`` sees it)."""
+    from ..denoise._guard import is_folded
+    from ..geometry.repair import weld as weld_mesh
+
+    w = weld_mesh(V, F) if weld else None
+    return is_folded(w.vertices, w.faces) if w is not None and w.n_merged else is_folded(V, F)
+
+
 def _same_file(a, b) -> bool:
     pa, pb = Path(a), Path(b)
     try:
@@ -332,6 +341,12 @@ def cmd_denoise(args) -> int:
         if np.array_equal(Vd, obj.vertices):
             # the do-no-harm gate (spectrageo.denoise._guard) found no noise, or only detail
             _status("no noise found: the vertices are written unchanged")
+        elif args.method == "tsgsp" and _folded(obj.vertices, obj.faces, not args.no_weld):
+            _status(
+                "the noise has flipped triangles (folded mesh, Eq. N10 of "
+                "spectrageo.denoise._guard): smoothed by lambda|mu blocks until the folds are "
+                "gone instead of TSGSP's normal filtering"
+            )
     elif isinstance(obj, MeshAnimation):
         dyn = getattr(denoise, "dynamic_methods", lambda: [])()
         if args.method == "dae" and args.train_frames is not None:
