@@ -255,10 +255,10 @@ Folded meshes (:func:`fold_share`, :func:`unfold`, issue 14). Noise larger than 
 of a tessellation flips triangles: on CAD exports with long thin triangles, Gaussian noise of 0.3
 mean edge lengths turns a fifth to two fifths of the face pairs sharing an edge by more than 120
 degrees against each other, and on organic meshes noise in random directions at 0.5 does the
-same to a fifth or a quarter. There the statistics above fail (patches of 16 vertices fit the thin strips
-of such meshes exactly, so the level comes out near 0 or the residual passes the detail test,
-and the gate returned noisy rim-sampled cylinders unchanged), and the face normals that
-Algorithm 2 filters no longer say where the surface is. With
+same to a fifth or a quarter. There the statistics above fail (patches of 16 vertices fit the
+thin strips of such meshes exactly, so the level comes out near 0 or the residual passes the
+detail test, and the gate returned noisy rim-sampled cylinders unchanged), and the face normals
+that Algorithm 2 filters no longer say where the surface is. With
 
     (N10)  f = |{edges e = (f, g): angle(n_f, n_g) > FOLD_DEG}| / |{edges shared by two faces}|
 
@@ -281,9 +281,10 @@ setting the protocol's tuning split chose for the peers (50 pairs), cut short wh
 are gone, which keeps a 132-vertex CAD cube from being smoothed to a blob (80 degrees after 50
 pairs). The vertex minimum keeps tiny models whose few faces turn sharply as their shape out of
 the rule (half the face pairs of a corner tetrahedron turn by 125 degrees); 50 is the size of
-the smallest tuning model the rule was measured on (a synthetic cone). Known limits: on some CAD tessellations at noise 0.1-0.3 (trimesh's ``box``,
-``20mm-xyz-cube``) the smoothing is worse than Algorithm 2 or than the noisy input; the
-result is a smooth surface, not a recovered CAD part. The rule was designed after the
+the smallest tuning model the rule was measured on (a synthetic cone). Known limits: on some
+CAD tessellations at noise 0.1-0.3 (trimesh's ``box``, ``20mm-xyz-cube``) the smoothing is
+worse than Algorithm 2 or than the noisy input; the result is a smooth surface, not a
+recovered CAD part. The rule was designed after the
 protocol's validation split showed TSGSP behind Taubin on heavy noise on CAD tessellations
 (``cad/cycloidal``, ``plate_holes``, ``cheese``), so those rows are not unseen for it, though
 no value was set on them.

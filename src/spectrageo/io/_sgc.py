@@ -1,4 +1,4 @@
-"""Compressed files of :mod:`spectrageo.compress` as inputs: ``.sgc`` meshes and ``.sga`` animations.
+"""Compressed files of :mod:`spectrageo.compress` as inputs: ``.sgc`` meshes, ``.sga`` animations.
 
 Reading decodes the whole file (:func:`spectrageo.compress.decode` /
 :func:`~spectrageo.compress.decode_animation`), so every command, the viewer and the batch runner
