@@ -81,3 +81,31 @@ def test_cli_says_when_the_folded_path_ran(tmp_path, capsys):
     io.write(src, Mesh(V, F))
     assert main(["denoise", str(src), str(tmp_path / "out.ply")]) == 0
     assert "flipped triangles" not in capsys.readouterr().err
+
+
+def test_the_gate_decision_reaches_tsgsp_once(monkeypatch):
+    """denoise() measures the folds once and hands its decision to tsgsp (like sigma_z)."""
+    import spectrageo.denoise._guard as guard
+
+    V, F = _rim_cylinder()
+    Vn = generate(V, F, kind="gaussian-normal", level=0.3, rng=1).vertices
+    calls = []
+    real = guard.fold_share
+
+    def counting(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(guard, "fold_share", counting)
+    X = denoise(Vn, F)
+    in_denoise = len(calls)
+    calls.clear()
+    assert np.array_equal(X, unfold(Vn, F))
+    in_unfold = len(calls)  # unfold measures once per block of pairs
+    assert in_unfold >= 1
+    assert in_denoise == in_unfold + 1  # the gate's measurement; none more inside tsgsp
+    calls.clear()
+    tsgsp(Vn, F, folded=False)
+    assert not calls  # the given decision is used as it is
+    with pytest.raises(InvalidInputError, match="folded"):
+        tsgsp(Vn, F, folded="no")

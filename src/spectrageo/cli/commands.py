@@ -71,15 +71,6 @@ def _read(path, *, kind=None, weld=None, nan_points=None, no_weld_option=False):
     return obj, rep
 
 
-def _folded(V, F, weld: bool) -> bool:
-    """Whether TSGSP took its folded-mesh path on this input (as ``denoise`` sees it)."""
-    from ..denoise._guard import is_folded
-    from ..geometry.repair import weld as weld_mesh
-
-    w = weld_mesh(V, F) if weld else None
-    return is_folded(w.vertices, w.faces) if w is not None and w.n_merged else is_folded(V, F)
-
-
 def _same_file(a, b) -> bool:
     pa, pb = Path(a), Path(b)
     try:
@@ -159,7 +150,9 @@ def describe(obj) -> dict:
 
 
 def cmd_info(args) -> int:
-    if str(args.file).lower().endswith((".sgc", ".sga", ".sgc.gz", ".sga.gz")):  # header summary
+    from ..io._common import split_suffix
+
+    if split_suffix(Path(args.file))[0] in (".sgc", ".sga"):  # compressed file: header summary
         from .compress_cmds import cmd_info_sgc
 
         return cmd_info_sgc(args)
@@ -303,6 +296,7 @@ def cmd_metrics(args) -> int:
 def cmd_denoise(args) -> int:
     from .. import denoise, io
     from .._progress import activity, progress
+    from ..denoise._guard import is_folded
     from ..geometry import Mesh, MeshAnimation, PointCloud
 
     _check_outputs([args.input], [args.output])
@@ -341,7 +335,8 @@ def cmd_denoise(args) -> int:
         if np.array_equal(Vd, obj.vertices):
             # the do-no-harm gate (spectrageo.denoise._guard) found no noise, or only detail
             _status("no noise found: the vertices are written unchanged")
-        elif args.method == "tsgsp" and _folded(obj.vertices, obj.faces, not args.no_weld):
+        elif args.method == "tsgsp" and is_folded(obj.vertices, obj.faces):
+            # the gate's decision on the mesh as given (the reader has welded any soup)
             _status(
                 "the noise has flipped triangles (folded mesh, Eq. N10 of "
                 "spectrageo.denoise._guard): smoothed by lambda|mu blocks until the folds are "

@@ -198,7 +198,8 @@ def denoise(
     share = 0.0  # coplanar face-pair share (Eq. N9) of the mesh the gate measured
     quiet = False  # the gate found no dense noise (level below min_noise)
     tail = 1.0  # lower-tail ratio (Eq. N4) of the mesh the gate measured
-    folded = False  # folded mesh (Eq. N10): noisy whatever the gate's other tests say
+    folded = None  # folded mesh (Eq. N10): noisy whatever the gate's other tests say; None:
+    # not measured (gate off)
     gated = False  # the gate ran on the input as given
     if min_noise > 0 and not is_soup(F, V.shape[0]):
         gated = True
@@ -258,15 +259,18 @@ def denoise(
                 out = rep.vertices  # the impulses were the noise
                 return w.expand(out) if welded else out
             Vw, sigma = rep.vertices, sigma_r
-    out = _run(info, Vw, Fw, pre=pre, trust=trust, sigma=sigma, options=options)
+    out = _run(info, Vw, Fw, pre=pre, trust=trust, sigma=sigma, folded=folded, options=options)
     return w.expand(out) if welded else out
 
 
-def _run(info, V, F, *, pre, trust, sigma, options) -> np.ndarray:
+def _run(info, V, F, *, pre, trust, sigma, folded, options) -> np.ndarray:
     """The method itself, with the coarse pre-step and the trust region of :func:`denoise`.
-    ``sigma`` is the noise estimate already computed by the gate (None: estimate here)."""
+    ``sigma`` and ``folded`` are the noise estimate and the folded-mesh decision already made by
+    the gate (None: made here, by the method)."""
     if info.name == "tsgsp" and sigma is not None:
         options = {**options, "sigma_z": sigma}
+    if info.name == "tsgsp" and folded is not None:
+        options = {**options, "folded": folded}
     V0 = V
     if pre == "coarse" and info.name != "tsgsp":
         from .tsgsp import coarse

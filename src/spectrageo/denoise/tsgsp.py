@@ -1023,6 +1023,7 @@ def tsgsp(
     trust: float | None = 6.0,
     sigma_z: float | None = None,
     folds: bool = True,
+    folded: bool | None = None,
     rng=0,
     **fine_options,
 ) -> np.ndarray:
@@ -1074,6 +1075,9 @@ def tsgsp(
         smoothed by :func:`~spectrageo.denoise._guard.unfold` (Taubin's lambda|mu low-pass, a
         polynomial graph spectral filter, until the folds are gone) instead, without the trust
         bound (the noise estimate fails on such meshes). False: Algorithm 2 whatever the folds.
+    folded : bool, optional
+        The folded-mesh decision when already made (by :func:`spectrageo.denoise.denoise`'s
+        gate, on the mesh as given); default measured here.
     rng : seed or Generator
         Seeds METIS and the subspace starts; results are deterministic for a seed.
     **fine_options
@@ -1117,7 +1121,9 @@ def tsgsp(
     V = as_points(V, "V")
     if not isinstance(folds, bool | np.bool_):
         raise InvalidInputError(f"`folds` must be True or False; got {folds!r}.")
-    if folds and is_folded(V, F):
+    if folded is not None and not isinstance(folded, bool | np.bool_):
+        raise InvalidInputError(f"`folded` must be None, True or False; got {folded!r}.")
+    if folds and (is_folded(V, F) if folded is None else folded):
         return unfold(V, F)
     if V.shape[0] < 8 and not coarse_options:
         # too few vertices for a spectrum: the fine step alone (documented in Notes)
