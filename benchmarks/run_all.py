@@ -62,6 +62,10 @@ SECTIONS = [
     ("planar_rule", [*_script("planar_rule"), "--out", str(HERE / "_out" / "planar_rule.md")]),
     ("fold_rule", [*_script("fold_rule"), "--out", str(HERE / "_out" / "fold_rule.md")]),
     (
+        "curved_finish",
+        [*_script("curved_finish"), "--out", str(HERE / "_out" / "curved_finish.md")],
+    ),
+    (
         "quiet_impulses",
         [*_script("quiet_impulses"), "--out", str(HERE / "_out" / "quiet_impulses.md")],
     ),
