@@ -25,6 +25,8 @@ weights coming from the coarse mesh (``input_weight`` of :func:`tsgsp`; reading 
 :func:`fine`), so that acute ridges rounded off by the low-pass are recovered; the part of that
 blend along the surface is weighted by :func:`tangent_weight` (Eqs. T1-T2), because noise along
 the surface put back there is never removed by the normal-driven vertex update.
+On a surface the fine step's curved-surface gate calls curved, what its single round leaves
+is finished with a few pairs of Taubin's lambda|mu low-pass (reading choice (g) of :func:`fine`).
 
 Reading choices (where the text leaves room) are documented on each function.
 """
@@ -839,9 +841,10 @@ def fine(
     shapes of ``benchmarks/planar_rule.py`` (195 cases) 30.90 / 30.72 (10) / 30.75 (20), cases
     above the noisy input 20 -> 19. 10 keeps the pairs (Table 5.4) within 0.03 degrees and
     takes most of the gain of the generated groups. Holding the vertices of feature faces
-    fixed during the finish was worse (pairs 4.690, tuning meshes 9.94, frames 17.28): the
-    faces that dense noise makes "features" on a curved surface are the noisy ones. The most
-    costly cases: casting with Gaussian noise 0.3 (7.11 -> 7.69), SharpSphere0.3 (see above).
+    fixed during the finish (a variant measured once, not kept) was worse (pairs 4.690,
+    tuning meshes 9.94, frames 17.28): the faces that dense noise makes "features" on a
+    curved surface are the noisy ones. The most costly cases: casting with Gaussian noise 0.3
+    (7.11 -> 7.69), SharpSphere0.3 (see above).
     Reproduce: ``python benchmarks/curved_finish.py``. ``curved_finish=0`` stops as before.
 
     Parameters
