@@ -3,7 +3,7 @@
 (through :func:`spectrageo.denoise.denoise`, so with its gate) for several numbers of Taubin
 lambda|mu pairs run when the curved-surface gate stops the fine step.
 
-    python benchmarks/curved_finish.py [--data DIR] [--out FILE.md]    # about 12 minutes
+    python benchmarks/curved_finish.py [--data DIR] [--out FILE.md]    # about 4 minutes
 
 Tuning groups (no validation mesh of the denoising protocol): the shared denoising pairs; the
 tuning meshes of ``spectrageo evaluate denoise`` (rocker-arm, knot2, spot, casting); the first
