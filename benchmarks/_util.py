@@ -60,3 +60,16 @@ def write_section(name: str, markdown: str) -> Path:
     os.replace(tmp, path)
     print(markdown)
     return path
+
+
+def data_out_args():
+    """``--data DIR`` (default ``$SPECTRAGEO_DATA`` or ``../shared/data``) and ``--out FILE.md``
+    of the tuning-data scripts, parsed, with warnings silenced (their tables are the output)."""
+    import argparse
+    import warnings
+
+    warnings.filterwarnings("ignore")
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--data", default=os.environ.get("SPECTRAGEO_DATA", "../shared/data"))
+    ap.add_argument("--out", default=None)
+    return ap.parse_args()

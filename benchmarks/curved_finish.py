@@ -15,16 +15,14 @@ generated case: the five generator kinds at levels 0.1, 0.3 and 0.5, seed 1.
 
 from __future__ import annotations
 
-import argparse
-import os
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _util import data_out_args  # noqa: E402
 from planar_rule import TRIMESH, TRIMESH_TUNING, synthetic  # noqa: E402
 from spectrageo import io  # noqa: E402
 from spectrageo.denoise import denoise  # noqa: E402
@@ -74,11 +72,7 @@ def groups(data: Path) -> dict[str, list]:
 
 
 def main() -> None:
-    warnings.filterwarnings("ignore")
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--data", default=os.environ.get("SPECTRAGEO_DATA", "../shared/data"))
-    ap.add_argument("--out", default=None)
-    a = ap.parse_args()
+    a = data_out_args()
     lines = [
         "## Curved-surface finish of TSGSP (reading choice (g) of `tsgsp.fine`)",
         "",

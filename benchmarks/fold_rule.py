@@ -16,16 +16,14 @@ the rule's 50 vertices). Also the largest share of a clean mesh of ``meshes/`` a
 
 from __future__ import annotations
 
-import argparse
-import os
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _util import data_out_args  # noqa: E402
 from planar_rule import TRIMESH, TRIMESH_TUNING, synthetic  # noqa: E402
 from spectrageo import io  # noqa: E402
 from spectrageo.denoise import _guard, denoise  # noqa: E402
@@ -69,11 +67,7 @@ def without_rule(Vn, F):
 
 
 def main() -> None:
-    warnings.filterwarnings("ignore")
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--data", default=os.environ.get("SPECTRAGEO_DATA", "../shared/data"))
-    ap.add_argument("--out", default=None)
-    a = ap.parse_args()
+    a = data_out_args()
     data = Path(a.data)
     rows = []
     for name, V, F, Vn in cases(data):
