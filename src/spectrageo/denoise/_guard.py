@@ -367,6 +367,11 @@ FOLD_SHARE = 0.14
 FOLD_MIN_VERTICES = 50
 #: :func:`unfold` stops once the share of folded pairs is below this
 FOLD_STOP = 0.005
+#: Taubin lambda|mu steps of the low-pass that :func:`unfold` and TSGSP's curved-surface finish
+#: (reading choice (g) of :func:`spectrageo.denoise.tsgsp.fine`) apply: the setting the
+#: protocol's tuning split chose for the Taubin peers (pass band 0.09)
+LOWPASS_LAM = 0.33
+LOWPASS_MU = -0.34
 #: :func:`unfold`: Taubin lambda|mu pairs per block, at most ``FOLD_BLOCKS`` blocks
 FOLD_PAIRS = 5
 FOLD_BLOCKS = 10
@@ -641,14 +646,14 @@ def is_folded(V, F) -> bool:
 
 
 def unfold(V, F, *, stop: float = FOLD_STOP) -> np.ndarray:
-    """Taubin lambda|mu smoothing (``lam`` 0.33, ``mu`` -0.34) in blocks of
+    """Taubin lambda|mu smoothing (:data:`LOWPASS_LAM`, :data:`LOWPASS_MU`) in blocks of
     :data:`FOLD_PAIRS` pairs until :func:`fold_share` is below ``stop``, at most
     :data:`FOLD_BLOCKS` blocks (module notes, "Folded meshes")."""
     from .smoothing import taubin
 
     X = as_points(V, "V")
     for _ in range(FOLD_BLOCKS):
-        X = taubin(X, F, lam=0.33, mu=-0.34, n_iter=FOLD_PAIRS)
+        X = taubin(X, F, lam=LOWPASS_LAM, mu=LOWPASS_MU, n_iter=FOLD_PAIRS)
         if fold_share(X, F) < stop:
             break
     return X

@@ -55,7 +55,7 @@ from ..graph import adjacency_matrix
 from ..graph.adjacency import knn
 from ..linalg._common import single_thread_blas
 from ..spectral import overlapped_submeshes, reassemble, submesh_eigenbases
-from ._guard import apply_trust, is_folded, noise_sigma, unfold
+from ._guard import LOWPASS_LAM, LOWPASS_MU, apply_trust, is_folded, noise_sigma, unfold
 from ._normals import fast_update_vertices, mean_centroid_distance
 from ._registry import register
 from ._tsgsp_mbl import RULES, _mbl_search
@@ -981,7 +981,7 @@ def fine(
                 # curved surface: further rounds would facet it (reading choice (c)); the
                 # low-pass of reading choice (g) takes off what one round left
                 if curved_finish:
-                    X = taubin(X, F, lam=0.33, mu=-0.34, n_iter=curved_finish)
+                    X = taubin(X, F, lam=LOWPASS_LAM, mu=LOWPASS_MU, n_iter=curved_finish)
                 break
         feature = new_feature
         best = _select(N, nb, feature, ev, indptr, cand)  # Eq. (5.16)-(5.19)
