@@ -80,6 +80,7 @@ SECTIONS = [
     ("doi_codec", _script("doi_codec")),
     ("connectivity", _script("connectivity")),
     ("compress_animation", _evaluate("compress-animation", "compress_animation")),
+    ("animation_rank", _script("animation_rank")),
     ("complete", _evaluate("complete", "complete")),
     ("complete_large", _script("complete_large")),
     ("register", _evaluate("register", "register")),
@@ -87,6 +88,7 @@ SECTIONS = [
     ("identify", _evaluate("identify", "identify")),
     ("identify_speed", _script("identify_speed")),
     ("learned_denoise", _script("learned_denoise")),
+    ("learned_refine", _script("learned_refine")),
     ("viewer", _script("viewer")),
 ]
 

@@ -157,6 +157,7 @@ def train_bm3d_cnn(
     lr: float = 3e-3,
     threads: int | None = None,
     report: bool = True,
+    start=None,
     log=print,
 ) -> dict:
     """Train the bm3d-cnn weights (Section 5.1.4) and write them to ``out`` with a report.
@@ -164,6 +165,11 @@ def train_bm3d_cnn(
     Stage ``s`` of the cascade (see :mod:`spectrageo.learn.bm3d_cnn`) is trained on images of
     the training cases after stages ``1..s-1``; the class centres of each stage are the
     kappa-means (kappa = 3) centres of its training images' first-row eigenvalues.
+
+    ``start`` (optional callable ``(V_noisy, F) -> V``) replaces every noisy training input by
+    its result before stage 1, so that the stages learn to refine another denoiser's output
+    (``benchmarks/learned_refine.py`` trains on TSGSP's results this way); the weights then
+    expect that denoiser's output as their input, which the metadata records as ``start``.
 
     Returns the training summary (also written as ``<out>.json``).
     """
@@ -193,6 +199,8 @@ def train_bm3d_cnn(
                     "current": _noisy(V0, F, rel, lv, seed),
                 }
             )
+            if start is not None:
+                cases[-1]["current"] = np.asarray(start(cases[-1]["current"], F), dtype=np.float64)
     stacks: dict[str, list] = {k: [] for k in ("class_centres", "W1", "b1", "rw", "W2", "b2")}
     history = []
     mu = None
@@ -248,6 +256,8 @@ def train_bm3d_cnn(
         "vertex_iter": int(vertex_iter),
         **_run_meta(meshes, levels, per_case, seed, epochs, dev, train_s),
     }
+    if start is not None:
+        meta["start"] = getattr(start, "__name__", repr(start))
     return _finish(out, arrays, meta, history, data_dir, "bm3d-cnn", seed, report)
 
 
