@@ -7,8 +7,8 @@ import pytest
 
 from spectrageo import InvalidInputError, io
 from spectrageo.denoise import denoise
-from spectrageo.denoise._guard import FOLD_SHARE, fold_share, unfold
-from spectrageo.denoise.tsgsp import tsgsp
+from spectrageo.denoise._guard import FOLD_SHARE, FOLD_STOP, fold_share, unfold
+from spectrageo.denoise.tsgsp import fine, tsgsp
 from spectrageo.metrics import theta_deg
 from spectrageo.noise.generator import generate
 
@@ -46,10 +46,41 @@ def test_noise_that_flips_triangles_is_smoothed_not_kept():
     assert t_out < 0.6 * t_in
     X = unfold(Vn, F)
     assert fold_share(X, F) < fold_share(Vn, F) / 4
-    assert np.array_equal(tsgsp(Vn, F), X)
+    assert np.array_equal(tsgsp(Vn, F, unfold_fine=False), X)
     assert not np.array_equal(tsgsp(Vn, F, folds=False), X)
+    # the folds are gone (share below FOLD_STOP), so the fine step runs on the unfolded mesh
+    assert fold_share(X, F) < FOLD_STOP
+    Y = tsgsp(Vn, F)
+    assert np.array_equal(Y, fine(X, F))
+    assert theta_deg(Y, V, F) < theta_deg(X, V, F) - 10  # 34.8 -> 13.6 degrees
     with pytest.raises(InvalidInputError, match="folds"):
         tsgsp(Vn, F, folds="yes")
+    with pytest.raises(InvalidInputError, match="unfold_fine"):
+        tsgsp(Vn, F, unfold_fine=1)
+
+
+def test_folds_left_after_unfolding_skip_the_fine_step():
+    """Where the unfold's blocks end with folds left (a steep cone: its clean rim already turns
+    by more than 120 degrees), the unfolded mesh is returned as it is."""
+    import trimesh
+
+    m = trimesh.creation.cone(radius=1.0, height=3.0, sections=48)
+    V, F = np.asarray(m.vertices, float), np.asarray(m.faces)
+    Vn = generate(V, F, kind="gaussian-normal", level=0.3, rng=1).vertices
+    X = unfold(Vn, F)
+    assert fold_share(X, F) >= FOLD_STOP
+    assert np.array_equal(tsgsp(Vn, F, folded=True), X)
+
+
+def test_fine_step_after_unfolding_an_organic_mesh(shared_data):
+    """Tuning case of the rule (benchmarks/unfold_fine.py): rocker-arm with Gaussian noise in
+    random directions at 0.5 folds; the fine step halves what the unfold left."""
+    m = io.read_mesh(shared_data / "meshes" / "rocker-arm.obj")
+    V, F = m.vertices, m.faces
+    Vn = generate(V, F, kind="gaussian-random", level=0.5, rng=1).vertices
+    X = unfold(Vn, F)
+    Y = denoise(Vn, F)
+    assert theta_deg(Y, V, F) < 0.7 * theta_deg(X, V, F)  # 18.4 -> 9.6 degrees
 
 
 def test_clean_meshes_are_far_from_the_fold_rule(shared_data):
@@ -96,14 +127,20 @@ def test_the_gate_decision_reaches_tsgsp_once(monkeypatch):
         calls.append(1)
         return real(*a, **k)
 
+    import spectrageo.denoise.tsgsp as ts
+
     monkeypatch.setattr(guard, "fold_share", counting)
+    monkeypatch.setattr(ts, "fold_share", counting)
     X = denoise(Vn, F)
     in_denoise = len(calls)
     calls.clear()
-    assert np.array_equal(X, unfold(Vn, F))
+    U = unfold(Vn, F)
     in_unfold = len(calls)  # unfold measures once per block of pairs
+    assert np.array_equal(X, fine(U, F))
     assert in_unfold >= 1
-    assert in_denoise == in_unfold + 1  # the gate's measurement; none more inside tsgsp
+    # the gate's measurement and tsgsp's check of the unfolded mesh (unfold_fine); the folded
+    # decision itself is not measured again inside tsgsp
+    assert in_denoise == in_unfold + 2
     calls.clear()
     tsgsp(Vn, F, folded=False)
     assert not calls  # the given decision is used as it is

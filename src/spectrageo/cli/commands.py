@@ -340,7 +340,7 @@ def cmd_denoise(args) -> int:
             _status(
                 "the noise has flipped triangles (folded mesh, Eq. N10 of "
                 "spectrageo.denoise._guard): smoothed by lambda|mu blocks until the folds are "
-                "gone instead of TSGSP's normal filtering"
+                "gone, then by TSGSP's fine step only if they are"
             )
     elif isinstance(obj, MeshAnimation):
         dyn = getattr(denoise, "dynamic_methods", lambda: [])()

@@ -55,7 +55,16 @@ from ..graph import adjacency_matrix
 from ..graph.adjacency import knn
 from ..linalg._common import single_thread_blas
 from ..spectral import overlapped_submeshes, reassemble, submesh_eigenbases
-from ._guard import LOWPASS_LAM, LOWPASS_MU, apply_trust, is_folded, noise_sigma, unfold
+from ._guard import (
+    FOLD_STOP,
+    LOWPASS_LAM,
+    LOWPASS_MU,
+    apply_trust,
+    fold_share,
+    is_folded,
+    noise_sigma,
+    unfold,
+)
 from ._normals import fast_update_vertices, mean_centroid_distance
 from ._registry import register
 from ._tsgsp_mbl import RULES, _mbl_search
@@ -1066,6 +1075,7 @@ def tsgsp(
     sigma_z: float | None = None,
     folds: bool = True,
     folded: bool | None = None,
+    unfold_fine: bool = True,
     rng=0,
     **fine_options,
 ) -> np.ndarray:
@@ -1120,6 +1130,14 @@ def tsgsp(
     folded : bool, optional
         The folded-mesh decision when already made (by :func:`spectrageo.denoise.denoise`'s
         gate, on the mesh as given); default measured here.
+    unfold_fine : bool
+        After :func:`~spectrageo.denoise._guard.unfold`, when the folds are gone (fold share
+        below :data:`~spectrageo.denoise._guard.FOLD_STOP`, the unfold's own stopping rule),
+        run the fine step (:func:`fine`, with ``preset`` and ``**fine_options``) on the
+        unfolded mesh: the low-pass leaves a surface whose face normals mean something again,
+        and the feature-aware filter takes off what it left (module notes of
+        :mod:`spectrageo.denoise._guard`, "Folded meshes"). Not in the thesis. Where folds
+        remain, the unfolded mesh is returned as it is. False: the unfolded mesh always.
     rng : seed or Generator
         Seeds METIS and the subspace starts; results are deterministic for a seed.
     **fine_options
@@ -1165,8 +1183,13 @@ def tsgsp(
         raise InvalidInputError(f"`folds` must be True or False; got {folds!r}.")
     if folded is not None and not isinstance(folded, bool | np.bool_):
         raise InvalidInputError(f"`folded` must be None, True or False; got {folded!r}.")
+    if not isinstance(unfold_fine, bool | np.bool_):
+        raise InvalidInputError(f"`unfold_fine` must be True or False; got {unfold_fine!r}.")
     if folds and (is_folded(V, F) if folded is None else folded):
-        return unfold(V, F)
+        X = unfold(V, F)
+        if unfold_fine and fold_share(X, F) < FOLD_STOP:
+            X = fine(X, F, preset=preset, **fine_options)
+        return X
     if V.shape[0] < 8 and not coarse_options:
         # too few vertices for a spectrum: the fine step alone (documented in Notes)
         return fine(V, F, preset=preset, **fine_options)
