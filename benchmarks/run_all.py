@@ -61,6 +61,7 @@ SECTIONS = [
     ),
     ("planar_rule", [*_script("planar_rule"), "--out", str(HERE / "_out" / "planar_rule.md")]),
     ("fold_rule", [*_script("fold_rule"), "--out", str(HERE / "_out" / "fold_rule.md")]),
+    ("unfold_fine", _script("unfold_fine")),
     (
         "curved_finish",
         [*_script("curved_finish"), "--out", str(HERE / "_out" / "curved_finish.md")],
@@ -81,6 +82,7 @@ SECTIONS = [
     ("connectivity", _script("connectivity")),
     ("compress_animation", _evaluate("compress-animation", "compress_animation")),
     ("animation_rank", _script("animation_rank")),
+    ("animation_stream", _script("animation_stream")),
     ("complete", _evaluate("complete", "complete")),
     ("complete_large", _script("complete_large")),
     ("register", _evaluate("register", "register")),

@@ -855,6 +855,10 @@ def fine(
     curved surface are the noisy ones. The most costly cases: casting with Gaussian noise 0.3
     (7.11 -> 7.69), SharpSphere0.3 (see above).
     Reproduce: ``python benchmarks/curved_finish.py``. ``curved_finish=0`` stops as before.
+    (Those figures predate :func:`tsgsp`'s ``unfold_fine``, which changes the folded cases of
+    the generated groups; rerun with it: pairs unchanged, tuning meshes 9.82 / 9.04 / 8.95 /
+    8.90 / 8.84, frames 17.86 / 15.12 / 14.95 / 14.87 / 14.85, CAD and synthetic 30.50 / 30.45
+    / 30.50 / 30.61 / 30.76; 10 pairs still keeps the pairs and takes most of the gain.)
 
     Parameters
     ----------
