@@ -81,9 +81,9 @@ were smoothed; bull still is (cheese is now a planar tessellation, knot2 is kept
 The ratios assume a sampling about as dense in every direction along the surface: clean organic
 meshes stretched along one axis (their triangles made long and thin, 5-10x) lose the detail
 test (cow, elephant and rocker-arm at 5x, spot at 10x: ``G`` stays high but ``S`` or ``T``
-falls to white-noise values),
-and the filters smooth them (spot at 10x: 7.1 degrees of mean normal change with tsgsp, 16.3
-with gnf). Graph-ring patches do not fix it (the clean armadillo fails the test on them).
+falls to white-noise values), and the filters smooth them (spot at 10x: 7.1 degrees of mean
+normal change with tsgsp, 16.3 with gnf). Graph-ring patches do not fix it (the clean armadillo
+fails the test on them).
 
 Patches that miss the surface (issue 14). Euclidean neighbours assume a sampling about as dense
 across the surface as along it. Meshes extruded or lofted from dense profiles break that: the

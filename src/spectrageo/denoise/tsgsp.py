@@ -1140,8 +1140,9 @@ def tsgsp(
         run the fine step (:func:`fine`, with ``preset`` and ``**fine_options``) on the
         unfolded mesh: the low-pass leaves a surface whose face normals mean something again,
         and the feature-aware filter takes off what it left (module notes of
-        :mod:`spectrageo.denoise._guard`, "Folded meshes"). Not in the thesis. Where folds
-        remain, the unfolded mesh is returned as it is. False: the unfolded mesh always.
+        :mod:`spectrageo.denoise._guard`, "Fine step after unfolding"). Not in the thesis.
+        Where folds remain, the unfolded mesh is returned as it is. False: the unfolded mesh
+        always.
     rng : seed or Generator
         Seeds METIS and the subspace starts; results are deterministic for a seed.
     **fine_options
