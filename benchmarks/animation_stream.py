@@ -7,8 +7,8 @@ the frame count").
 The shared crane (175 frames, 10,002 vertices) is coded with the default settings, once whole
 (:func:`spectrageo.compress.encode_animation`) and once through
 :class:`spectrageo.compress.StreamEncoder`, one frame pushed at a time; the stream is then
-repeated forwards and backwards to 700 and 1,400 frames (frames generated on the fly, never held
-together). Each run is a fresh process; peak RSS is the whole process (interpreter, libraries
+repeated forwards and backwards to 700 and 1,400 frames (the 175 read frames stay in memory; the
+repeats are handed over one at a time, never copied into a longer array). Each run is a fresh process; peak RSS is the whole process (interpreter, libraries
 and the input file read included), so growth with the frame count is what the target is about.
 """
 

@@ -44,7 +44,8 @@ def test_noise_that_flips_triangles_is_smoothed_not_kept():
     t_out = theta_deg(denoise(Vn, F), V, F)
     # before the rule the gate called this mesh clean (detail test) and returned the input
     assert t_out < 0.6 * t_in
-    X = unfold(Vn, F)
+    X, share = unfold(Vn, F, return_share=True)
+    assert share == fold_share(X, F) and np.array_equal(X, unfold(Vn, F))
     assert fold_share(X, F) < fold_share(Vn, F) / 4
     assert np.array_equal(tsgsp(Vn, F, unfold_fine=False), X)
     assert not np.array_equal(tsgsp(Vn, F, folds=False), X)
@@ -127,10 +128,7 @@ def test_the_gate_decision_reaches_tsgsp_once(monkeypatch):
         calls.append(1)
         return real(*a, **k)
 
-    import spectrageo.denoise.tsgsp as ts
-
     monkeypatch.setattr(guard, "fold_share", counting)
-    monkeypatch.setattr(ts, "fold_share", counting)
     X = denoise(Vn, F)
     in_denoise = len(calls)
     calls.clear()
@@ -138,9 +136,9 @@ def test_the_gate_decision_reaches_tsgsp_once(monkeypatch):
     in_unfold = len(calls)  # unfold measures once per block of pairs
     assert np.array_equal(X, fine(U, F))
     assert in_unfold >= 1
-    # the gate's measurement and tsgsp's check of the unfolded mesh (unfold_fine); the folded
-    # decision itself is not measured again inside tsgsp
-    assert in_denoise == in_unfold + 2
+    # the gate's measurement only: tsgsp neither measures the folded decision again nor the
+    # unfolded mesh (unfold_fine uses the share unfold measured after its last block)
+    assert in_denoise == in_unfold + 1
     calls.clear()
     tsgsp(Vn, F, folded=False)
     assert not calls  # the given decision is used as it is

@@ -666,18 +666,21 @@ def is_folded(V, F) -> bool:
     return V.shape[0] >= FOLD_MIN_VERTICES and fold_share(V, F) >= FOLD_SHARE
 
 
-def unfold(V, F, *, stop: float = FOLD_STOP) -> np.ndarray:
+def unfold(V, F, *, stop: float = FOLD_STOP, return_share: bool = False):
     """Taubin lambda|mu smoothing (:data:`LOWPASS_LAM`, :data:`LOWPASS_MU`) in blocks of
     :data:`FOLD_PAIRS` pairs until :func:`fold_share` is below ``stop``, at most
-    :data:`FOLD_BLOCKS` blocks (module notes, "Folded meshes")."""
+    :data:`FOLD_BLOCKS` blocks (module notes, "Folded meshes"). With ``return_share``, also the
+    fold share of the result (measured after the last block, so not again by the caller)."""
     from .smoothing import taubin
 
     X = as_points(V, "V")
+    share = float("nan")  # FOLD_BLOCKS >= 1: set by the first block
     for _ in range(FOLD_BLOCKS):
         X = taubin(X, F, lam=LOWPASS_LAM, mu=LOWPASS_MU, n_iter=FOLD_PAIRS)
-        if fold_share(X, F) < stop:
+        share = fold_share(X, F)
+        if share < stop:
             break
-    return X
+    return (X, share) if return_share else X
 
 
 def apply_trust(V: np.ndarray, X: np.ndarray, radius: float) -> np.ndarray:

@@ -60,7 +60,6 @@ from ._guard import (
     LOWPASS_LAM,
     LOWPASS_MU,
     apply_trust,
-    fold_share,
     is_folded,
     noise_sigma,
     unfold,
@@ -1191,8 +1190,8 @@ def tsgsp(
     if not isinstance(unfold_fine, bool | np.bool_):
         raise InvalidInputError(f"`unfold_fine` must be True or False; got {unfold_fine!r}.")
     if folds and (is_folded(V, F) if folded is None else folded):
-        X = unfold(V, F)
-        if unfold_fine and fold_share(X, F) < FOLD_STOP:
+        X, share = unfold(V, F, return_share=True)
+        if unfold_fine and share < FOLD_STOP:
             X = fine(X, F, preset=preset, **fine_options)
         return X
     if V.shape[0] < 8 and not coarse_options:
