@@ -54,7 +54,7 @@ SECTIONS = [
         [
             *_script("clean_inputs"),
             "--max-vertices",
-            "40000",
+            "500000",
             "--out",
             str(HERE / "_out" / "clean_inputs.md"),
         ],
