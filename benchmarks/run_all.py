@@ -50,6 +50,10 @@ SECTIONS = [
         ],
     ),
     (
+        "denoise_levels",
+        [*_script("denoise_levels"), "--out", str(HERE / "_out" / "denoise_levels.md")],
+    ),
+    (
         "clean_inputs",
         [
             *_script("clean_inputs"),
