@@ -662,3 +662,19 @@ def test_cli_complete_reads_the_archives_every_command_reads(tmp_path):
             got = d["vertices"] if "vertices" in d.files else d["frames"]
         assert got.shape == A.shape and np.isfinite(got).all()
         assert np.allclose(got[:, known], A[:, known])
+
+
+def test_fill_holes_refuses_a_density_that_would_exhaust_memory(monkeypatch):
+    """The implanted points are estimated from the holes' areas before any is built: a density
+    typed too large is one clear error (it used to be killed for memory), a normal one fills."""
+    from spectrageo.complete import holes
+
+    V, F = _grid(8)  # its open border: a 32-edge loop around 64 unit squares
+    with pytest.raises(InvalidInputError, match="would implant about"):
+        fill_holes(V, F, density=1e6)
+    V1, F1 = fill_holes(V, F, density=2.0)  # about 4 x 64 / 0.87 = 296 points
+    assert 150 < V1.shape[0] - V.shape[0] < 450
+    monkeypatch.setattr(holes, "MAX_IMPLANTED", 100)
+    with pytest.raises(InvalidInputError, match="max_hole"):
+        fill_holes(V, F, density=2.0)
+    assert fill_holes(V, F, density=2.0, max_hole=8)[0].shape == V.shape  # the border left open

@@ -320,3 +320,27 @@ def test_baseline_ratio_interpolates_the_baseline_at_draco12_kg():
     assert math.isclose(r["ratio"], 5.0 / math.sqrt(120.0), rel_tol=1e-9)
     md = ev.format_markdown([{**x, "split": "t"} for x in rows])
     assert "Against quantisation + temporal delta + zstd" in md
+
+
+@pytest.mark.parametrize("method", ["blocks", "layered"])
+def test_cli_partial_decode_of_whole_and_cut_streams(tmp_path, capsys, method):
+    """``decompress --partial`` reads every stream kind (the layered state keeps its frame count
+    in another place than the block codecs'), says how many frames a cut file lacks, and writes
+    nothing before it has decoded."""
+    A, F = _synthetic(T=48)  # three blocks of the default 16 frames
+    src = tmp_path / "a.npz"
+    io.write(src, MeshAnimation(A, F))
+    out = tmp_path / "a.sga"
+    assert main(["compress", str(src), str(out), "--method", method]) == 0
+    whole = tmp_path / "whole.npz"
+    capsys.readouterr()
+    assert main(["decompress", "--partial", str(out), str(whole)]) == 0
+    assert "missing" not in capsys.readouterr().err
+    assert io.read_animation(whole).frames.shape == A.shape
+    cut = tmp_path / "cut.sga"
+    cut.write_bytes(out.read_bytes()[: int(out.stat().st_size * 0.75)])
+    part = tmp_path / "part.npz"
+    assert main(["decompress", "--partial", str(cut), str(part)]) == 0
+    got = io.read_animation(part).frames
+    assert 0 < got.shape[0] < A.shape[0]
+    assert f"of {A.shape[0]} frames missing" in capsys.readouterr().err

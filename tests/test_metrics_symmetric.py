@@ -163,3 +163,15 @@ def test_animation_pair_still_works_and_rejects_radius(capsys, files):
 def test_bad_radius_is_one_line(capsys, files):
     code, _, err = run(capsys, "metrics", files["fine"], files["coarse"], "--radius", "-1")
     assert code == 2 and "radius" in err and len(err.strip().splitlines()) == 1
+
+
+def test_distances_across_thirty_orders_of_magnitude():
+    """A mesh 1e38 times larger than the reference: the closest-point formulas' edge and area
+    terms round to zero against the distance (they used to divide by zero); the union of the
+    edges gives the answer instead."""
+    V, F = icosphere(2)
+    d = metrics.point_to_surface(V * 1e38, V, F).distances
+    assert np.isfinite(d).all()
+    np.testing.assert_allclose(d, 1e38, rtol=0.01)  # every vertex of the unit icosphere: |v| = 1
+    r = metrics.compare_surfaces(Mesh(V * 1e38, F), Mesh(V, F))
+    assert abs(r["hd_max"] / 1e38 - 1.0) < 0.01

@@ -202,14 +202,21 @@ def _decompress_animation(args, data: bytes) -> int:
     t0 = time.perf_counter()
     frames, F = compress.decode_animation(data, partial=args.partial)
     dt = time.perf_counter() - t0
-    io.write(args.output, MeshAnimation(frames, F))
     msg = f"wrote {args.output}: {frames.shape[0]} frames of {frames.shape[1]} vertices"
     if args.partial:
+        # the frame count the header announces (every stream kind's state carries it: the
+        # layered one as ``n_frames``, the others in their ``params``)
         dec = compress.StreamDecoder()
         dec.feed(data)
-        total = dec.state.params.n_frames if dec.state is not None else 0
+        st = dec.state
+        total = 0
+        if st is not None:
+            total = getattr(st, "n_frames", None)
+            if total is None:
+                total = st.params.n_frames
         if total and total > frames.shape[0]:
             msg += f" ({total - frames.shape[0]} of {total} frames missing: the file is cut short)"
+    io.write(args.output, MeshAnimation(frames, F))
     _status(f"{msg}, {dt:.2f} s ({1e3 * dt / frames.shape[0]:.1f} ms/frame)")
     return 0
 

@@ -20,13 +20,30 @@ from ..geometry import boundary_edges, boundary_loops, weld
 from ..geometry.primitives import _normalize_rows
 from .static import INPAINT_METHODS, inpaint
 
-__all__ = ["DP_MAX_LOOP", "FAIR_RINGS", "fill_holes"]
+__all__ = ["DP_MAX_LOOP", "FAIR_RINGS", "MAX_IMPLANTED", "fill_holes"]
 
 #: Loops with more edges are cut into pieces by chords before they are patched: the planar
 #: patch's tests cost O(L^2) memory and Liepa's dynamic programming O(L^3) time (about 2.6 s at
 #: 300 edges, minutes at 2000). The open border of a scan is such a loop; it is filled at the
 #: density of its edges, and ``max_hole`` leaves it open.
 DP_MAX_LOOP = 300
+
+#: Most points :func:`fill_holes` implants in one call (estimated from the holes' areas before
+#: any is built): about 20 GB of memory at the measured 10 kB per implanted point, so a
+#: ``density`` typed too large is refused with a clear error instead of exhausting memory.
+MAX_IMPLANTED = 2_000_000
+
+
+def _lattice_count(P: np.ndarray, h: float) -> float:
+    """Points of a hexagonal lattice of spacing ``h`` inside the loop ``P`` (L, 3), from the area
+    of its projection on its best-fitting plane (shoelace formula)."""
+    if not h > 0:
+        return 0.0
+    Q = P - P.mean(axis=0)
+    _, _, vt = np.linalg.svd(Q, full_matrices=False)
+    x, y = Q @ vt[0], Q @ vt[1]
+    area = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    return area / (h * h * np.sqrt(3.0) / 2.0)
 
 
 # ------------------------------------------------------------------ planar patch (scipy Delaunay)
@@ -461,7 +478,9 @@ def fill_holes(
     density : float
         Implanted points per loop edge length (1: spacing equal to the mean loop edge). The
         points grow with the hole's area: the 4,000-edge border of a 1000 x 1000 grid takes
-        1.13M points and 11.8 GB at 1, 70k points and 1.3 GB at 0.25.
+        1.13M points and 11.8 GB at 1, 70k points and 1.3 GB at 0.25. A call whose holes would
+        take more than :data:`MAX_IMPLANTED` points (estimated from their areas before any is
+        filled) is refused with :class:`InvalidInputError`.
     rng : int, Generator or None
         Passed to :func:`inpaint`.
 
@@ -504,12 +523,24 @@ def fill_holes(
     new_faces: list[np.ndarray] = []
     ctx = _Context(V, F, n, edge_keys)
     n_next = n
-    for loop in progress(loops, desc="holes", total=len(loops)):
+    todo = []
+    expected = 0.0
+    for loop in loops:
         L = loop.size
         if L < 3 or (max_hole is not None and L > max_hole):
             continue
         P = V[loop]
         h = float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).mean()) / density
+        todo.append((loop, P, h))
+        expected += _lattice_count(P, h)
+    if expected > MAX_IMPLANTED:
+        raise InvalidInputError(
+            f"`density` = {density:g} would implant about {expected:,.0f} points into the "
+            f"{len(todo)} hole(s) (at most {MAX_IMPLANTED:,}, about 20 GB of memory); lower "
+            "`density` (1 spaces the points like the hole's border edges) or leave large holes "
+            "open with `max_hole`."
+        )
+    for loop, P, h in progress(todo, desc="holes", total=len(todo)):
         tri, new3 = _loop_patch(loop, P, h, ctx)
         ids = np.concatenate([loop, np.arange(n_next, n_next + new3.shape[0])])
         new_pts.append(new3)

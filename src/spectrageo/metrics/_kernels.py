@@ -24,6 +24,19 @@ def _seg_sqdist(px, py, pz, ax, ay, az, bx, by, bz):  # pragma: no cover - jitte
 
 
 @numba.njit(cache=True)
+def _closest_on_edges(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):  # pragma: no cover
+    """Closest point of the union of the triangle's three edges, as barycentric weights."""
+    d_ab, t_ab = _seg_sqdist(px, py, pz, ax, ay, az, bx, by, bz)
+    d_bc, t_bc = _seg_sqdist(px, py, pz, bx, by, bz, cx, cy, cz)
+    d_ca, t_ca = _seg_sqdist(px, py, pz, cx, cy, cz, ax, ay, az)
+    if d_ab <= d_bc and d_ab <= d_ca:
+        return 1.0 - t_ab, t_ab, 0.0
+    if d_bc <= d_ca:
+        return 0.0, 1.0 - t_bc, t_bc
+    return t_ca, 0.0, 1.0 - t_ca
+
+
+@numba.njit(cache=True)
 def closest_point_on_triangle(
     px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz
 ):  # pragma: no cover - jitted
@@ -31,7 +44,10 @@ def closest_point_on_triangle(
 
     Voronoi-region classification of p against the triangle's vertices, edges and interior
     (Ericson, *Real-Time Collision Detection*, Sec. 5.1.5). Exactly degenerate triangles (a repeated
-    vertex or collinear vertices) are handled as the union of their three edges.
+    vertex or collinear vertices) are handled as the union of their three edges, and so is a
+    triangle whose edge or area term rounds to zero against the query's distance (a point very
+    far away relative to the triangle's size, e.g. meshes compared across 30 orders of
+    magnitude), where the region formulas would divide by zero.
     """
     abx, aby, abz = bx - ax, by - ay, bz - az
     acx, acy, acz = cx - ax, cy - ay, cz - az
@@ -40,14 +56,7 @@ def closest_point_on_triangle(
     ny = abz * acx - abx * acz
     nz = abx * acy - aby * acx
     if nx * nx + ny * ny + nz * nz <= 0.0:
-        d_ab, t_ab = _seg_sqdist(px, py, pz, ax, ay, az, bx, by, bz)
-        d_bc, t_bc = _seg_sqdist(px, py, pz, bx, by, bz, cx, cy, cz)
-        d_ca, t_ca = _seg_sqdist(px, py, pz, cx, cy, cz, ax, ay, az)
-        if d_ab <= d_bc and d_ab <= d_ca:
-            return 1.0 - t_ab, t_ab, 0.0
-        if d_bc <= d_ca:
-            return 0.0, 1.0 - t_bc, t_bc
-        return t_ca, 0.0, 1.0 - t_ca
+        return _closest_on_edges(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
     apx, apy, apz = px - ax, py - ay, pz - az
     d1 = abx * apx + aby * apy + abz * apz
     d2 = acx * apx + acy * apy + acz * apz
@@ -60,7 +69,9 @@ def closest_point_on_triangle(
         return 0.0, 1.0, 0.0  # vertex b
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = d1 / (d1 - d3)  # d1 - d3 = |ab|^2 > 0
+        if not d1 - d3 > 0.0:  # d1 - d3 = |ab|^2, lost to rounding
+            return _closest_on_edges(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
+        v = d1 / (d1 - d3)
         return 1.0 - v, v, 0.0  # edge ab
     cpx, cpy, cpz = px - cx, py - cy, pz - cz
     d5 = abx * cpx + aby * cpy + abz * cpz
@@ -69,13 +80,19 @@ def closest_point_on_triangle(
         return 0.0, 0.0, 1.0  # vertex c
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = d2 / (d2 - d6)  # d2 - d6 = |ac|^2 > 0
+        if not d2 - d6 > 0.0:  # = |ac|^2, lost to rounding
+            return _closest_on_edges(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
+        w = d2 / (d2 - d6)
         return 1.0 - w, 0.0, w  # edge ac
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))  # = |bc|^2 > 0
+        if not (d4 - d3) + (d5 - d6) > 0.0:  # = |bc|^2, lost to rounding
+            return _closest_on_edges(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
         return 0.0, 1.0 - w, w  # edge bc
-    denom = 1.0 / (va + vb + vc)  # = 1 / |ab x ac|^2 > 0
+    if not va + vb + vc > 0.0:  # = |ab x ac|^2 in exact arithmetic
+        return _closest_on_edges(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
+    denom = 1.0 / (va + vb + vc)
     v = vb * denom
     w = vc * denom
     return 1.0 - v - w, v, w  # interior
