@@ -209,3 +209,61 @@ def test_demo_writes_outputs(capsys, tmp_path):
     heat = io.read_mesh(tmp_path / "demo" / "fandisk_error_heatmap.ply")
     assert heat.vertex_colors is not None and "error" in heat.vertex_attributes
     assert heat.n_vertices == 6475
+
+
+def test_noise_outlier_kinds_take_their_fraction_and_refuse_a_level(capsys, tmp_path):
+    from spectrageo import PointCloud
+
+    P = np.random.default_rng(0).uniform(size=(300, 3))
+    src = tmp_path / "p.xyz"
+    io.write(src, PointCloud(P))
+    out = tmp_path / "o.ply"
+    for fraction, added in (("0", 0), ("0.2", 60), (None, 30)):
+        opt = [] if fraction is None else ["--fraction", fraction]
+        code, _, err = run_cli(capsys, "noise", src, out, "--kind", "outliers-near", *opt)
+        assert code == 0, err
+        assert io.read(out).points.shape[0] == 300 + added
+    code, _, err = run_cli(capsys, "noise", src, out, "--kind", "outliers-far", "--level", "0.5")
+    assert code == 2 and "--fraction" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("command", ["noise", "simplify", "register"])
+def test_negative_seed_is_a_usage_error(capsys, tmp_path, command):
+    V, F = icosphere(1)
+    a = tmp_path / "a.ply"
+    io.write(a, Mesh(V, F))
+    argv = {
+        "noise": ["noise", a, tmp_path / "o.ply"],
+        "simplify": ["simplify", a, tmp_path / "o.ply"],
+        "register": ["register", a, a, "--out", tmp_path / "t.json"],
+    }[command]
+    with pytest.raises(SystemExit) as exc:
+        main([str(x) for x in argv] + ["--seed", "-1"])
+    assert exc.value.code == 2
+    assert "non-negative integer" in capsys.readouterr().err
+    from spectrageo import InvalidInputError
+    from spectrageo._validation import as_rng
+
+    with pytest.raises(InvalidInputError, match="non-negative"):
+        as_rng(-1)
+
+
+def test_a_command_that_cannot_write_every_output_writes_none(capsys, tmp_path):
+    """Output folders and the --apply format are checked before any work: nothing is left
+    behind by a command that then fails."""
+    from spectrageo import PointCloud
+
+    P = np.random.default_rng(0).uniform(size=(200, 3))
+    src = tmp_path / "p.xyz"
+    io.write(src, PointCloud(P))
+    out = tmp_path / "o.xyz"
+    code, _, err = run_cli(capsys, "outliers", src, out, "--mask", tmp_path / "no" / "m.npy")
+    assert code == 2 and "output folder does not exist" in err and not out.exists()
+    V, F = icosphere(2)
+    a = tmp_path / "a.ply"
+    io.write(a, Mesh(V, F))
+    t = tmp_path / "t.json"
+    code, _, err = run_cli(capsys, "register", a, a, "--out", t, "--apply", tmp_path / "m.npz")
+    assert code == 2 and "--apply" in err and not t.exists()
+    code, _, err = run_cli(capsys, "register", a, a, "--out", tmp_path / "no" / "t.json")
+    assert code == 2 and "output folder does not exist" in err

@@ -138,6 +138,8 @@ def as_rng(rng: Any) -> np.random.Generator:
     if rng is None:
         return np.random.default_rng(0)
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
+        if rng < 0:
+            raise InvalidInputError(f"`rng` seed must be a non-negative integer; got {int(rng)}.")
         return np.random.default_rng(int(rng))
     raise InvalidInputError(
         f"`rng` must be an int seed, a numpy Generator or None; got {type(rng).__name__}."

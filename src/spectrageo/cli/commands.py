@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
+from ._argtypes import seed_type
 from .batch_cmds import add_tile_options
 
 
@@ -80,7 +81,9 @@ def _same_file(a, b) -> bool:
 
 
 def _check_outputs(inputs, outputs) -> None:
-    """Refuse to write an output over an input file (the input would be lost)."""
+    """Refuse to write an output over an input file (the input would be lost), or into a folder
+    that does not exist: checked before any work, so that a command that cannot write all of its
+    outputs writes none of them."""
     for out in outputs:
         if out is None:
             continue
@@ -90,6 +93,9 @@ def _check_outputs(inputs, outputs) -> None:
                     f"output {out} is the input file {inp}; write to another path "
                     "(the input would be overwritten)."
                 )
+        parent = Path(out).parent
+        if not (parent if str(parent) else Path(".")).is_dir():
+            raise _err(f"output folder does not exist: {parent} (for {out})")
 
 
 # --------------------------------------------------------------------------- info
@@ -218,8 +224,15 @@ def cmd_noise(args) -> int:
     from ..geometry import Mesh, MeshAnimation, PointCloud
 
     _check_outputs([args.input], [args.output])
+    outliers = args.kind.startswith("outliers")
+    if outliers and args.level is not None:
+        raise _err(
+            f"--level does not apply to --kind {args.kind}: the outliers' count is --fraction "
+            "(of the points, default 0.1) and their placement is fixed by the kind."
+        )
+    level = 0.3 if args.level is None else args.level
     obj, _rep = _read(args.input)
-    opts = {"kind": args.kind, "level": args.level, "rng": args.seed}
+    opts = {"kind": args.kind, "level": level, "rng": args.seed}
     if args.fraction is not None:
         opts["fraction"] = args.fraction
     if isinstance(obj, Mesh):
@@ -227,11 +240,10 @@ def cmd_noise(args) -> int:
     elif isinstance(obj, MeshAnimation):
         out = obj.with_frames(noise.animation_noise(obj.frames, obj.faces, **opts))
     elif isinstance(obj, PointCloud):
-        if args.kind.startswith("outliers"):
+        if outliers:
             kind = args.kind.split("-", 1)[1] if "-" in args.kind else "far"
-            P, labels = noise.add_outliers(
-                obj.points, fraction=args.fraction or 0.1, kind=kind, rng=args.seed
-            )
+            fraction = 0.1 if args.fraction is None else args.fraction
+            P, labels = noise.add_outliers(obj.points, fraction=fraction, kind=kind, rng=args.seed)
             out = PointCloud(P, attributes={"outlier": labels.astype(np.uint8)})
         else:
             out = PointCloud(noise.apply(obj.points, None, **opts))
@@ -240,7 +252,8 @@ def cmd_noise(args) -> int:
             f"`noise` supports meshes, animations and point clouds; got {type(obj).__name__}."
         )
     io.write(args.output, out)
-    _status(f"wrote {args.output} ({args.kind} noise, level {args.level}, seed {args.seed})")
+    what = f"fraction {fraction}" if outliers and isinstance(obj, PointCloud) else f"level {level}"
+    _status(f"wrote {args.output} ({args.kind} noise, {what}, seed {args.seed})")
     return 0
 
 
@@ -776,13 +789,17 @@ def register_all(sub) -> None:
     p.add_argument(
         "--level",
         type=float,
-        default=0.3,
-        help="noise level relative to the mean edge length (Eq. 4.36)",
+        default=None,
+        help="noise level relative to the mean edge length (Eq. 4.36; default 0.3; not for the "
+        "outlier kinds, whose count is --fraction)",
     )
     p.add_argument(
-        "--fraction", type=float, default=None, help="fraction of vertices (impulsive, outliers)"
+        "--fraction",
+        type=float,
+        default=None,
+        help="fraction of vertices (impulsive) or outliers per point (outliers-*, default 0.1)",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_type, default=0)
     p.set_defaults(func=cmd_noise)
 
     p = sub.add_parser(
@@ -959,7 +976,7 @@ def register_all(sub) -> None:
     p.add_argument(
         "--level", type=float, default=0.3, help="noise level relative to the mean edge length"
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_type, default=0)
     p.add_argument("--methods", default=None, help=f"comma-separated subset of {', '.join(static)}")
     p.set_defaults(func=cmd_demo)
 

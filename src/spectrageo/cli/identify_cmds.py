@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from .._errors import InvalidInputError
+from ._argtypes import seed_type
 
 
 def _status(msg: str) -> None:
@@ -80,7 +81,7 @@ def register(sub) -> None:
     p.add_argument("scene", help="scene point cloud or mesh file")
     p.add_argument("models", nargs="+", metavar="MODEL", help="model mesh or point-cloud files")
     p.add_argument("--out", required=True, help="report.json")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=seed_type, default=0, help="random seed (default 0)")
     p.add_argument(
         "--zeta", type=float, default=0.4, help="dissimilarity threshold (Table 6.7: 0.4)"
     )

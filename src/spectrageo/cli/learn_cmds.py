@@ -12,6 +12,7 @@ import importlib.util
 from pathlib import Path
 
 from .._errors import InvalidInputError
+from ._argtypes import seed_type
 
 HELP = {
     "train": (
@@ -72,7 +73,7 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, metavar="WEIGHTS.npz")
     p.add_argument("--epochs", type=int, default=None, help="epochs per model / stage")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_type, default=0)
     p.add_argument("--stages", type=int, default=None, help="bm3d-cnn cascade stages")
     p.add_argument("--threads", type=int, default=None, help="CPU threads of torch")
     p.add_argument(

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
+from ._argtypes import seed_type
 
 
 def _status(msg: str) -> None:
@@ -75,6 +76,23 @@ def _read_geometry(path: str, name: str):
     return obj
 
 
+def _check_apply_format(path: str, src) -> None:
+    """Refuse an ``--apply`` file format that cannot hold the source before registering (and
+    before ``--out`` is written)."""
+    from ..geometry import Mesh
+    from ..io._api import _MESH_WRITE, _POINTS_WRITE
+    from ..io._common import split_suffix
+
+    suffix = split_suffix(Path(path))[0]
+    allowed = _MESH_WRITE if isinstance(src, Mesh) else _POINTS_WRITE
+    if suffix not in allowed:
+        kind = "mesh" if isinstance(src, Mesh) else "point cloud"
+        raise InvalidInputError(
+            f"--apply: cannot write the moved {kind} as {suffix or '(no extension)'!r}; "
+            f"use one of {', '.join(allowed)}."
+        )
+
+
 def _moved(obj, T: np.ndarray):
     """``obj`` (Mesh or PointCloud) moved by ``T``, same kind, normals rotated."""
     from ..geometry import Mesh
@@ -115,6 +133,8 @@ def cmd_register(args) -> int:
     init = _load_transform(args.init) if args.init else None
     t0 = time.perf_counter()
     src = _read_geometry(args.source, "SOURCE")
+    if args.apply:
+        _check_apply_format(args.apply, src)
     tgt = _read_geometry(args.target, "TARGET")
     res = register(src, tgt, init=init, rng=args.seed)
     elapsed = time.perf_counter() - t0
@@ -129,8 +149,6 @@ def cmd_register(args) -> int:
         "inlier_distance": float(res.inlier_distance),
     }
     out = Path(args.out)
-    if out.parent and not out.parent.exists():
-        raise InvalidInputError(f"`--out`: folder does not exist: {out.parent}")
     with atomic_write(out) as tmp:
         Path(tmp).write_text(_json_text(report), encoding="utf-8")
     if args.apply:
@@ -161,7 +179,7 @@ def register(sub) -> None:
         help="T0.json (or 4x4 text) initial transform; skips the broad phase",
     )
     p.add_argument("--apply", default=None, help="OUT: write the moved source (same kind)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the broad phase (default 0)")
+    p.add_argument("--seed", type=seed_type, default=0, help="seed of the broad phase (default 0)")
     p.set_defaults(func=cmd_register)
     p.description = (
         "Register SOURCE onto TARGET: broad phase (global, from local shape properties and a\n"

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
+from ._argtypes import seed_type
 from .batch_cmds import add_tile_options
 
 _VALUE_SUFFIXES = (".npy", ".csv", ".ply")
@@ -285,7 +286,7 @@ def register(sub) -> None:
     p.add_argument("--classes", type=int, default=4, help="saliency classes (4)")
     p.add_argument("--method", choices=["combined", "spectral", "geometric"], default="combined")
     p.add_argument("--k", type=int, default=25)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_type, default=0)
     p.set_defaults(func=cmd_simplify)
 
     p = sub.add_parser(
