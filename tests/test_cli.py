@@ -267,3 +267,22 @@ def test_a_command_that_cannot_write_every_output_writes_none(capsys, tmp_path):
     assert code == 2 and "--apply" in err and not t.exists()
     code, _, err = run_cli(capsys, "register", a, a, "--out", tmp_path / "no" / "t.json")
     assert code == 2 and "output folder does not exist" in err
+
+
+def test_point_cloud_saliency_has_one_value_per_input_row(capsys, tmp_path):
+    """Rows without coordinates (NaN, as scanners write them) are left out of the computation
+    and get NaN, so the map lines up with the file's rows, as the outlier masks do."""
+    P = np.random.default_rng(1).normal(size=(120, 3))
+    rows = [" ".join(f"{x:.9g}" for x in p) for p in P]
+    rows[17] = "nan nan nan"
+    src = tmp_path / "scan.xyz"
+    src.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "s.npy"
+    code, _, err = run_cli(capsys, "saliency", src, "--out", out)
+    assert code == 0, err
+    s = np.load(out)
+    assert s.shape == (120,) and np.isnan(s[17]) and np.isfinite(np.delete(s, 17)).all()
+    assert "1 rows without coordinates" in err
+    code, _, err = run_cli(capsys, "saliency", src, "--out", tmp_path / "s.ply")
+    assert code == 0, err
+    assert io.read(tmp_path / "s.ply").points.shape[0] == 119

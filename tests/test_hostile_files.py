@@ -611,3 +611,26 @@ def test_temporaries_are_named_and_stale_ones_removed(tmp_path, small_mesh):
     os.utime(other, (past, past))
     io.write(target, small_mesh)
     assert not old.exists() and fresh.exists() and other.exists()
+
+
+def test_coordinates_too_small_to_measure_are_refused(tmp_path):
+    """A model at 1e-300 scale: its squared lengths underflow, so `info` reported a mean edge
+    length of 0 and `noise` returned it unchanged. It is refused like coordinates above 1e150;
+    a single point or coincident points (extent 0) and small real scales are accepted."""
+    from spectrageo._validation import MIN_EXTENT, as_points
+
+    V, F = icosphere(1)
+    with pytest.raises(InvalidInputError, match="spans only 2e-300"):
+        as_points(V * 1e-300)
+    as_points(V * 1e-60)  # well above MIN_EXTENT: accepted
+    as_points(np.zeros((5, 3)))
+    as_points(np.ones((1, 3)) * 1e-300)
+    assert MIN_EXTENT == 1e-70
+    with pytest.raises(InvalidInputError, match="Rescale"):  # nor written
+        io.write(tmp_path / "t.off", Mesh(V * 1e-300, F))
+    lines = ["OFF", f"{len(V)} {len(F)} 0"]
+    lines += [" ".join(f"{x:.17g}" for x in v) for v in V * 1e-300]
+    lines += ["3 " + " ".join(str(i) for i in f) for f in F]
+    (tmp_path / "tiny.off").write_text("\n".join(lines) + "\n")
+    with pytest.raises(InvalidInputError, match="Rescale"):
+        io.read(tmp_path / "tiny.off")

@@ -886,3 +886,14 @@ def test_ragged_polygon_with_two_vertices(tmp_path):
         InvalidInputError, match="r.ply: face 1 has 2 vertices; faces need at least 3"
     ):
         io.read(p)
+
+
+def test_obj_relative_index_before_the_first_vertex_is_named(tmp_path):
+    """``f -1 -2 -9`` on three vertices: the message names -9 and the valid range (it used to
+    report an index of 9223372036854775807)."""
+    p = tmp_path / "neg.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -9\n")
+    with pytest.raises(InvalidInputError, match=r"index -9 is out of range.*down to -3"):
+        io.read(p)
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -3\n")
+    assert io.read(p).faces.tolist() == [[2, 1, 0]]

@@ -430,5 +430,16 @@ def test_simplify_refuses_a_mesh_whose_faces_all_collapse():
     the CLI then failed to write with an unrelated message ("`vertices` is empty")."""
     V, F = grid(8, 8)
     Fd = np.c_[F[:, 0], F[:, 0], F[:, 1]]
-    with pytest.raises(InvalidInputError, match="no triangle survives"):
+    # refused before the saliency map (which has no surface to measure), one clear error
+    with pytest.raises(InvalidInputError, match="every face of the mesh is degenerate"):
         simplify(V, Fd, ratio=0.5, method="geometric", k=10, rng=0)
+
+
+def test_inspect_refuses_a_copy_without_surface():
+    """A scan whose vertices all coincide has no saliency; inspect used to map it to a constant
+    deviation with exit status 0."""
+    from spectrageo.saliency import inspect
+
+    V, F = icosphere(2)
+    with pytest.raises(InvalidInputError, match="V_copy"):
+        inspect(V, F, np.zeros_like(V), F)

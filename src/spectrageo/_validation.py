@@ -22,6 +22,10 @@ def _shape_str(a: Any) -> str:
 #: of coordinates up to 1e150 stay below the float64 maximum (1.8e308), so no kernel overflows to
 #: inf (an inf turned into an index by compiled code would read or write out of bounds).
 MAX_COORDINATE = 1e150
+#: Smallest non-zero extent (largest side of the bounding box) accepted by :func:`as_points`:
+#: areas and Gram determinants (fourth powers of lengths) of a smaller point set underflow to
+#: zero in float64, so every triangle would look degenerate and every length scale vanish.
+MIN_EXTENT = 1e-70
 
 
 def coordinate_array(
@@ -50,7 +54,8 @@ def as_points(
     V: Any, name: str = "V", *, allow_empty: bool = False, copy: bool = False
 ) -> np.ndarray:
     """Return ``V`` as a C-contiguous float64 array of shape (n, 3) with finite entries of
-    magnitude at most :data:`MAX_COORDINATE` (1e150)."""
+    magnitude at most :data:`MAX_COORDINATE` (1e150), spanning either nothing (one point, or
+    coincident points) or at least :data:`MIN_EXTENT` (1e-70)."""
     arr = coordinate_array(V, name, copy=copy, allow_empty=allow_empty)
     if not np.isfinite(arr).all():
         bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
@@ -64,6 +69,13 @@ def as_points(
             f"first at index {int(big[0])} ({float(np.abs(arr[big[0]]).max()):.3g}); squared "
             "distances would overflow. Rescale the data."
         )
+    if arr.shape[0] > 1:
+        extent = float(np.ptp(arr, axis=0).max())
+        if 0.0 < extent < MIN_EXTENT:
+            raise InvalidInputError(
+                f"`{name}` spans only {extent:.3g} (bounding box); lengths that small underflow "
+                f"in areas and squared distances (below {MIN_EXTENT:g}). Rescale the data."
+            )
     return np.ascontiguousarray(arr)
 
 

@@ -228,8 +228,13 @@ def cmd_info_sgc(args) -> int:
     data = _read_sgc(args.file)
     try:
         d = {"file": str(args.file), **compress.info(data)}
-    except InvalidInputError:  # an animation file (.sga): its own header
-        d = {"file": str(args.file), **compress.info_animation(data)}
+    except InvalidInputError as mesh_err:  # an animation file (.sga): its own header
+        try:
+            d = {"file": str(args.file), **compress.info_animation(data)}
+        except InvalidInputError:
+            if compress._animation.is_animation(data) or str(args.file).lower().endswith(".sga"):
+                raise
+            raise mesh_err from None  # neither: report it as the mesh file it is named
     if args.json:
         print(json.dumps(d, indent=2))
     else:

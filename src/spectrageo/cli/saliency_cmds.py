@@ -106,7 +106,7 @@ def cmd_saliency(args) -> int:
         from .batch_cmds import cmd_saliency_tiled
 
         return cmd_saliency_tiled(args)
-    obj = io.read(args.input)
+    obj, rep = io.read_with_report(args.input, nan_points="drop")
     t0 = time.perf_counter()
     if isinstance(obj, Mesh):
         s = saliency.saliency(
@@ -122,6 +122,13 @@ def cmd_saliency(args) -> int:
         if args.per == "face":
             raise InvalidInputError("a point cloud has no faces; use --per vertex.")
         s = saliency.pointcloud_saliency(obj.points, k=args.k)
+        if rep.source_index is not None and _suffix(args.out) != ".ply":
+            # one value per input row, as the outlier masks: NaN where a row (an organized
+            # scan's missing measurement) had no coordinates; a .ply holds the points kept
+            full = np.full(rep.n_input_vertices, np.nan)
+            full[rep.source_index] = s
+            s = full
+            _status(f"{rep.n_nonfinite_rows} rows without coordinates (NaN): saliency NaN")
         _write_values(args.out, s, geometry=obj, name="saliency")
     elif isinstance(obj, MeshAnimation):
         if args.per == "face":

@@ -140,8 +140,12 @@ def _resolve(idx: np.ndarray, count: int, name: str, what: str, *, required: boo
                 stacklevel=2,
             )
             return np.full(idx.shape, -1, dtype=np.int64)
-    elif (out < 0).any():  # relative index before the first vertex: left to the Mesh range check
-        out = np.where(out < 0, np.iinfo(np.int64).max, out)
+    elif (out < 0).any():  # a relative index reaching before the first vertex
+        raw = int(idx[np.flatnonzero(out < 0)[0]])
+        raise InvalidInputError(
+            f"{name}: OBJ face index {raw} is out of range: relative (negative) indices count "
+            f"back from the last 'v' line (the file has {count}), so they go down to -{count}."
+        )
     return out
 
 

@@ -16,9 +16,18 @@ NORMALS = ("guided", "face")
 PER = ("vertex", "face")
 
 
-def check_mesh(V, F) -> tuple[np.ndarray, np.ndarray]:
-    V = as_points(V, "V")
-    return V, as_faces(F, V.shape[0], "F")
+def check_mesh(V, F, names=("V", "F")) -> tuple[np.ndarray, np.ndarray]:
+    """``(V, F)`` validated; a mesh none of whose faces has a positive area (every vertex in one
+    point, or on one line) has no surface to measure saliency on and is refused."""
+    V = as_points(V, names[0])
+    F = as_faces(F, V.shape[0], names[1])
+    if F.shape[0] and not (face_areas(V, F) > 0).any():
+        what = "the mesh" if names[0] == "V" else f"the mesh `{names[0]}`"
+        raise InvalidInputError(
+            f"every face of {what} is degenerate (zero area: its vertices coincide or are "
+            "collinear); saliency is undefined there."
+        )
+    return V, F
 
 
 def check_int(value, name: str, *, minimum: int = 1, maximum: int | None = None) -> int:

@@ -19,7 +19,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._errors import InvalidInputError
-from .._validation import as_faces, as_points, check_positive
+from .._validation import check_positive
+from ._common import check_mesh
 
 
 @dataclass(frozen=True)
@@ -87,10 +88,8 @@ def inspect(
     """
     from .combined import saliency as _saliency
 
-    V1 = as_points(V_ref, "V_ref")
-    F1 = as_faces(F_ref, V1.shape[0], "F_ref")
-    V2 = as_points(V_copy, "V_copy")
-    F2 = as_faces(F_copy, V2.shape[0], "F_copy")
+    V1, F1 = check_mesh(V_ref, F_ref, ("V_ref", "F_ref"))
+    V2, F2 = check_mesh(V_copy, F_copy, ("V_copy", "F_copy"))
     w = float(check_positive(saliency_weight, "saliency_weight", allow_zero=True))
 
     def _map(s, V, F, name):
