@@ -897,3 +897,24 @@ def test_obj_relative_index_before_the_first_vertex_is_named(tmp_path):
         io.read(p)
     p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -3\n")
     assert io.read(p).faces.tolist() == [[2, 1, 0]]
+
+
+@pytest.mark.skipif(not Path("/proc/self").exists(), reason="needs Linux's /proc")
+def test_a_folder_that_takes_no_new_file_is_named_not_the_temporary():
+    """Writing into /proc failed with 'file not found' naming the hidden temporary file."""
+    from spectrageo.geometry import Mesh
+
+    V = np.eye(3)
+    with pytest.raises(
+        InvalidInputError, match=r"cannot write /proc/x\.ply: the folder /proc"
+    ) as e:
+        io.write("/proc/x.ply", Mesh(V, np.array([[0, 1, 2]])))
+    assert "spectrageo-tmp" not in str(e.value)
+
+
+def test_npz_that_is_not_a_zip_says_so(tmp_path):
+    p = tmp_path / "garbage.npz"
+    p.write_bytes(b"\x00\x01not an archive at all" * 10)
+    with pytest.raises(InvalidInputError, match=r"not a zip archive of \.npy arrays") as e:
+        io.read(p)
+    assert "pickled" not in str(e.value)

@@ -539,7 +539,10 @@ def _read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCl
         RuntimeError,  # encrypted members
         zlib.error,
     ) as exc:
-        raise InvalidInputError(f"{name}: not a valid .npz archive ({exc_text(exc)}).") from exc
+        why = exc_text(exc)
+        if not data.startswith(b"PK") and not data.startswith(b"\x93NUMPY"):
+            why = "not a zip archive of .npy arrays"  # numpy would call it pickled data
+        raise InvalidInputError(f"{name}: not a valid .npz archive ({why}).") from exc
     if not isinstance(d, np.lib.npyio.NpzFile):
         raise InvalidInputError(f"{name}: not a .npz archive (a single .npy array).")
     with d:

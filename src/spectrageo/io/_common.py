@@ -293,15 +293,24 @@ def atomic_write(path: str | os.PathLike) -> Iterator[Path]:
     target, st = _resolve_target(path)
     parent = target.parent if str(target.parent) else Path(".")
     _remove_stale_temporaries(parent, target.name)
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=f".{target.name}{TMP_TAG}", suffix=target.suffix, dir=parent
-    )
+    try:
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=f".{target.name}{TMP_TAG}", suffix=target.suffix, dir=parent
+        )
+    except OSError as exc:  # a read-only or special folder (/proc, a full disk...)
+        raise InvalidInputError(
+            f"cannot write {target}: the folder {parent} does not accept new files "
+            f"({exc.strerror or exc})."
+        ) from exc
     os.close(fd)
     tmp = Path(tmp_name)
     try:
         yield tmp
         os.chmod(tmp, stat.S_IMODE(st.st_mode) if st is not None else 0o666 & ~_UMASK)
-        os.replace(tmp, target)
+        try:
+            os.replace(tmp, target)
+        except OSError as exc:
+            raise InvalidInputError(f"cannot write {target}: {exc.strerror or exc}.") from exc
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
