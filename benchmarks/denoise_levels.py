@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from spectrageo.evaluate.denoise import evaluate_generality, format_csv, generality_summary
+from spectrageo.evaluate._tables import rows_to_csv
+from spectrageo.evaluate.denoise import PROTOCOL_COLUMNS, evaluate_generality, generality_summary
 
 HERE = Path(__file__).resolve().parent
 
@@ -96,7 +97,7 @@ def main() -> None:
         groups["meshes > 30k vertices (all levels)"] = big
     out = Path(a.out)
     csv_path = out.with_name(out.stem + "_rows.csv")
-    csv_path.write_text(format_csv(rows))
+    csv_path.write_text(rows_to_csv(rows, PROTOCOL_COLUMNS))
     above = {
         lv: sorted(
             r["case"]
