@@ -77,6 +77,20 @@ def summary_table(groups: dict[str, list[dict]]) -> list[str]:
     return lines
 
 
+def failure_lines(rows: list[dict]) -> list[str]:
+    """One line per method that failed on some cases (its rows then count the noisy input)."""
+    out = []
+    for m in sorted({r["method"] for r in rows if r.get("error")}):
+        bad = [r for r in rows if r["method"] == m and r.get("error")]
+        models = sorted({r["model"] for r in bad})
+        first = str(bad[0]["error"]).splitlines()[0][:120]
+        out.append(
+            f"- {m} failed on {len(bad)} case(s) ({', '.join(models)}; first error: {first}); "
+            "those rows count the noisy input"
+        )
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--data", default=os.environ.get("SPECTRAGEO_DATA", "../shared/data"))
@@ -134,6 +148,7 @@ def main() -> None:
         lines.append(
             f"- level {lv:g}, tsgsp above the noisy input on: " + (", ".join(above[lv]) or "none")
         )
+    lines += failure_lines(rows)
     text = "\n".join(lines) + "\n"
     out.write_text(text)
     print(text)
