@@ -500,3 +500,14 @@ def test_entropy_groups_round_trip_when_the_coder_seals_into_no_words():
         empty += len(data) == 12  # three group heads and no coder words
         assert np.array_equal(decode_groups(data, groups, 3, "test"), vals), vals
     assert empty >= 1
+
+
+def test_info_on_a_damaged_sgc_speaks_of_a_mesh_file(tmp_path, capsys):
+    """`info` tries the mesh header, then the animation one; a file that is neither was
+    reported with the animation reader's message (".sga data ...")."""
+    for data in (b"", b"garbage bytes, not a bitstream" * 4):
+        bad = tmp_path / "bad.sgc"
+        bad.write_bytes(data)
+        assert main(["info", str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert ".sgc" in err and ".sga" not in err, err
