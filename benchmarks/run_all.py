@@ -4,6 +4,8 @@ and assemble their sections.
     python benchmarks/run_all.py                 # run all, then assemble
     python benchmarks/run_all.py --assemble-only # only assemble benchmarks/_out/*.md
     python benchmarks/run_all.py --only core,lowpass
+
+The headline table and the table of contents at the top come from ``benchmarks/summary.py``.
 """
 
 from __future__ import annotations
@@ -15,6 +17,9 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+import summary  # noqa: E402
 
 
 def _script(name: str) -> list[str]:
@@ -106,6 +111,20 @@ speed comparisons are ratios measured in the same run.
 """
 
 
+def assemble() -> str:
+    """BENCHMARKS.md from the section files in ``benchmarks/_out``, with the headline table and
+    the table of contents at the top (benchmarks/summary.py)."""
+    parts = [HEADER]
+    for name, cmd in SECTIONS:
+        f = HERE / "_out" / f"{name}.md"
+        if f.exists():
+            parts.append(f.read_text().rstrip() + "\n")
+        else:
+            run = " ".join(Path(c).name if c == sys.executable else c for c in cmd)
+            parts.append(f"## {name}\n\nNot measured yet: `{run}`.\n")
+    return summary.update_benchmarks("\n".join(parts))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--assemble-only", action="store_true")
@@ -118,16 +137,9 @@ def main() -> None:
                 continue
             print(f"== {name}: {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
             subprocess.run(cmd, check=True, cwd=ROOT)
-    parts = [HEADER]
-    for name, cmd in SECTIONS:
-        f = HERE / "_out" / f"{name}.md"
-        if f.exists():
-            parts.append(f.read_text().rstrip() + "\n")
-        else:
-            run = " ".join(Path(c).name if c == sys.executable else c for c in cmd)
-            parts.append(f"## {name}\n\nNot measured yet: `{run}`.\n")
+    text = assemble()
     tmp = ROOT / "BENCHMARKS.md.tmp"
-    tmp.write_text("\n".join(parts))
+    tmp.write_text(text)
     tmp.replace(ROOT / "BENCHMARKS.md")
     print(f"wrote {ROOT / 'BENCHMARKS.md'}", file=sys.stderr)
 

@@ -29,6 +29,22 @@ from ._guard import (
 
 @dataclass(frozen=True)
 class DenoiserInfo:
+    """A registered denoiser.
+
+    Attributes
+    ----------
+    name : str
+        The method name (``denoise(..., method=name)``).
+    func : callable
+        ``func(V, F, **options) -> (n, 3) array`` of denoised positions.
+    summary : str
+        One line describing the method.
+    reference : str
+        Where the method is defined (thesis section, algorithm or paper).
+    presets : tuple of str
+        Names accepted by ``denoise(..., preset=...)`` for this method.
+    """
+
     name: str
     func: Callable[..., np.ndarray]
     summary: str
@@ -81,6 +97,23 @@ def available() -> list[str]:
 
 
 def get(name: str) -> DenoiserInfo:
+    """The registered denoiser ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A name of :func:`available`.
+
+    Returns
+    -------
+    DenoiserInfo
+        Its function, summary, reference and presets.
+
+    Raises
+    ------
+    InvalidInputError
+        If no denoiser of that name is registered.
+    """
     _load()
     if name not in _REGISTRY:
         raise InvalidInputError(

@@ -235,7 +235,7 @@ def encode_animation_blocks(
         ``blocks`` (``block`` frames per task, default 16) is the one that parallelises; the other
         four code the whole sequence as one block (one task). ``layered`` is refused
         (:class:`~spectrageo.InvalidInputError`): its closed-loop encoder is sequential.
-    step, bpvf, error, **options
+    step, bpvf, error
         As in :func:`~spectrageo.compress.encode_animation`.
     scheduler : str, optional
         Address of a running Dask scheduler (workers need spectrageo installed).
@@ -245,6 +245,8 @@ def encode_animation_blocks(
         Local cluster of processes (default) or of threads in this process.
     progress : bool, optional
         Dask's progress bar and the dashboard link on stderr (default: when stderr is a terminal).
+    **options
+        As in :func:`~spectrageo.compress.encode_animation`.
 
     Returns
     -------

@@ -996,10 +996,12 @@ def saliency_tiled(
         Points per tile (>= 2 (max(k, normal_k) + 1)).
     k, normal_k, normalize
         As :func:`spectrageo.saliency.pointcloud_saliency`.
-    workers, scheduler, processes, chunk, progress, scratch
+    workers, scheduler, processes, chunk
         As :func:`remove_outliers_tiled`.
     return_values : bool
         Also return the (n,) values in memory.
+    progress, scratch
+        As :func:`remove_outliers_tiled`.
     """
     from ..saliency._common import check_int
 
@@ -1190,10 +1192,12 @@ def robot_denoise_tiled(
         False: skip the RPCA step and filter every point (then equal to
         :func:`spectrageo.outliers.bilateral_point_filter` to rounding); ``keep`` is all True,
         ``scores`` None and ``threshold`` NaN.
-    workers, scheduler, processes, chunk, progress, scratch
+    workers, scheduler, processes, chunk
         As :func:`remove_outliers_tiled`.
     return_arrays : bool
         Also return ``keep``, ``scores`` (n each) and the filtered ``points`` (n_kept, 3).
+    progress, scratch
+        As :func:`remove_outliers_tiled`.
     """
     check_positive(k, "k", integer=True)
     check_positive(rpca_k, "rpca_k", integer=True)

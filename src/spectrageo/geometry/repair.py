@@ -89,6 +89,20 @@ def remove_unreferenced(V, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class RepairReport:
+    """What :func:`clean_mesh` changed.
+
+    Attributes
+    ----------
+    merged_vertices : int
+        Vertices merged into others.
+    degenerate_faces : int
+        Faces dropped for zero area or repeated corners.
+    duplicate_faces : int
+        Faces dropped as repeats of another face.
+    unreferenced_vertices : int
+        Vertices dropped because no face used them.
+    """
+
     merged_vertices: int
     degenerate_faces: int
     duplicate_faces: int
@@ -96,6 +110,7 @@ class RepairReport:
 
     @property
     def changed(self) -> bool:
+        """True when any count is non-zero."""
         return any(
             (
                 self.merged_vertices,

@@ -2,31 +2,31 @@
 
 Formats (each single-file format also gzip-compressed: ``.ply.gz``, ``.obj.gz``, ``.pcd.gz`` ...):
 
-==========  =========================================  ==========================================
-extension   read                                       write
-==========  =========================================  ==========================================
-``.ply``    mesh or points (plyfile), ascii/binary,    Mesh, PointCloud (binary or ascii)
+==========  ============================================  ==========================================
+extension   read                                          write
+==========  ============================================  ==========================================
+``.ply``    mesh or points (plyfile), ascii/binary,       Mesh, PointCloud (binary or ascii)
             normals, colours, extra properties
-``.obj``    mesh or points (meshio), polygons fanned   Mesh, PointCloud (meshio)
-``.off``    mesh or points, COFF/NOFF, polygons fanned Mesh, PointCloud (meshio)
-``.stl``    mesh (trimesh), corners welded unless      Mesh (binary or ascii, trimesh)
+``.obj``    mesh or points (meshio), polygons fanned      Mesh, PointCloud (meshio)
+``.off``    mesh or points, COFF/NOFF, polygons fanned    Mesh, PointCloud (meshio)
+``.stl``    mesh (trimesh), corners welded unless         Mesh (binary or ascii, trimesh)
             ``weld=False``
-``.pcd``    points, ascii/binary/binary_compressed     PointCloud (``pcd_format=``)
-``.xyz``    points, 3 or 6 columns (normals)           PointCloud
-``.npy``    points, (n, 3) array                       PointCloud
-``.las``    points (laspy, optional extra)             PointCloud
-``.laz``    points (laspy + lazrs, optional extra)     PointCloud
-``.npz``    MeshAnimation (``vertices``, ``faces``)    MeshAnimation, PointCloudSequence
+``.pcd``    points, ascii/binary/binary_compressed        PointCloud (``pcd_format=``)
+``.xyz``    points, 3 or 6 columns (normals)              PointCloud
+``.npy``    points, (n, 3) array                          PointCloud
+``.las``    points (laspy, optional extra)                PointCloud
+``.laz``    points (laspy + lazrs, optional extra)        PointCloud
+``.npz``    MeshAnimation (``vertices``, ``faces``)       MeshAnimation, PointCloudSequence
             or PointCloudSequence (``points``
             (T, n, 3), or (N, 3) + ``counts`` (T,))
-``.sgc``    mesh compressed by spectrageo.compress,    (``spectrageo compress``: lossy, takes
-            decoded (order as coded)                   a method and a rate)
-``.sga``    animation compressed by                    (``spectrageo compress``)
+``.sgc``    mesh compressed by spectrageo.compress,       (``spectrageo compress``: lossy, takes
+            decoded (order as coded)                      a method and a rate)
+``.sga``    animation compressed by                       (``spectrageo compress``)
             spectrageo.compress, decoded
-folder/     numbered frames (``frame_000.obj`` ...,    MeshAnimation, PointCloudSequence
-            natural order) -> animation when all have  (``frame_format=".ply"`` default)
+folder/     numbered frames (``frame_000.obj`` ...,       MeshAnimation, PointCloudSequence
+            natural order) -> animation when all have     (``frame_format=".ply"`` default)
             faces (shared connectivity), else sequence
-==========  =========================================  ==========================================
+==========  ============================================  ==========================================
 
 Policies
     * Order and counts are preserved exactly: no reader merges, drops or reorders vertices or faces

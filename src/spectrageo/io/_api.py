@@ -753,24 +753,27 @@ def write(path: str | os.PathLike, obj: Any, *, binary: bool = True, **kw: Any) 
     obj : Mesh | PointCloud | MeshAnimation | PointCloudSequence | list[PointCloud] | (n, 3) array
     binary : bool
         Binary PLY/STL/PCD (default) or ascii. Text formats (OBJ, OFF, XYZ) ignore it.
-    pcd_format : {"ascii", "binary", "binary_compressed"}, optional
-        PCD encoding; default ``"binary"`` (``"ascii"`` when ``binary=False``).
-    dtype : numpy float dtype, optional
-        Coordinate type for PLY (default float64, lossless) and PCD. PCD default (None): float32,
-        PCL's usual type, when every coordinate survives the float32 round trip exactly
-        (``np.array_equal(P.astype(np.float32).astype(np.float64), P)``), else float64, so that
-        georeferenced clouds are not altered (float32 moves UTM coordinates such as
-        x=512345.678 by up to 3 cm, northings near 5.4e6 by up to 0.25 m); PCD normals are float32
-        unless ``dtype`` is given. An explicit ``dtype`` is always obeyed.
-    las_scale : float, optional
-        LAS/LAZ coordinate resolution (default: chosen from the extent, see :mod:`._las`).
-    frame_format : str, optional
-        Frame file format of folder outputs (default ``".ply"``; e.g. ``".obj"``, ``".pcd"``,
-        ``".ply.gz"``).
-    prefix : str, optional
-        Frame file name prefix of folder outputs (default ``"frame_"``).
-    compress : bool, optional
-        ``.npz`` outputs: zip-deflate the arrays (default False).
+    **kw
+        Format options (any other name is an error):
+
+        ``pcd_format`` : {"ascii", "binary", "binary_compressed"}, optional
+            PCD encoding; default ``"binary"`` (``"ascii"`` when ``binary=False``).
+        ``dtype`` : numpy float dtype, optional
+            Coordinate type for PLY (default float64, lossless) and PCD. PCD default (None): float32,
+            PCL's usual type, when every coordinate survives the float32 round trip exactly
+            (``np.array_equal(P.astype(np.float32).astype(np.float64), P)``), else float64, so that
+            georeferenced clouds are not altered (float32 moves UTM coordinates such as
+            x=512345.678 by up to 3 cm, northings near 5.4e6 by up to 0.25 m); PCD normals are float32
+            unless ``dtype`` is given. An explicit ``dtype`` is always obeyed.
+        ``las_scale`` : float, optional
+            LAS/LAZ coordinate resolution (default: chosen from the extent of the points).
+        ``frame_format`` : str, optional
+            Frame file format of folder outputs (default ``".ply"``; e.g. ``".obj"``, ``".pcd"``,
+            ``".ply.gz"``).
+        ``prefix`` : str, optional
+            Frame file name prefix of folder outputs (default ``"frame_"``).
+        ``compress`` : bool, optional
+            ``.npz`` outputs: zip-deflate the arrays (default False).
 
     Notes
     -----

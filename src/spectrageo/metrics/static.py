@@ -281,20 +281,18 @@ def compare(
         one-sided maxima, ``hd_mean`` the mean of the two one-sided area-weighted means). Python
         floats.
 
+    Raises
+    ------
+    InvalidInputError
+        Different vertex counts, different faces, or no faces at all.
+
     Notes
     -----
     Vertices used by no face are not part of either surface and do not enter ``hd_*``; the
     per-vertex metrics (``dmean``, ``dmax``, ``nmsve``) are over all vertices, which correspond by
     index. With corresponding vertices ``hd_max <= dmax`` (every surface point of one mesh is a
-    barycentric combination whose counterpart lies on the other).
-
-    Earlier versions computed ``hd_*`` one-sided (result vertices -> reference surface), which scored a
-    mesh collapsed onto a subset of the reference surface as ~0.
-
-    Raises
-    ------
-    InvalidInputError
-        Different vertex counts, different faces, or no faces at all.
+    barycentric combination whose counterpart lies on the other). Both one-sided distances enter
+    ``hd_*``, so a mesh collapsed onto part of the reference surface is not scored as close.
     """
     V, F_res = _unpack(result, "result")
     V_ref, F_ref = _unpack(reference, "reference")

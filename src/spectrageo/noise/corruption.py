@@ -242,30 +242,6 @@ def corrupt_outliers(
     Distances are in units of the point spacing ``s`` (the mean nearest-neighbour distance of
     ``P``, as in :func:`add_outliers`); ``diag`` is the bounding-box diagonal of ``P``.
 
-    Patterns
-    --------
-    ``"uniform"``
-        Uniform in the bounding box of ``P`` enlarged on every side by ``margin * diag``.
-    ``"halo"``
-        A random inlier (with replacement) displaced by ``U(2, 20) s`` along a uniformly random
-        unit direction (so within 2-20 spacings of its inlier, possibly nearer the surface).
-    ``"blobs"``
-        Clustered outliers: clusters of 10-50 points (the last one smaller), each an isotropic
-        Gaussian of standard deviation ``U(2, 5) s`` around a centre uniform in the enlarged
-        bounding box.
-    ``"flying"``
-        Flying pixels of range sensors: a random inlier, drawn with probability proportional to
-        its local depth range (the spread of the depths of its 10 nearest neighbours seen from
-        ``viewpoint``, plus a floor of ``s``), so depth edges give most of them, moved along its
-        sensor ray (the line from ``viewpoint``) by ``+-U(2, 30) s`` (random sign).
-    ``"lidar"``
-        Structured LiDAR artefacts, half each: *multipath* returns -- a random inlier moved
-        *behind* its surface along its sensor ray by ``U(5, 50) s``; *vegetation-like scatter* --
-        a random inlier moved ``U(2, 10) s`` along a random direction in the hemisphere of its
-        PCA normal that faces ``viewpoint``.
-    ``"mixed"``
-        Half ``"uniform"``, half a halo at ``U(5, 15) s`` (the case of the outlier issue).
-
     Parameters
     ----------
     P : (n, 3) array_like
@@ -289,6 +265,32 @@ def corrupt_outliers(
     P_out : (n + m, 3) float64
     labels : (n + m,) bool
         True for the injected outliers.
+
+    Notes
+    -----
+    Patterns:
+
+    ``"uniform"``
+        Uniform in the bounding box of ``P`` enlarged on every side by ``margin * diag``.
+    ``"halo"``
+        A random inlier (with replacement) displaced by ``U(2, 20) s`` along a uniformly random
+        unit direction (so within 2-20 spacings of its inlier, possibly nearer the surface).
+    ``"blobs"``
+        Clustered outliers: clusters of 10-50 points (the last one smaller), each an isotropic
+        Gaussian of standard deviation ``U(2, 5) s`` around a centre uniform in the enlarged
+        bounding box.
+    ``"flying"``
+        Flying pixels of range sensors: a random inlier, drawn with probability proportional to
+        its local depth range (the spread of the depths of its 10 nearest neighbours seen from
+        ``viewpoint``, plus a floor of ``s``), so depth edges give most of them, moved along its
+        sensor ray (the line from ``viewpoint``) by ``+-U(2, 30) s`` (random sign).
+    ``"lidar"``
+        Structured LiDAR artefacts, half each: *multipath* returns -- a random inlier moved
+        *behind* its surface along its sensor ray by ``U(5, 50) s``; *vegetation-like scatter* --
+        a random inlier moved ``U(2, 10) s`` along a random direction in the hemisphere of its
+        PCA normal that faces ``viewpoint``.
+    ``"mixed"``
+        Half ``"uniform"``, half a halo at ``U(5, 15) s`` (the case of the outlier issue).
     """
     P = as_points(P, "P")
     check_choice(pattern, "pattern", OUTLIER_PATTERNS)

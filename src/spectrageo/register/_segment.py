@@ -90,7 +90,8 @@ def adaptive_dbscan(
 
     Returns
     -------
-    labels : (n,) int64; cluster ``0 .. n_c - 1`` by decreasing size, ``-1`` for noise (Eq. 6.28).
+    (n,) int64
+        Labels: cluster ``0 .. n_c - 1`` by decreasing size, ``-1`` for noise (Eq. 6.28).
     """
     P = as_points(points, "points")
     k_a = _check_int(k_a, "k_a", 1)

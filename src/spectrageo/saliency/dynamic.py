@@ -88,7 +88,7 @@ def animation_saliency(
         Shared connectivity.
     threshold : float
         Area-change threshold of Eq. (6.16) (thesis: 0.1); 0 recomputes every vertex of every frame.
-    method, k, weights, normals, options
+    method, k, weights, normals, **options
         As in :func:`spectrageo.saliency.saliency` (``options`` go to the geometric part).
 
     Returns

@@ -550,8 +550,9 @@ def orthogonal_iteration(
 
     Returns
     -------
-    U : (n, k) orthonormal Ritz vectors, ascending, signs fixed by :func:`fix_signs`
-        (or :class:`OIResult` when ``full_output``).
+    (n, k) ndarray or OIResult
+        Orthonormal Ritz vectors, ascending, signs fixed by :func:`fix_signs` (an
+        :class:`OIResult` when ``full_output``).
     """
     L = _as_laplacian(L)
     n = L.shape[0]
@@ -649,9 +650,10 @@ def dynamic_orthogonal_iteration(
     U0 : (n, m0) starting subspace (e.g. the result of the previous submesh)
     X : (n,) or (n, d) signal (e.g. the vertex coordinates of the submesh)
     eps_low, eps_high : float, 0 <= eps_low < eps_high
-    delta, zeta, factor : see :func:`orthogonal_iteration`
+    delta, zeta : see :func:`orthogonal_iteration`
     t_max : int, maximum number of OI steps
     min_size, max_size : bounds of ``n_l`` (``max_size`` defaults to ``n - 1``)
+    factor : see :func:`orthogonal_iteration`
     on_nonconvergence : {"warn", "raise", "ignore"}
         Policy when ``converged`` is False (see :func:`orthogonal_iteration`).
 
@@ -815,10 +817,9 @@ def submesh_eigenbases(
     """Low-frequency eigenbases of every submesh Laplacian, in submesh order (Algorithms 6-7).
 
     Yields ``(i, eigenvalues (k_i,), eigenvectors (n_i, k_i))`` for ``i = 0, 1, ...``; the rows of the
-    eigenvectors follow ``subs.parts[i]``, the columns are ascending with signs fixed.
+    eigenvectors follow ``subs.parts[i]``, the columns are ascending with signs fixed. The
+    ``method`` argument:
 
-    Methods
-    -------
     ``"exact"``
         Dense LAPACK eigendecomposition of each submesh Laplacian (``O(n_i^3)``, the "SVD" reference
         of Fig. 5.55); only the ``k`` lowest pairs are computed.

@@ -152,7 +152,8 @@ def submesh_laplacian(
 
     Returns
     -------
-    L : csr_matrix (n_i, n_i), positive semi-definite, ``L 1 = 0`` when not normalized.
+    (n_i, n_i) csr_matrix
+        The Laplacian: positive semi-definite, ``L 1 = 0`` when not normalized.
     """
     from ..graph import laplacian_from_adjacency, weighted_adjacency
 
