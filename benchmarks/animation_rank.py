@@ -29,11 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _util import machine_line, write_section  # noqa: E402
 from spectrageo.compress._connectivity import encode_faces  # noqa: E402
-from spectrageo.evaluate.compress_animation import (  # noqa: E402
-    TUNING_SPLIT,
-    VALIDATION_SPLIT,
-    _draco,
-)
+from spectrageo.datasets.splits import cases  # noqa: E402
+from spectrageo.evaluate.compress_animation import _draco  # noqa: E402
 from spectrageo.io import read_animation  # noqa: E402
 from spectrageo.metrics import kg_error  # noqa: E402
 
@@ -57,7 +54,7 @@ def _rank_for(A: np.ndarray, target: float) -> int:
     return lo
 
 
-def row(rel: str, A: np.ndarray, F: np.ndarray) -> dict:
+def row(rel: str, A: np.ndarray, F: np.ndarray, split: str) -> dict:
     T, n, _ = A.shape
     nb, R, _te, _td, _kept = _draco(A, F, 12, False)
     kg12 = float(kg_error(R, A))
@@ -69,7 +66,7 @@ def row(rel: str, A: np.ndarray, F: np.ndarray) -> dict:
     left = TARGET_BPVF - conn
     return {
         "model": Path(rel).stem,
-        "split": "tuning" if rel in TUNING_SPLIT else "validation",
+        "split": split,
         "frames": T,
         "vertices": n,
         "draco12_kg": kg12,
@@ -115,11 +112,11 @@ def main() -> None:
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     rows = []
-    for rel in TUNING_SPLIT + VALIDATION_SPLIT:
-        anim = read_animation(Path(args.data) / rel)
+    for case in cases("compress-animation"):  # the split registry's cases, tuning first
+        anim = read_animation(Path(args.data) / case.file)
         A = np.asarray(anim.frames, dtype=np.float64)
         F = np.asarray(anim.faces, dtype=np.int64)
-        rows.append(row(rel, A, F))
+        rows.append(row(case.file, A, F, case.split))
         print(rows[-1], file=sys.stderr, flush=True)
     md = markdown(rows)
     if args.out:

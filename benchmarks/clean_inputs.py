@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from spectrageo import denoise, io
+from spectrageo.datasets.splits import GATE_SPLIT_LIMIT, cases
 from spectrageo.denoise._guard import (
     MIN_NOISE,
     PLANAR_SHARE,
@@ -34,10 +35,10 @@ from spectrageo.denoise._guard import (
 )
 from spectrageo.metrics import theta_deg
 
-SKIP = (".txt", ".md", ".yml")
 #: the detail test's tuning / validation halves are the even / odd positions of the clean meshes
-#: up to this many vertices (module notes of spectrageo.denoise._guard)
-SPLIT_LIMIT = 40_000
+#: up to this many vertices (module notes of spectrageo.denoise._guard); the halves themselves are
+#: the split registry's ``denoise-gate`` cases (spectrageo.datasets.splits)
+SPLIT_LIMIT = GATE_SPLIT_LIMIT
 
 INTRO = """## Clean inputs: do no harm
 
@@ -68,16 +69,18 @@ models, shipped with the tests); they are tuning data of the planar rule
 
 
 def clean_meshes(data: Path, max_vertices: int):
-    for sub in ("meshes", "cad"):
-        for p in sorted((data / sub).iterdir()):
-            if p.name.startswith(("LICENSE", "COPYRIGHT")) or p.name.endswith(SKIP):
-                continue
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                m = io.read(p)
-            if m.faces is None or m.faces.shape[0] == 0 or m.vertices.shape[0] > max_vertices:
-                continue
-            yield f"{sub}/{p.name}", m.vertices, m.faces
+    """``(path, V, F, split)`` of the registry's ``denoise-gate`` cases up to ``max_vertices``
+    (split ``large`` for the meshes in neither half of the detail test)."""
+    for c in cases("denoise-gate"):
+        p = data / c.file
+        if not p.is_file():
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = io.read(p)
+        if m.faces is None or m.faces.shape[0] == 0 or m.vertices.shape[0] > max_vertices:
+            continue
+        yield c.file, m.vertices, m.faces, "large" if c.group == "large" else c.split
 
 
 #: clean CAD exports outside the shared data, shipped with the tests
@@ -138,19 +141,11 @@ def main() -> None:
     ]
     worst = {m: [0.0, 0.0, 0] for m in methods}
     count = 0
-    shared = list(clean_meshes(Path(a.data), a.max_vertices))
     # the halves of the detail test were fixed on the list up to SPLIT_LIMIT vertices; larger
     # meshes (the dragon scans) were outside it and informed no choice
-    pos = 0
-    split = []
-    for _name, V, _F in shared:
-        if V.shape[0] > SPLIT_LIMIT:
-            split.append("large")
-        else:
-            split.append("tuning" if pos % 2 == 0 else "validation")
-            pos += 1
-    extra = list(extra_meshes())
-    for (name, V, F), sp in zip(shared + extra, split + ["extra"] * len(extra)):
+    shared = [(name, V, F, sp) for name, V, F, sp in clean_meshes(Path(a.data), a.max_vertices)]
+    extra = [(name, V, F, "extra") for name, V, F in extra_meshes()]
+    for name, V, F, sp in shared + extra:
         diag = float(np.linalg.norm(np.ptp(V, axis=0)))
         e = noise_estimate(V, F=F)  # with the faces, as the gate of denoise.denoise
         ps = planar_share(V, F)

@@ -34,6 +34,7 @@ from spectrageo.compress._connectivity import (  # noqa: E402
     reorder,
 )
 from spectrageo.datasets import data_dir  # noqa: E402
+from spectrageo.datasets.splits import cases  # noqa: E402
 
 
 def _rcm_delta(F: np.ndarray, n: int) -> int:
@@ -63,27 +64,8 @@ def _draco1(V, F) -> float:
 
 
 def _meshes(root: Path):
-    tuning = [
-        *sorted((root / "meshes").glob("*.off")),
-        *sorted((root / "meshes").glob("*.obj")),
-        *sorted((root / "cad").glob("*.obj")),
-        *sorted((root / "cad").glob("*.STL")),
-        *sorted((root / "cad").glob("*.stl")),
-        *sorted((root / "cad").glob("*.ply")),
-        *sorted((root / "holes").glob("*.off")),
-        root / "meshes" / "dragon_vrip_res2.ply.gz",
-    ]
-    validation = [
-        *sorted((root / "animations").glob("*.npz")),
-        *sorted((root / "denoise").glob("*/Original.obj")),
-        *sorted(p for p in (root / "saliency").glob("*.obj") if "_gt_" not in p.name),
-        *sorted((root / "denoise" / "real_scans").glob("*.*")),
-        root / "scans" / "rangemap" / "face000.ply",
-        *sorted((root / "scans" / "registration" / "uwa").glob("*.ply")),
-        root / "meshes" / "dragon_vrip_res3.ply.gz",
-        root / "meshes" / "dragon_vrip.ply.gz",
-    ]
-    return [("tuning", p) for p in tuning] + [("validation", p) for p in validation]
+    """``(split, path)`` of the split registry's ``connectivity`` cases present under ``root``."""
+    return [(c.split, root / c.file) for c in cases("connectivity") if (root / c.file).exists()]
 
 
 def _load(path: Path):

@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _util import data_out_args  # noqa: E402
 from planar_rule import TRIMESH, TRIMESH_TUNING, synthetic  # noqa: E402
 from spectrageo import io  # noqa: E402
+from spectrageo.datasets.splits import cases as registry_cases  # noqa: E402
 from spectrageo.denoise import denoise  # noqa: E402
 from spectrageo.denoise.tsgsp import CURVED_FINISH  # noqa: E402
 from spectrageo.evaluate.denoise import TUNING_MESHES, TUNING_PAIRS  # noqa: E402
@@ -33,7 +34,8 @@ from spectrageo.noise.generator import GENERATOR_KINDS, generate  # noqa: E402
 
 LEVELS = (0.1, 0.3, 0.5)
 PAIRS = (0, 10, 15, 20, 30)
-ANIMATIONS = ("cat-poses", "chickenCrossing", "crane", "horse-gallop")
+#: the animations whose first frames are the split registry's ``denoise-frames`` cases
+ANIMATIONS = tuple(Path(c.file).stem for c in registry_cases("denoise-frames"))
 
 
 def _generated(models):

@@ -29,13 +29,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _util import machine_line, run_isolated, write_section  # noqa: E402
 from spectrageo.datasets import data_dir  # noqa: E402
+from spectrageo.datasets.splits import cases  # noqa: E402
 
-MESHES = (
-    ("tuning", "meshes/fandisk.off"),
-    ("validation", "meshes/stanford-bunny.obj"),
-    ("validation", "meshes/dragon_vrip_res2.ply.gz"),
-    ("validation", "meshes/dragon_vrip.ply.gz"),
-)
+#: (split, path) of the split registry's ``doi-codec`` cases
+MESHES = tuple((c.split, c.file) for c in cases("doi-codec"))
 K = 75  # a quarter of the 300-vertex submesh
 ERRORS = (1e-3, 1.5e-3, 2.5e-3, 4e-3)
 REPEAT = 2

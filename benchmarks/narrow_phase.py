@@ -58,11 +58,17 @@ DISTANCES = (0.01, 0.025, 0.05)
 
 
 def _pairs(data: Path) -> list[dict]:
+    from spectrageo.datasets.splits import cases
     from spectrageo.evaluate.register import bunny_pairs, fragment_pairs
 
-    # the evaluation's pairs carry a large random motion; only the clouds and the ground truth
-    # are used here (the start is the ground truth perturbed, below)
-    return bunny_pairs(data, 0) + fragment_pairs(data, 0)
+    # the split registry's ``register-narrow`` cases (the bunny scans, the fragment pair); the
+    # evaluation's pairs carry a large random motion; only the clouds and the ground truth are
+    # used here (the start is the ground truth perturbed, below)
+    make = {"bunny": bunny_pairs, "open3d": fragment_pairs}
+    out = []
+    for c in cases("register-narrow"):
+        out += [{**p, "split": c.split} for p in make[c.name](data, 0)]
+    return out
 
 
 def _perturb(T_gt: np.ndarray, angle_deg: float, shift: float, rng) -> np.ndarray:
@@ -140,7 +146,8 @@ def run(peers: bool = True, repeat: int = 1) -> list[dict]:
                 te = rm.translation_error(Th, p["T_gt"]) / diag
                 rows.append({"pair": f"{p['data']}:{p['pair']}", "overlap": p["overlap"],
                              "angle": angle, "method": name, "rot": re, "trans": te,
-                             "ok": bool(re <= ROT_OK and te <= TRANS_OK), "seconds": sec})  # fmt: skip
+                             "ok": bool(re <= ROT_OK and te <= TRANS_OK), "seconds": sec,
+                             "split": p["split"]})  # fmt: skip
         print(f"{p['data']}:{p['pair']} done", file=sys.stderr)
     return rows
 

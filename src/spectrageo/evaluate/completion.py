@@ -39,39 +39,39 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+from ..datasets.splits import cases as _cases
+from ..datasets.splits import files as _files
+from ..datasets.splits import split_of
 from ._tables import pyplot, rows_to_csv, save_png, write_section
 
-TUNING = {"meshes": ("fandisk",), "seed": 1}
-VALIDATION = {"meshes": ("fandisk", "elephant", "joint", "armadillo"), "seed": 0}
+
+def _config(split: str) -> dict:
+    cs = _cases("completion", split)
+    return {"meshes": tuple(c.name for c in cs), "seed": cs[0].seed}
+
+
+#: the static inpainting splits of the split registry (task ``completion``,
+#: :mod:`spectrageo.datasets.splits`): fandisk is in both, with different seeds
+TUNING = _config("tuning")
+VALIDATION = _config("validation")
 FRACTIONS = (0.1, 0.3, 0.5, 0.7)
 PATTERNS = ("random", "region")
 STATIC_METHODS = ("mc", "li", "lsm", "mean")
-ANIMATIONS = (
-    "horse-gallop", "crane", "chickenCrossing", "horse-collapse", "cat-poses", "lion-poses"
-)  # fmt: skip
+#: the evaluated animations (registry task ``completion-animation``, validation split, seed 0)
+ANIMATIONS = tuple(c.name for c in _cases("completion-animation", "validation"))
 ANIM_METHODS = ("motion", "li", "lia", "mc", "gmc", "wrli", "seq-li")
 ANIM_FRAMES = 25
 GRABBER_STEP = 4
 ANIM_KNOWN = 0.3
 COLUMNS = ("part", "data", "n", "pattern", "known", "method", "rms", "nmsve", "theta_deg",
            "kg", "hd", "hd_surface", "hd_mean_surface", "watertight", "boundary_edges",
-           "seconds", "note")  # fmt: skip
+           "seconds", "note", "split")  # fmt: skip
 #: Clean meshes (paths under the data folder) that :func:`cut_holes` punches holes into. The
 #: tuning split (with ``holes/elephant-with-holes.off``) chose the defaults of :func:`fill_holes`;
 #: the validation split informed no choice of method or parameter (a welding bug was found on
 #: its diplodocus and fixed).
-HOLE_TUNING = (
-    "meshes/bear.off", "meshes/bull.off", "meshes/camel.off", "meshes/cow.off",
-    "meshes/dino.off", "meshes/fandisk.off", "meshes/knot2.off", "meshes/man.off",
-    "meshes/rocker-arm.obj", "meshes/spot.obj", "meshes/turbine.off",
-    "cad/abc_00000050.stl", "cad/cycloidal.ply", "cad/partLp.obj", "cad/screwdriver.obj",
-)  # fmt: skip
-HOLE_VALIDATION = (
-    "meshes/armadillo.off", "meshes/diplodocus.off", "meshes/cheese.off",
-    "meshes/anchor_dense.off", "meshes/rotor.off", "meshes/cube-meshed.off",
-    "cad/featuretype.STL", "cad/joint.obj", "cad/octagonal_pocket.stl", "cad/plate_holes.STL",
-    "cad/angle_block.STL", "saliency/casting.obj", "saliency/block.obj", "saliency/cad.obj",
-)  # fmt: skip
+HOLE_TUNING = _files("completion-holes-cut", "tuning")
+HOLE_VALIDATION = _files("completion-holes-cut", "validation")
 HOLES_PER_MESH = 6
 PARTS = ("static", "holes", "holes-cut", "animation", "sequence")
 HOLE_RINGS = (1, 2, 3)
@@ -99,6 +99,13 @@ def unknown_region(F: np.ndarray, n: int, fraction_known: float, rng: Any) -> np
 
 
 def _static(data: Path, meshes, methods, fractions, patterns, seed) -> list[dict]:
+    rows = _static_rows(data, meshes, methods, fractions, patterns, seed)
+    for r in rows:
+        r["split"] = split_of("completion", r["data"], seed=seed) or "-"
+    return rows
+
+
+def _static_rows(data: Path, meshes, methods, fractions, patterns, seed) -> list[dict]:
     from .. import io
     from ..complete import inpaint
     from ..metrics import nmsve, theta_deg
@@ -194,10 +201,11 @@ def _holes(data: Path, methods) -> list[dict]:
             continue
         m = io.read_mesh(p)
         with_ref = ref if p.stem.startswith("elephant") else None
+        split = split_of("completion-holes", p.stem) or "-"
         for r in _fill_rows(p.stem, m.vertices, m.faces, with_ref, methods):
+            r["split"] = split
             if with_ref is not None:
-                r["split"] = "tuning"
-                r["note"] = (r.get("note") or "") + " (tuning split)"
+                r["note"] = (r.get("note") or "") + f" ({split} split)"
             rows.append(r)
     return rows
 
@@ -330,7 +338,8 @@ def _animations(data: Path, names, methods, n_frames, frac, seed) -> list[dict]:
                          "rms": float(np.sqrt(np.mean(np.sum((X[u] - A[u]) ** 2, -1))) / diag),
                          "nmsve": float(np.mean([nmsve(X[t], A[t], F) for t in range(1, T)])),
                          "kg": kg_error(X[1:], A[1:]), "seconds": sec,
-                         "note": "offline" if meth in ("mc", "gmc") else "online, s/frame"})  # fmt: skip
+                         "note": "offline" if meth in ("mc", "gmc") else "online, s/frame",
+                         "split": split_of("completion-animation", name, seed=seed) or "-"})  # fmt: skip
     return rows
 
 
@@ -377,7 +386,8 @@ def _grabber(data: Path, methods, frac, seed, step: int = GRABBER_STEP) -> list[
         rows.append({"part": "sequence", "data": f"pcl-grabber (every {step}th pixel)", "n": n,
                      "pattern": "random", "known": frac, "method": meth,
                      "rms": float(np.sqrt(np.mean(np.sum((X[u] - A[u]) ** 2, -1))) / diag),
-                     "seconds": sec, "note": "online, s/frame"})  # fmt: skip
+                     "seconds": sec, "note": "online, s/frame",
+                     "split": split_of("completion-sequence", "pcl-grabber", seed=seed) or "-"})  # fmt: skip
     return rows
 
 
@@ -393,8 +403,9 @@ def evaluate(
     n_frames: int = ANIM_FRAMES,
     parts: tuple[str, ...] = PARTS,
 ) -> list[dict]:
-    """Run the completion benchmarks; returns one row per run (keys of :data:`COLUMNS`, and
-    ``split`` on the hole rows measured against a clean mesh).
+    """Run the completion benchmarks; returns one row per run (keys of :data:`COLUMNS`; ``split``
+    is the case's split in the registry, :mod:`spectrageo.datasets.splits`, ``"-"`` for a case
+    it does not list).
 
     ``methods`` restricts the static/hole methods (``mc, li, lsm, mean``) and the animation
     methods (``motion, li, lia, mc, gmc, wrli, seq-li``) by name; ``parts`` chooses among

@@ -18,13 +18,15 @@ quantisation bits with its default (reordering, compression level 7) and order-p
 (``preserve_order=True``) modes, and uniform quantisation of the coordinates + zstd (level 19) of
 vertices and faces.
 
-Splits are fixed here: :data:`TUNING_SPLIT` (fandisk, partLp), on which the defaults of the
+Splits are fixed in the split registry (:mod:`spectrageo.datasets.splits`, task ``compress``):
+:data:`TUNING_SPLIT` (fandisk, partLp), on which the defaults of the
 codecs (``submesh_size=300``, ``k=300``, ``overlap=0.1``; ``feature_fraction=0.15``,
 ``ratio=4``; the delta codecs' levels :data:`spectrageo.compress._feature.LEVELS`) were chosen,
 and :data:`VALIDATION_SPLIT`, never used for the geometry codecs' choices. The connectivity coder's constants (:mod:`spectrageo.compress._conn_traverse`) were
 chosen on the tuning meshes of ``benchmarks/connectivity.py``, which include every mesh of both
 splits here, so the validation rows are not held out for the connectivity part. The full
-437k-vertex dragon is in :data:`LARGE` and runs only with ``large=True``.
+437k-vertex dragon is in :data:`LARGE` (registry split ``validation``, group ``large``; its rows
+are labelled ``large``) and runs only with ``large=True``.
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._progress import progress
+from ..datasets.splits import COMPRESS_LARGE
+from ..datasets.splits import files as _files
 from ._tables import (
     check_names,
     have,
@@ -45,21 +49,10 @@ from ._tables import (
     write_rate_outputs,
 )
 
-TUNING_SPLIT = ("meshes/fandisk.off", "cad/partLp.obj")
-VALIDATION_SPLIT = (
-    "meshes/stanford-bunny.obj",
-    "meshes/armadillo.off",
-    "cad/joint.obj",
-    "cad/screwdriver.obj",
-    "meshes/dragon_vrip_res2.ply.gz",
-    "cad/featuretype.STL",
-    "cad/plate_holes.STL",
-    "cad/angle_block.STL",
-    "cad/abc_00000050.stl",
-    "cad/octagonal_pocket.stl",
-    "cad/cycloidal.ply",
-)
-LARGE = ("meshes/dragon_vrip.ply.gz",)
+#: the splits of the split registry's ``compress`` task (:mod:`spectrageo.datasets.splits`)
+TUNING_SPLIT = _files("compress", "tuning")
+VALIDATION_SPLIT = tuple(f for f in _files("compress", "validation") if f not in COMPRESS_LARGE)
+LARGE = COMPRESS_LARGE
 SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
 METHODS = ("spectral", "spectral-reorder", "feature", "uniform-delta", "saliency")
 PEERS = ("draco", "draco-ordered", "quant-zstd")

@@ -19,7 +19,7 @@ error, and flagged ``order_kept = no``) and order-preserving (``draco-ordered``)
 ``quant-delta-zstd``: uniform quantisation of all frames on the animation's bounding box,
 temporal difference of the integer coordinates, zstd level 19, faces once.
 
-Splits are fixed here: :data:`TUNING_SPLIT` (horse-gallop, on which the defaults ``step``,
+Splits are fixed in the split registry (task ``compress-animation``): :data:`TUNING_SPLIT` (horse-gallop, on which the defaults ``step``,
 ``anchors``, ``anchor_ratio``, ``block`` were looked at) and :data:`VALIDATION_SPLIT`. The thesis's
 Tables 5.12-5.13 use Handstand, Samba, Dinosaur, Chinchilla, Camel and Flag, none of which is in
 the shared data, so no thesis value is printed beside ours.
@@ -34,6 +34,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._progress import progress
+from ..datasets.splits import files as _files
 from ._tables import (
     check_names,
     have,
@@ -43,14 +44,9 @@ from ._tables import (
     write_rate_outputs,
 )
 
-TUNING_SPLIT = ("animations/horse-gallop.npz",)
-VALIDATION_SPLIT = (
-    "animations/crane.npz",
-    "animations/horse-collapse.npz",
-    "animations/chickenCrossing.npz",
-    "animations/cat-poses.npz",
-    "animations/lion-poses.npz",
-)
+#: the splits of the split registry's ``compress-animation`` task (:mod:`spectrageo.datasets.splits`)
+TUNING_SPLIT = _files("compress-animation", "tuning")
+VALIDATION_SPLIT = _files("compress-animation", "validation")
 SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
 METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "layered")
 #: ``layered`` (Section 5.2.4): fraction of the vertices sent per frame

@@ -25,6 +25,9 @@ import numpy as np
 from .._errors import InvalidInputError
 from .._progress import progress
 from .._validation import check_choice
+from ..datasets.splits import DENOISE_LEFT_OUT, DENOISE_SAME_SHAPE_AS_TUNING, split_of
+from ..datasets.splits import cases as _cases
+from ..datasets.splits import files as _files
 from ..noise._core import check_level
 from ._tables import rows_to_csv, write_md_csv
 
@@ -41,6 +44,7 @@ COLUMNS = (
     "dmean_n",
     "hd_mean",
     "time_s",
+    "split",
 )
 
 #: peer methods run when their package can be imported
@@ -88,8 +92,9 @@ def _row(pair: str, method: str, X, V0, F, dt: float, hd: bool) -> dict:
 
     met = metrics.compare(X, V0, F, hausdorff_distance=hd)
     r = {"pair": pair, "method": method, "n_vertices": int(X.shape[0])}
-    r.update({k: met.get(k, float("nan")) for k in COLUMNS[3:-1]})
+    r.update({k: met.get(k, float("nan")) for k in COLUMNS[3:-2]})
     r["time_s"] = dt
+    r["split"] = split_of("denoise", pair) or "-"
     return r
 
 
@@ -123,7 +128,8 @@ def evaluate_denoise(
     Returns
     -------
     list of dict, one row per (pair, method) with the keys of :data:`COLUMNS`; the noisy input is
-    reported as method ``"noisy"``.
+    reported as method ``"noisy"``; ``split`` is the pair's split in the registry (``"-"`` for a
+    pair it does not list).
     """
     from .. import denoise, io
     from ..datasets import denoise_pairs
@@ -242,7 +248,7 @@ def format_markdown(rows: list[dict]) -> str:
     """Markdown table of :func:`evaluate_denoise` rows (the best theta per pair in bold)."""
     head = (
         "| pair | method | n | theta (deg) | Dmean d | Dmax d | dist n | NMSVE | Dmean n "
-        "| HD mean | time (s) |"
+        "| HD mean | time (s) | split |"
     )
     lines = [head, "|" + "---|" * len(COLUMNS)]
     best: dict[str, float] = {}
@@ -250,7 +256,7 @@ def format_markdown(rows: list[dict]) -> str:
         if r["method"] != "noisy":
             best[r["pair"]] = min(best.get(r["pair"], np.inf), r["theta_deg"])
     for r in rows:
-        cells = [_fmt(k, r[k]) for k in COLUMNS]
+        cells = [_fmt(k, r.get(k, "-")) for k in COLUMNS]
         if r["method"] != "noisy" and r["theta_deg"] == best.get(r["pair"]):
             cells[3] = f"**{cells[3]}**"
         lines.append("| " + " | ".join(cells) + " |")
@@ -324,83 +330,30 @@ def _summary_block(rows: list[dict]) -> str:
 # settings may be chosen on TUNING only, and VALIDATION is used for nothing but reporting.
 
 #: Tuning split, part 1: the shared noisy / ground-truth pairs of ``denoise/``. TSGSP's and GNF's
-#: defaults (reading choices, the do-no-harm gate ``min_noise``) were chosen on them.
-TUNING_PAIRS = (
-    "Block0.4",
-    "BlockN1",
-    "Bunny0.2",
-    "Fandisk0.3",
-    "Fandisk0.7",
-    "SharpSphere0.3",
-    "TrimStar0.5",
-    "Twelve0.5Impulsive",
-)
+#: defaults (reading choices, the do-no-harm gate ``min_noise``) were chosen on them. Read from the
+#: split registry (:mod:`spectrageo.datasets.splits`, task ``denoise``), as are the lists below.
+TUNING_PAIRS = tuple(c.name for c in _cases("denoise", "tuning") if c.corruption == "pair")
 #: Tuning split, part 2: clean meshes corrupted by :func:`spectrageo.noise.generate`. These four
 #: (at Gaussian noise 0.3) informed TSGSP's ``area_weights`` and ``input_weight=0.7`` (see the
 #: generality section of BENCHMARKS.md), so they may never be used for validation.
-TUNING_MESHES = (
-    "meshes/rocker-arm.obj",
-    "meshes/knot2.off",
-    "meshes/spot.obj",
-    "saliency/casting.obj",
-)
+TUNING_MESHES = tuple(c.file for c in _cases("denoise", "tuning") if c.corruption == "generated")
 #: Shapes kept out of both splits' generated cases because another tessellation of the same object
 #: is a tuning pair (fandisk, the Stanford bunny, the block): validating on them would not be
 #: held out.
-SAME_SHAPE_AS_TUNING = (
-    "meshes/fandisk.off",
-    "meshes/fandisk_large.off",
-    "meshes/stanford-bunny.obj",
-    "saliency/fandisk.obj",
-    "saliency/block.obj",
-)
-#: Validation split: clean meshes of ``meshes/`` and ``cad/`` that played no part in choosing
-#: defaults (exceptions, disclosed in the report header: blade for the noise estimate's ring-patch
-#: rule, the meshed cube with impulses for the impulse repair's crease rule, and half of these
-#: clean meshes for the gate's detail test), corrupted by :func:`spectrageo.noise.generate`
-#: (every kind at every level). It holds organic
+SAME_SHAPE_AS_TUNING = DENOISE_SAME_SHAPE_AS_TUNING
+#: Validation split: clean meshes of ``meshes/`` and ``cad/`` meant to play no part in choosing
+#: defaults, corrupted by :func:`spectrageo.noise.generate` (every kind at every level). The
+#: rules designed or revisited after this split had been looked at are the ``consulted_by`` of
+#: its registry cases (:data:`spectrageo.datasets.splits.DENOISE_VALIDATION_CONSULTED`, disclosed
+#: in the report header): the split is not held out for them. It holds organic
 #: scans, CAD tessellations with long thin triangles and mixed element sizes (the whole ``cad/``
 #: folder: trimesh's parts, cycloidal, partLp, joint, screwdriver, ABC 00000050) and a mesh of more
 #: than 100k vertices (the dragon at 100,250 vertices). In neither split: :data:`LEFT_OUT`.
-VALIDATION_MESHES = (
-    "meshes/ChineseDragon-10kv.off",
-    "meshes/anchor_dense.off",
-    "meshes/armadillo.off",
-    "meshes/bear.off",
-    "meshes/blade.off",
-    "meshes/bull.off",
-    "meshes/camel.off",
-    "meshes/cheese.off",
-    "meshes/cow.off",
-    "meshes/cube-meshed.off",
-    "meshes/dino.off",
-    "meshes/diplodocus.off",
-    "meshes/dragon_vrip_res2.ply.gz",
-    "meshes/elephant.off",
-    "meshes/joint.off",
-    "meshes/lion.off",
-    "meshes/man.off",
-    "meshes/mushroom.off",
-    "meshes/rotor.off",
-    "meshes/turbine.off",
-    "cad/abc_00000050.stl",
-    "cad/angle_block.STL",
-    "cad/cycloidal.ply",
-    "cad/featuretype.STL",
-    "cad/joint.obj",
-    "cad/octagonal_pocket.stl",
-    "cad/partLp.obj",
-    "cad/plate_holes.STL",
-    "cad/screwdriver.obj",
-)
+VALIDATION_MESHES = _files("denoise", "validation")
 #: Shared clean meshes in neither split: the 6-vertex octahedron (too small for a noise estimate)
 #: and the two other resolutions of the validation dragon (the same object; the 437k-vertex one
 #: would also make a full run take most of a day on 2 cores).
-LEFT_OUT = (
-    "meshes/octahedron.off",
-    "meshes/dragon_vrip.ply.gz",
-    "meshes/dragon_vrip_res3.ply.gz",
-)
+LEFT_OUT = DENOISE_LEFT_OUT
 SPLIT_CHOICES = ("tuning", "validation", "both")
 #: methods of this package run by the protocol (default settings)
 PROTOCOL_METHODS = ("tsgsp", "gnf")

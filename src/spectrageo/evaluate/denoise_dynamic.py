@@ -22,9 +22,12 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._progress import progress
+from ..datasets.splits import cases as _cases
+from ..datasets.splits import split_of
 from ._tables import rows_to_csv, write_md_csv
 
-ANIMATIONS = ("crane", "horse-gallop", "horse-collapse", "chickenCrossing")
+#: the animations of the split registry's ``denoise-dynamic`` task (:mod:`spectrageo.datasets.splits`)
+ANIMATIONS = tuple(c.name for c in _cases("denoise-dynamic"))
 DEFAULT_METHODS = ("gft-rpca", "normals-rpca", "bnf", "gnf", "tsgsp")
 #: (kind, level) of the corruptions.
 NOISES = (("gaussian", 0.2), ("impulsive", 0.5), ("uniform", 0.2))
@@ -40,6 +43,7 @@ COLUMNS = (
     "sted",
     "seconds",
     "note",
+    "split",
 )
 
 
@@ -105,7 +109,8 @@ def evaluate(
 
     Returns
     -------
-    list of dict with the keys of :data:`COLUMNS` (a ``"noisy"`` row per animation and noise).
+    list of dict with the keys of :data:`COLUMNS` (a ``"noisy"`` row per animation and noise;
+    ``split`` from the split registry).
     """
     from .. import denoise as dn
     from ..noise import animation_noise
@@ -140,7 +145,8 @@ def evaluate(
         T, n, _ = A.shape
         for kind, level in noises:
             noisy = animation_noise(A, F, kind=kind, level=level, rng=rng)
-            base = {"animation": name, "n_vertices": n, "n_frames": T, "noise": f"{kind} {level:g}"}
+            base = {"animation": name, "n_vertices": n, "n_frames": T, "noise": f"{kind} {level:g}",
+                    "split": split_of("denoise-dynamic", name) or "-"}  # fmt: skip
             rows.append({**base, "method": "noisy", **_metrics(noisy, A, F, hd_frames),
                          "seconds": 0.0, "note": ""})  # fmt: skip
             for m in methods:
@@ -177,7 +183,7 @@ def _fmt(key: str, v) -> str:
 
 def format_markdown(rows: list[dict]) -> str:
     """Markdown table of :func:`evaluate` rows (the best theta of every animation/noise in bold)."""
-    head = "| animation | n | T | noise | method | theta (deg) | HD mean | KG (%) | STED | time (s) | note |"
+    head = "| animation | n | T | noise | method | theta (deg) | HD mean | KG (%) | STED | time (s) | note | split |"
     lines = [head, "|" + "---|" * len(COLUMNS)]
     best: dict[tuple, float] = {}
     for r in rows:
@@ -185,7 +191,7 @@ def format_markdown(rows: list[dict]) -> str:
             key = (r["animation"], r["noise"])
             best[key] = min(best.get(key, np.inf), r["theta_deg"])
     for r in rows:
-        cells = [_fmt(k, r[k]) for k in COLUMNS]
+        cells = [_fmt(k, r.get(k, "-")) for k in COLUMNS]
         if r["method"] != "noisy" and r["theta_deg"] == best.get((r["animation"], r["noise"])):
             cells[5] = f"**{cells[5]}**"
         lines.append("| " + " | ".join(cells) + " |")

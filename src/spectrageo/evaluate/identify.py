@@ -26,7 +26,9 @@ with a rotation error below 10 degrees and a translation error below 5 % of its 
 occlusion bin (Fig. 6.40, also as ``<out>.png``); time per scene; the milk result; the DBSCAN
 table.
 
-Split: the defaults of :func:`~spectrageo.register.identify` that are not the thesis's (voxel
+Split (fixed in the split registry, :mod:`spectrageo.datasets.splits`, task ``identify``; the
+milk scene and the DBSCAN timings carry the split of their scene): the defaults of
+:func:`~spectrageo.register.identify` that are not the thesis's (voxel
 1/40 of the model diagonal, ``k_p_fraction`` 0.5, ``query_radius`` 0.1, the descriptor size and
 RANSAC budget) were chosen on generated scenes with seeds 1-6, of which :data:`TUNING` (seeds 1-3)
 is reported; the validation tables use the seeds of :data:`VALIDATION` (11-18). Caveat: the
@@ -51,22 +53,21 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+from ..datasets.splits import IDENTIFY_LIBRARY, split_of
+from ..datasets.splits import cases as _cases
 from ._tables import fmt_cell, have, pyplot, rows_to_csv, save_png, write_section
 
-LIBRARY = {
-    "bunny": "meshes/stanford-bunny.obj",
-    "armadillo": "meshes/armadillo.off",
-    "cow": "meshes/cow.off",
-    "elephant": "meshes/elephant.off",
-    "camel": "meshes/camel.off",
-    "fandisk": "meshes/fandisk.off",
-    "rocker-arm": "meshes/rocker-arm.obj",
-    "spot": "meshes/spot.obj",
-    "dragon": "meshes/ChineseDragon-10kv.off",
-    "parasaurolophus": "scans/registration/uwa/parasaurolophus_6700.ply",
-}
-TUNING = {"seeds": (1, 2, 3)}
-VALIDATION = {"seeds": (11, 12, 13, 14, 15, 16, 17, 18)}
+#: the model library of the scenes (name -> path), from the split registry
+LIBRARY = dict(IDENTIFY_LIBRARY)
+
+
+def _seeds(split: str) -> tuple[int, ...]:
+    return tuple(c.seed for c in _cases("identify", split) if c.file is None)
+
+
+#: the scene seeds of the split registry's ``identify`` task (:mod:`spectrageo.datasets.splits`)
+TUNING = {"seeds": _seeds("tuning")}
+VALIDATION = {"seeds": _seeds("validation")}
 OCCLUSION_BINS = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
 ROT_OK_DEG = 10.0
 TRANS_OK = 0.05
@@ -144,7 +145,8 @@ def _milk(data: Path) -> list[dict]:
         sec = time.perf_counter() - t0
         re = rotation_error_deg(m.transformation[:3, :3], Tg[:3, :3])
         te = translation_error(m.transformation[:3, 3], Tg[:3, 3]) / diag
-        rows.append({"part": "milk", "split": "-", "scene": "milk_cartoon_all_small_clorox",
+        rows.append({"part": "milk", "split": split_of("identify", "milk") or "-",
+                     "scene": "milk_cartoon_all_small_clorox",
                      "model": "milk", "present": True, "found": m.found, "h": m.dissimilarity,
                      "rot_err_deg": re, "trans_err": te,
                      "recognized": bool(m.found and re <= ROT_OK_DEG and te <= TRANS_OK),
@@ -164,12 +166,14 @@ def _dbscan(data: Path, lib, seeds) -> list[dict]:
     clouds = []
     for seed in seeds:
         sc = make_scene(lib, n_objects=3 + seed % 4, rng=seed)
-        clouds.append((f"generated {seed}", sc.points, 0.5 * sc.pixel_size))
+        split = split_of("identify", f"scene {seed}", seed=seed) or "-"
+        clouds.append((f"generated {seed}", sc.points, 0.5 * sc.pixel_size, split))
     p = data / "scans" / "pcl" / "milk_cartoon_all_small_clorox.pcd"
     if p.is_file():
-        clouds.append(("milk_cartoon_all_small_clorox", io.read(p).points, 0.01))
+        split = split_of("identify", "milk") or "-"
+        clouds.append(("milk_cartoon_all_small_clorox", io.read(p).points, 0.01, split))
     rows = []
-    for name, P, thr in clouds:
+    for name, P, thr, split in clouds:
         keep, _ = remove_planes(P, threshold=max(thr, 1e-9) * 2, rng=0)
         Q = P[keep]
         t0 = time.perf_counter()
@@ -189,7 +193,7 @@ def _dbscan(data: Path, lib, seeds) -> list[dict]:
         c = DBSCAN(eps=eps, min_samples=5, algorithm="brute", n_jobs=1).fit_predict(Q)
         tc = time.perf_counter() - t0
         ari = float(adjusted_rand_score(a, b))
-        common = {"part": "dbscan", "split": "-", "scene": name, "n_points": int(Q.shape[0]),
+        common = {"part": "dbscan", "split": split, "scene": name, "n_points": int(Q.shape[0]),
                   "ari": ari}  # fmt: skip
         rows.append({**common, "method": "adaptive (ours)", "n_clusters": n_big(a), "seconds": ta})
         rows.append({**common, "method": "sklearn DBSCAN", "n_clusters": n_big(b), "seconds": tb,

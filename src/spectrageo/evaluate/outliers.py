@@ -48,6 +48,8 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._progress import progress
+from ..datasets.splits import OUTLIER_PATTERNS_BY_SPLIT, split_of
+from ..datasets.splits import cases as _cases
 from ._tables import rows_to_csv, write_md_csv
 
 __all__ = [
@@ -64,52 +66,39 @@ __all__ = [
     "format_markdown",
 ]
 
-#: (label, path relative to the data folder) of the evaluated scans.
-SCANS = (
-    ("bunny bun000", "scans/bunny/bun000.ply.gz"),
-    ("bunny top2", "scans/bunny/top2.ply.gz"),
-    ("lidar autzen", "scans/lidar/autzen_trim.laz"),
-    ("kinect milk", "scans/pcl/milk.pcd"),
-    ("kinect table_scene_mug", "scans/pcl/table_scene_mug_stereo_textured.pcd"),
-    ("fragment cloud_bin_0", "scans/registration/open3d/cloud_bin_0.pcd"),
-    ("fragment cloud_bin_1", "scans/registration/open3d/cloud_bin_1.pcd"),
-)
-SEQUENCES = (("horse-gallop", "animations/horse-gallop.npz"),)
+#: (label, path relative to the data folder) of the evaluated scans (far / near outliers): the
+#: split registry's ``outliers-injected`` task (:mod:`spectrageo.datasets.splits`), whose
+#: validation scans are not held out for the constants chosen on this benchmark
+SCANS = tuple((c.name, c.file) for c in _cases("outliers-injected"))
+SEQUENCES = tuple((c.name, c.file) for c in _cases("outliers-sequence"))
 DEFAULT_METHODS = ("rpca", "sor", "sor-grid", "radius", "open3d-sor", "sequence")
 #: Methods run only when named (long): the outlier patterns on sequences.
 EXTRA_METHODS = ("sequence-patterns",)
+#: frame step of the sequences of :data:`SEQUENCE_PATTERN_DATA` (1 when not listed)
+_SEQUENCE_STEP = {"animations/crane.npz": 4}
 #: Sequences of :func:`evaluate_sequence_patterns`: (label, path, frame step). Animations carry
 #: faces (theta); the Kinect frames (camera coordinates, sensor at the origin) have no ground-truth
 #: surface (F1 only).
-SEQUENCE_PATTERN_DATA = (
-    ("horse-gallop", "animations/horse-gallop.npz", 1),
-    ("crane (every 4th frame)", "animations/crane.npz", 4),
-    ("Kinect grabber frames", "scans/pcl/grabber_sequence", 1),
+SEQUENCE_PATTERN_DATA = tuple(
+    (c.name, c.file, _SEQUENCE_STEP.get(c.file, 1)) for c in _cases("outliers-sequence-patterns")
 )
 SEQUENCE_PATTERN_FRACTIONS = (0.1, 0.2)
 
-#: Tuning split, fixed: constants of the outlier filters may be chosen on these cases only
-#: (patterns of :func:`spectrageo.noise.corrupt_outliers` x scans).
-TUNING_SPLIT = {
-    "patterns": ("uniform", "halo", "blobs"),
-    "scans": (
-        ("bunny bun000", "scans/bunny/bun000.ply.gz"),
-        ("kinect milk", "scans/pcl/milk.pcd"),
-        ("fragment cloud_bin_0", "scans/registration/open3d/cloud_bin_0.pcd"),
-        ("kinect table_scene_mug", "scans/pcl/table_scene_mug_stereo_textured.pcd"),
-    ),
-}
-#: Validation split, fixed: other patterns on other scans, never used to choose a constant.
-VALIDATION_SPLIT = {
-    "patterns": ("blobs", "flying", "lidar", "mixed"),
-    "scans": (
-        ("bunny top2", "scans/bunny/top2.ply.gz"),
-        ("fragment cloud_bin_1", "scans/registration/open3d/cloud_bin_1.pcd"),
-        ("lidar autzen", "scans/lidar/autzen_trim.laz"),
-        ("rangemap face000", "scans/rangemap/face000.ply"),
-        ("b9", "scans/b9.ply"),
-    ),
-}
+
+def _split_spec(split: str) -> dict:
+    return {
+        "patterns": OUTLIER_PATTERNS_BY_SPLIT[split],
+        "scans": tuple((c.name, c.file) for c in _cases("outliers", split)),
+    }
+
+
+#: Tuning split, fixed in the split registry (task ``outliers``): constants of the outlier
+#: filters may be chosen on these cases only (patterns of
+#: :func:`spectrageo.noise.corrupt_outliers` x scans).
+TUNING_SPLIT = _split_spec("tuning")
+#: Validation split, fixed: other patterns on other scans, meant to choose no constant (the
+#: registry's ``consulted_by`` lists the defaults it is not held out for).
+VALIDATION_SPLIT = _split_spec("validation")
 SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
 SPLIT_FRACTIONS = (0.05, 0.1, 0.2, 0.3)
 _SOR_GRID = ((10, 20, 30), (0.5, 1.0, 1.5, 2.0, 2.5, 3.0))
@@ -168,7 +157,8 @@ def evaluate_outliers(
     the fraction of points flagged in ``flagged``).
 
     Rows carry ``dataset, kind, fraction, method, params, precision, recall, f1, time_s,
-    n_points`` (static) or ``theta_deg, p2s_mean, p2s_max_frame`` and per-frame lists
+    n_points, split`` (static; ``split`` of the scan in the registry, ``"-"`` for a scan it does
+    not list) or ``theta_deg, p2s_mean, p2s_max_frame`` and per-frame lists
     (sequences; ``"sequence"`` in ``methods``). ``out`` writes ``<out>.md`` and ``<out>.csv``.
     """
     from .. import io, noise
@@ -206,7 +196,8 @@ def evaluate_outliers(
                     normals=N if kind == "near" else None,
                     shuffle=True,
                 )
-                base = {"dataset": label, "kind": kind, "fraction": frac, "n_points": Q.shape[0]}
+                base = {"dataset": label, "kind": kind, "fraction": frac, "n_points": Q.shape[0],
+                        "split": split_of("outliers-injected", rel) or "-"}  # fmt: skip
                 for m in methods:
                     if m in ("rpca", "sor", "radius"):
                         t0 = time.perf_counter()
@@ -397,6 +388,7 @@ def evaluate_sequence_patterns(
             for frac in fractions:
                 base = {
                     "suite": "sequence-patterns",
+                    "split": split_of("outliers-sequence-patterns", rel) or "-",
                     "dataset": label,
                     "kind": pat,
                     "fraction": frac,
@@ -584,6 +576,7 @@ def _evaluate_sequences(data: Path, fractions, seed: int) -> list[dict]:
                 th = np.array([theta_deg(W[t], V[t], F) for t in range(T)])
                 p2s = np.array([point_to_surface(W[t], V[t], F).distances.mean() for t in range(T)])
                 row = {
+                    "split": split_of("outliers-sequence", rel) or "-",
                     "dataset": label,
                     "kind": "sequence",
                     "fraction": frac,
@@ -623,6 +616,13 @@ _COLS = (
 )
 
 
+def _is_pattern_row(r: dict) -> bool:
+    """Rows of :func:`evaluate_splits` (an outlier pattern, or ``clean``, on a split's scan)."""
+    from ..noise import OUTLIER_PATTERNS
+
+    return not r.get("suite") and r.get("kind") in (*OUTLIER_PATTERNS, "clean")
+
+
 def _uses_labels(method: str) -> bool:
     """Rows whose parameters were chosen with the ground-truth labels (grid / oracle)."""
     return method.endswith("-grid") or method.endswith("-oracle")
@@ -630,9 +630,9 @@ def _uses_labels(method: str) -> bool:
 
 def format_markdown(rows: list[dict]) -> str:
     """Markdown tables: static F1 per scan/kind/fraction/method, then the sequence results."""
-    split_rows = [r for r in rows if r.get("split")]
+    split_rows = [r for r in rows if _is_pattern_row(r)]
     suite_rows = [r for r in rows if r.get("suite") == "sequence-patterns"]
-    rows = [r for r in rows if not r.get("split") and not r.get("suite")]
+    rows = [r for r in rows if not _is_pattern_row(r) and not r.get("suite")]
     static = [r for r in rows if r.get("kind") != "sequence"]
     seq = [r for r in rows if r.get("kind") == "sequence"]
     out = []

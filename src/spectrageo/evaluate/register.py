@@ -30,7 +30,7 @@ bounding-box diagonal (Eq. 4.35); success = rotation error < 5 degrees and trans
 5 % of the diagonal; time in seconds (wall clock; our KD-tree queries use all cores, as
 Open3D's do).
 
-Splits (fixed in code): the defaults of :mod:`spectrageo.register` (voxel = 1/45 diagonal,
+Splits (fixed in the split registry, :mod:`spectrageo.datasets.splits`): the defaults of :mod:`spectrageo.register` (voxel = 1/45 diagonal,
 kernel radius 3 voxels, 600 samples x 15 matches, 15 verified peaks, Tukey annealing down to 2
 spacings, Tukey start at 2 voxels after the broad phase) were chosen on :data:`TUNING`: the bunny
 pairs and the fragment pair moved by motions of seed 1, registration seed 1, and generated pairs
@@ -55,15 +55,22 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+from ..datasets.splits import cases as _cases
 from ._tables import have, markdown_table, pyplot, rows_to_csv, save_png, write_section
 
-TUNING = {"bunny_seed": 1, "reg_seed": 1, "generated": ("armadillo",), "gen_seed": 1}
-VALIDATION = {
-    "bunny_seed": 0,
-    "reg_seed": 0,
-    "generated": ("elephant", "camel", "cow", "dino", "bull"),
-    "gen_seed": 0,
-}
+
+def _config(split: str) -> dict:
+    """The seeds and generated meshes of one split of the registry's ``register`` task."""
+    cs = _cases("register", split)
+    scan = next(c for c in cs if c.name == "bunny")
+    gen = [c for c in cs if c.file is not None and c.file.startswith("meshes/")]
+    return {"bunny_seed": scan.seed, "reg_seed": scan.seed,
+            "generated": tuple(c.name for c in gen), "gen_seed": gen[0].seed}  # fmt: skip
+
+
+#: the splits of the split registry (:mod:`spectrageo.datasets.splits`, task ``register``)
+TUNING = _config("tuning")
+VALIDATION = _config("validation")
 METHODS = ("spectrageo", "o3d_ransac_fpfh_icp", "o3d_fgr", "o3d_icp")
 OVERLAP_BINS = ((0.3, 0.5), (0.5, 0.7), (0.7, 1.01))
 MIN_OVERLAP = 0.3
@@ -72,7 +79,7 @@ TRANS_TOL = 0.05
 GEN_PAIRS_PER_MESH = 2
 GEN_POINTS = 20000
 COLUMNS = ("data", "pair", "overlap", "method", "rot_err_deg", "trans_err", "success",
-           "fitness", "seconds", "note")  # fmt: skip
+           "fitness", "seconds", "note", "split")  # fmt: skip
 
 
 def _quat_matrix(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
@@ -319,7 +326,9 @@ def evaluate(
 ) -> list[dict]:
     """Run the registration benchmark; one row per (pair, method) with the keys of
     :data:`COLUMNS`. ``methods`` restricts :data:`METHODS` (Open3D peers are skipped when
-    :mod:`open3d` is missing); ``split`` is ``"validation"`` (reported) or ``"tuning"``;
+    :mod:`open3d` is missing); ``split`` is ``"validation"`` (reported) or ``"tuning"`` (each
+    row carries it; the registry's ``consulted_by`` says the validation scan pairs are the tuning
+    ones moved by other motions);
     ``max_pairs`` keeps the first pairs of each part (for quick runs)."""
     data = Path(data_dir)
     if not data.is_dir():
@@ -342,7 +351,7 @@ def evaluate(
             pairs = pairs[:max_pairs]
         for pair in pairs:
             for m in sel:
-                rows.append(_run(m, pair, cfg["reg_seed"]))
+                rows.append({**_run(m, pair, cfg["reg_seed"]), "split": split})
     if out is not None:
         write_tables(rows, out)
     return rows

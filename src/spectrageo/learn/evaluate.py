@@ -22,17 +22,16 @@ from pathlib import Path
 import numpy as np
 
 from .._progress import progress
+from ..datasets.splits import cases as _cases
+from ..datasets.splits import split_of
 
 STATIC_METHODS = ("bm3d-cnn", "dae", "tsgsp", "bnf")
-#: validation-split slice: organic and CAD meshes of 6k-26k vertices
-VALIDATION_SLICE = (
-    "meshes/ChineseDragon-10kv.off",
-    "meshes/armadillo.off",
-    "cad/joint.obj",
-)
+#: validation-split slice: organic and CAD meshes of 6k-26k vertices (the split registry's
+#: ``learn`` task, :mod:`spectrageo.datasets.splits`)
+VALIDATION_SLICE = tuple(c.file for c in _cases("learn", "validation") if c.group != "animation")
 LEVELS = (0.3, 0.5)
-ANIMATIONS = ("crane", "horse-gallop", "chickenCrossing")
-COLUMNS = ("part", "case", "method", "n_vertices", "input_theta", "theta_deg", "time_s")
+ANIMATIONS = tuple(c.name for c in _cases("learn", group="animation"))
+COLUMNS = ("part", "case", "method", "n_vertices", "input_theta", "theta_deg", "time_s", "split")
 
 
 def _theta(X, V0, F) -> float:
@@ -41,7 +40,7 @@ def _theta(X, V0, F) -> float:
     return float(theta_deg(X, V0, F))
 
 
-def _static_rows(part, case, Vn, V0, F, methods, rows, repeat=1):
+def _static_rows(part, case, Vn, V0, F, methods, rows, repeat=1, split="-"):
     from .. import denoise
 
     th0 = _theta(Vn, V0, F)
@@ -53,7 +52,7 @@ def _static_rows(part, case, Vn, V0, F, methods, rows, repeat=1):
             dt = min(dt, time.perf_counter() - t)
         rows.append(
             {"part": part, "case": case, "method": m, "n_vertices": int(Vn.shape[0]),
-             "input_theta": th0, "theta_deg": _theta(X, V0, F), "time_s": dt}
+             "input_theta": th0, "theta_deg": _theta(X, V0, F), "time_s": dt, "split": split}
         )  # fmt: skip
 
 
@@ -102,7 +101,8 @@ def evaluate_learned(
     warm_up(list(methods), *_warm_mesh())
     for name, npth, opth in progress(denoise_pairs(data), desc="pairs"):
         n, o = io.read_mesh(npth), io.read_mesh(opth)
-        _static_rows("pairs", name, n.vertices, o.vertices, o.faces, methods, rows, repeat)
+        split = split_of("denoise", name) or "-"
+        _static_rows("pairs", name, n.vertices, o.vertices, o.faces, methods, rows, repeat, split)
     for rel in progress(validation, desc="validation"):
         for lv in levels:
             case = ProtocolCase(
@@ -114,7 +114,8 @@ def evaluate_learned(
             )
             _, V0, F = _load_clean(data, case)
             Vn = generate(V0, F, kind="gaussian-normal", level=lv, rng=case.seed).vertices
-            _static_rows("validation", case.name, Vn, V0, F, methods, rows, repeat)
+            split = split_of("learn", rel) or "-"
+            _static_rows("validation", case.name, Vn, V0, F, methods, rows, repeat, split)
     if protocol_levels:
         from ..evaluate.denoise import protocol_cases
 
@@ -123,7 +124,8 @@ def evaluate_learned(
             if V0.shape[0] > int(protocol_max_vertices):
                 continue
             Vn = generate(V0, F, kind=case.corruption, level=case.level, rng=case.seed).vertices
-            _static_rows("protocol", case.name, Vn, V0, F, methods, rows)  # one timed run
+            # one timed run
+            _static_rows("protocol", case.name, Vn, V0, F, methods, rows, split=case.split)
     for name in progress(animations, desc="animations"):
         path = data / "animations" / f"{name}.npz"
         if not path.is_file():
@@ -134,7 +136,8 @@ def evaluate_learned(
         An = animation_noise(A, F, kind="gaussian", level=0.3, rng=0)
         ev = list(range(0, A.shape[0], frame_step))
         case = f"{name}[{A.shape[0]} frames]:gaussian@0.3"
-        base = {"part": "animation", "case": case, "n_vertices": int(A.shape[1])}
+        base = {"part": "animation", "case": case, "n_vertices": int(A.shape[1]),
+                "split": split_of("learn", name) or "-"}  # fmt: skip
         th0 = float(np.mean([_theta(An[t], A[t], F) for t in ev]))
         t = time.perf_counter()
         D = dae_animation(An, F, train_frames=min(train_frames, A.shape[0]))

@@ -22,19 +22,20 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._validation import check_positive
+from ..datasets.splits import (
+    DENOISE_SAME_SHAPE_AS_TUNING,
+    LEARN_REPORT_MESH,
+    LEARN_TRAIN_MESHES,
+)
+from ..datasets.splits import files as _files
 from . import _features as fe
 from ._weights import package_version, save_weights
 
-#: training meshes of the shipped weights (relative to the shared data folder)
-TRAIN_MESHES = (
-    "saliency/casting.obj",
-    "saliency/cad.obj",
-    "meshes/rocker-arm.obj",
-    "meshes/spot.obj",
-    "meshes/knot2.off",
-)
+#: training meshes of the shipped weights (relative to the shared data folder; the split
+#: registry's ``learn-train`` tuning cases, :mod:`spectrageo.datasets.splits`)
+TRAIN_MESHES = LEARN_TRAIN_MESHES
 #: mesh whose noisy versions give the validation theta of the training report (no choice uses it)
-REPORT_MESH = "holes/mech-holes-shark.off"
+REPORT_MESH = LEARN_REPORT_MESH
 #: relative Gaussian noise levels of the training cases
 TRAIN_LEVELS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7)
 REPORT_LEVELS = (0.3, 0.5)
@@ -42,9 +43,7 @@ REPORT_LEVELS = (0.3, 0.5)
 
 def check_training_meshes(meshes) -> tuple[str, ...]:
     """Refuse meshes of the validation split, the benchmark pairs or their shapes."""
-    from ..evaluate.denoise import SAME_SHAPE_AS_TUNING, VALIDATION_MESHES
-
-    banned = set(VALIDATION_MESHES) | set(SAME_SHAPE_AS_TUNING)
+    banned = set(_files("denoise", "validation")) | set(DENOISE_SAME_SHAPE_AS_TUNING)
     out = []
     for m in meshes:
         m = str(m).replace("\\", "/")
