@@ -35,14 +35,17 @@ GMC_TAU = 1e-2
 #: filtering sweeps of ``"motion"`` after the satellite generations of Algorithm 12 (chosen on
 #: the tuning animation, see :func:`complete_animation`)
 MOTION_SWEEPS = 20
-#: per-frame switch of ``"motion"``: below this leave-one-out ratio the motion step is kept
-#: without testing static interpolation (tuning: horse-gallop 0.15-0.34 per frame; the pose set
-#: cat-poses 0.47-1.39)
-SWITCH_SCREEN = 0.45
-#: per-frame switch: anchors are held out in strides of ``SWITCH_STRIDE`` at these offsets (three
-#: disjoint folds of a tenth of the anchors each) to fit the blend weight of the two completions
-SWITCH_STRIDE = 10
-SWITCH_FOLDS = (0, 3, 6)
+#: per-frame switch of ``"motion"``: below this leave-one-out ratio (:func:`_loo_ratio`) the
+#: motion step is kept without testing static interpolation.
+#: Chosen on the tuning split; see docs/decisions.md#completion-switch.
+SWITCH_SCREEN = 0.3
+#: per-frame switch: every ``SWITCH_STRIDE``-th anchor is held out (one fold per offset in
+#: :data:`SWITCH_FOLDS`) to fit the blend weight of the two completions.
+#: Chosen on the tuning split; see docs/decisions.md#completion-switch.
+SWITCH_STRIDE = 5
+#: per-frame switch: offsets of the held-out folds (``(0,)``: one fold, a fifth of the anchors).
+#: Chosen on the tuning split; see docs/decisions.md#completion-switch.
+SWITCH_FOLDS = (0,)
 
 
 # --------------------------------------------------------------------------------- validation
@@ -409,7 +412,8 @@ def complete_animation(
         ``"motion"`` only, not in the thesis; it serves pose sets, whose frames are unrelated
         poses. Per frame, a cheap leave-one-out screen at the anchors (:func:`_loo_ratio`)
         keeps the motion step when it is clearly better (ratio below :data:`SWITCH_SCREEN`);
-        otherwise three disjoint tenths of the anchors are held out in turn, the frame is
+        otherwise the folds of held-out anchors (every :data:`SWITCH_STRIDE`-th anchor from each
+        offset of :data:`SWITCH_FOLDS`) are held out in turn, the frame is
         completed both by the motion step and by static Laplacian interpolation, and the blend
         ``a * motion + (1 - a) * interpolation`` whose weight fits the held-out anchors best
         (least squares, clipped to [0, 1]; Eq. S1 of ``_with_static_switch``) completes the

@@ -1178,6 +1178,7 @@ _ED = "spectrageo evaluate denoise --split tuning"
 _EC = "spectrageo evaluate compress"
 _ECA = "spectrageo evaluate compress-animation"
 _EX = "spectrageo evaluate complete"
+_EXS = "benchmarks/retune_completion_switch.py"
 _ER = "spectrageo evaluate register --split tuning"
 _EI = "spectrageo evaluate identify"
 _PEER_FIXED = {
@@ -1347,12 +1348,12 @@ _DEFAULTS = [
        "horse-gallop, 25 frames, seed 1"),
     _d(_X + "dynamic.MOTION_SWEEPS", 20, "tuning", "completion-animation", _EX,
        "horse-gallop, 25 frames, seed 1"),
-    _d(_X + "dynamic.SWITCH_SCREEN", 0.45, "tuning+validation", "completion-animation", _EX,
-       "horse-gallop and cat-poses, the latter also seed 0"),
-    _d(_X + "dynamic.SWITCH_STRIDE", 10, "tuning+validation", "completion-animation", _EX,
-       "the folds were chosen after lion-poses seed 0"),
-    _d(_X + "dynamic.SWITCH_FOLDS", (0, 3, 6), "tuning+validation", "completion-animation", _EX,
-       "chosen after looking at lion-poses with seed 0"),
+    _d(_X + "dynamic.SWITCH_SCREEN", 0.3, "tuning", "completion-animation", _EXS,
+       "54-setting grid on horse-gallop and cat-poses seed 1; docs/decisions.md#completion-switch"),
+    _d(_X + "dynamic.SWITCH_STRIDE", 5, "tuning", "completion-animation", _EXS,
+       "54-setting grid on horse-gallop and cat-poses seed 1; docs/decisions.md#completion-switch"),
+    _d(_X + "dynamic.SWITCH_FOLDS", (0,), "tuning", "completion-animation", _EXS,
+       "54-setting grid on horse-gallop and cat-poses seed 1; docs/decisions.md#completion-switch"),
     # --------------------------------------- registration and identification
     _d(_R + "_broad.broad_phase_points.n_samples", 600, "tuning", "register", _ER,
        "raised from 400 for the fragment pair"),
