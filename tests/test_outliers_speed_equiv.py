@@ -249,15 +249,17 @@ def test_aggressive_rank_rule_keeps_the_decisions():
 
 @pytest.mark.parametrize("pattern", ["uniform", "halo"])
 def test_default_fast_path_on_real_scan(shared_data, pattern):
-    """bun000 with 10 % outliers (the tuning split): the ranking rule saves an iteration and
-    the decisions are those of the reference path."""
+    """bun000 with 10 % outliers (the tuning split): the fast path (float32, ranking rule,
+    replayed second pass) needs no more iterations than the reference path and makes its
+    decisions. (With ``tol = 3e-4`` the residual rule stops both at the same iteration on the
+    uniform case; the ranking rule saved one there under the former ``tol = 1e-4``.)"""
     from spectrageo import io
 
     P = io.read(shared_data / "scans/bunny/bun000.ply.gz", kind="points").points
     Q, lab = noise.corrupt_outliers(P, pattern=pattern, fraction=0.1, rng=0)
     ref = remove_outliers(Q, return_points=False, **EXACT)
     fast = remove_outliers(Q, return_points=False)
-    assert fast.info["n_iter"] < ref.info["n_iter"]
+    assert fast.info["n_iter"] <= ref.info["n_iter"]
     diff = np.abs(fast.scores - ref.scores)
     assert np.quantile(diff[~lab], 0.99) < 0.05
     # the replayed rows of step 5 (rebuilt far-outlier patches) move more: 0.069 measured

@@ -6,12 +6,10 @@ from __future__ import annotations
 
 import importlib
 import inspect
-import os
 from collections import defaultdict
 
 import pytest
 
-from spectrageo.datasets import data_dir
 from spectrageo.datasets import splits as S
 
 #: Defaults recorded as chosen on data other than the tuning split. Each one is an expected
@@ -19,16 +17,6 @@ from spectrageo.datasets import splits as S
 #: and recorded as ``tuning`` in the registry, the test passes unexpectedly and fails the run, and
 #: its name must be removed here).
 NOT_TUNING_YET = {
-    # justified on the seven shared scans of the far / near benchmark, validation scans included
-    "spectrageo.outliers.rpca_scores.rho": "far/near F1 on all seven shared scans",
-    "spectrageo.outliers.rpca_scores.tol": "score change on all seven shared scans",
-    "spectrageo.outliers.rpca_scores.refine": "far/near F1 on all seven shared scans",
-    "spectrageo.outliers.rpca.REFINE_MIN_TAU": "the refinement step, on all seven scans",
-    "spectrageo.outliers.rpca_scores.tangent_weight": "near F1 on six of the seven scans",
-    "spectrageo.outliers._clusters.CLUSTER_MIN": "set after validation scans were seen",
-    # chosen on the four reference maps that are the whole saliency evaluation
-    "spectrageo.saliency.saliency.sparse_norm": "the four reference maps (the evaluation)",
-    "spectrageo.saliency.geometric.geometric_face_values.sparse_norm": "the same choice",
     # the detail test's tuning half holds meshes of the denoising protocol's validation split
     "spectrageo.denoise._guard.MIN_GROWTH": "dino / armadillo are protocol validation meshes",
     "spectrageo.denoise._guard.MIN_SURVIVAL": "joint.off / armadillo: validation meshes",
@@ -37,10 +25,6 @@ NOT_TUNING_YET = {
     "spectrageo.denoise._guard.MISALIGNED_COS": "shares including validation meshes (blade)",
     "spectrageo.denoise._guard.MISALIGNED_SHARE": "shares including validation meshes (blade)",
     "spectrageo.denoise._guard.SPIKE_PLANE_DEG": "added for meshes/cube-meshed:impulsive",
-    # the completion switch looked at the evaluated pose sets with the evaluation's seed
-    "spectrageo.complete.dynamic.SWITCH_SCREEN": "cat-poses seed 0 was looked at",
-    "spectrageo.complete.dynamic.SWITCH_STRIDE": "lion-poses seed 0 was looked at",
-    "spectrageo.complete.dynamic.SWITCH_FOLDS": "lion-poses seed 0 was looked at",
 }
 
 #: Tasks whose validation split reuses files of its tuning split (other seeds or motions).
@@ -160,16 +144,9 @@ def test_shared_files_are_not_held_out():
                 assert c.consulted_by and not c.held_out, c
 
 
-@pytest.fixture
-def data_root(request):
-    if os.environ.get("CI") == "true" and data_dir() is None:
-        pytest.fail("the shared data must be present under CI (SPECTRAGEO_DATA)")
-    return request.getfixturevalue("shared_data")
-
-
-def test_every_case_file_exists(data_root):
-    missing = sorted({f for c in S.CASES for f in c.files if not (data_root / f).exists()})
-    assert not missing, f"registry files missing under {data_root}: {missing}"
+def test_every_case_file_exists(shared_data):  # shared_data fails under CI=true when absent
+    missing = sorted({f for c in S.CASES for f in c.files if not (shared_data / f).exists()})
+    assert not missing, f"registry files missing under {shared_data}: {missing}"
 
 
 def test_consulted_defaults_are_registered():
@@ -205,7 +182,7 @@ def test_lookups():
     assert S.split_of("register", "bunny", seed=1) == "tuning"
     assert S.split_of("register", "nothing") is None
     assert S.default("spectrageo.denoise._guard.MIN_NOISE").value == 0.015
-    assert {d.task for d in S.defaults("evaluation")} == {"saliency"}
+    assert S.defaults("evaluation") == ()
     with pytest.raises(KeyError, match="no registered default"):
         S.default("nope")
     with pytest.raises(ValueError, match="`task` must be one of"):

