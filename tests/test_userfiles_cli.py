@@ -387,8 +387,9 @@ def test_tsgsp_on_tiny_meshes():
     V, F = np.asarray(box.vertices, float), np.asarray(box.faces)
     Vn = V + np.random.default_rng(0).normal(0, 0.01, V.shape)
     out = denoise.denoise(Vn, F, method="tsgsp")
-    assert out.shape == V.shape and np.isfinite(out).all()
-    assert not np.array_equal(out, Vn)  # it ran (8 vertices: enough for the noise estimate)
+    # 8 vertices of a coarse shape: the coarse-mesh test of the gate cannot tell this noise from
+    # shape, and filtering such boxes made them worse on the tuning split, so they are left alone
+    np.testing.assert_array_equal(out, Vn)
     tet = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
     Ft = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
     out = denoise.denoise(tet, Ft, method="tsgsp")  # 4 vertices: noise cannot be told from shape
@@ -396,12 +397,14 @@ def test_tsgsp_on_tiny_meshes():
 
 
 def test_isolated_triangles_give_a_plain_cause(tmp_path, capsys):
+    """Separate triangles have nothing to filter: written unchanged, with the reason."""
     tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
     V = np.vstack([tri, tri + 5, tri + 10])
     F = np.arange(9).reshape(3, 3)
     io.write(tmp_path / "s.ply", Mesh(V, F))
     code, _, err = run_cli(capsys, "denoise", tmp_path / "s.ply", tmp_path / "o.ply")
-    assert code == 2 and "triangle soup that welding did not join" in err
+    assert code == 0 and "separate triangles" in err and "unchanged" in err
+    np.testing.assert_array_equal(io.read_mesh(tmp_path / "o.ply", weld=False).V, V)
 
 
 def test_point_rows_without_coordinates_in_register_and_elsewhere(tmp_path, capsys):

@@ -347,7 +347,21 @@ def cmd_denoise(args) -> int:
         out = obj.with_vertices(Vd)
         if np.array_equal(Vd, obj.vertices):
             # the do-no-harm gate (spectrageo.denoise._guard) found no noise, or only detail
-            _status("no noise found: the vertices are written unchanged")
+            from ..denoise._guard import coarse_shape, has_shared_edge
+
+            if not has_shared_edge(obj.faces):
+                _status(
+                    "separate triangles (no edge shared by two faces), nothing to filter: the "
+                    "vertices are written unchanged"
+                )
+            elif coarse_shape(obj.vertices, obj.faces).coarse:
+                _status(
+                    "coarse mesh (it turns by more per edge than noise would, coherently between "
+                    "neighbours: Eqs. N11-N13 of spectrageo.denoise._guard), no noise found: the "
+                    "vertices are written unchanged"
+                )
+            else:
+                _status("no noise found: the vertices are written unchanged")
         elif args.method == "tsgsp" and is_folded(obj.vertices, obj.faces):
             # the gate's decision on the mesh as given (the reader has welded any soup)
             _status(

@@ -1249,6 +1249,10 @@ _DEFAULTS = [
        "tuning", "saliency", "benchmarks/retune_saliency.py",
        "the same choice as saliency.sparse_norm"),
     # ------------------------------------------------------------- denoising
+    _d(_G + "COARSE_OFFSET", 0.12, "tuning", "denoise-gate", "benchmarks/lowpoly/clean_coarse.py",
+       "log midpoint of knot2 (0.099) and suzanne (0.139); tuning half of lowpoly/manifest.csv"),
+    _d(_G + "COARSE_CORR", 0.28, "tuning", "denoise-gate", "benchmarks/lowpoly/clean_coarse.py",
+       "log midpoint of a noisy low-poly tuning case (0.201) and suzanne (0.382)"),
     _d(_G + "MIN_NOISE", 0.015, "tuning", "denoise", _ED,
        "just above the largest level of a clean original among the shared pairs"),
     _d(_G + "TRUST", 6.0, "tuning", "denoise", _ED,

@@ -19,7 +19,9 @@ from ._guard import (
     SPIKE_SHARE_QUIET,
     TRUST,
     apply_trust,
+    coarse_shape,
     despike,
+    has_shared_edge,
     is_folded,
     noise_estimate,
     noise_sigma,
@@ -174,7 +176,11 @@ def denoise(
         edge turned by more than 120 degrees against each other, on 50 vertices or more:
         :func:`spectrageo.denoise._guard.is_folded`, Eq. N10; no clean mesh of the tuning data
         comes near it) is never called clean: the gate's tests are skipped and the method runs
-        (``tsgsp`` then smooths it with :func:`spectrageo.denoise._guard.unfold`).
+        (``tsgsp`` then smooths it with :func:`spectrageo.denoise._guard.unfold`). A coarse mesh
+        (:func:`spectrageo.denoise._guard.coarse_shape`, Eqs. N11-N13: a low-poly model whose
+        vertices turn by more per edge than noise would, coherently between neighbours) counts as
+        clean whatever its level, and a mesh none of whose edges is shared by two faces (separate
+        triangles, after welding) is returned unchanged.
     impulses : bool
         Sparse impulses (:func:`spectrageo.denoise._guard.despike`, Eqs. N5-N8, not in the
         thesis): on a mesh the gate calls noisy, isolated spikes are pulled back first when at
@@ -241,7 +247,8 @@ def denoise(
         if not folded and share < PLANAR_SHARE:
             est = noise_estimate(V, F=F)
             sigma, level, tail = est.sigma, est.level, est.tail
-            if level < min_noise:
+            # a coarse mesh turns by more per edge than noise would, coherently (Eqs. N11-N13)
+            if level < min_noise or coarse_shape(V, F).coarse:
                 if not impulses:
                     return V.copy()  # no noise found: nothing to remove
                 quiet = True
@@ -250,7 +257,9 @@ def denoise(
     Vw, Fw = (w.vertices, w.faces) if welded else (V, F)
     if Fw.shape[0] == 0:
         return V.copy()  # every face collapsed when coincident vertices were merged
-    if welded and min_noise > 0 and (not gated or (sigma is None and not folded)):
+    if min_noise > 0 and not has_shared_edge(Fw):
+        return V.copy()  # separate triangles: no filter has a neighbourhood to work with
+    if min_noise > 0 and (not gated or (welded and sigma is None and not folded)):
         # a soup is gated here; a planar mesh's share is measured again on the welded mesh,
         # against which the impulse repair is compared
         folded = is_folded(Vw, Fw)
@@ -258,7 +267,7 @@ def denoise(
         if not folded and share < PLANAR_SHARE:
             est = noise_estimate(Vw, F=Fw)
             sigma, level, tail = est.sigma, est.level, est.tail
-            if level < min_noise:
+            if level < min_noise or coarse_shape(Vw, Fw).coarse:
                 if not impulses:
                     return V.copy()
                 quiet = True

@@ -12,6 +12,7 @@ from .._validation import as_faces, as_points, check_choice, check_positive
 from ..geometry import face_areas, face_centroids, face_normals, update_vertices, vertex_normals
 from ..geometry.primitives import mean_edge_length
 from ..graph import adjacency_matrix
+from ._guard import no_scale_message
 from ._normals import (
     face_neighbors,
     joint_bilateral_normals,
@@ -202,9 +203,7 @@ def bnf(
         sigma_s = mean_centroid_distance(V, F)
         if not sigma_s > 0:
             raise InvalidInputError(
-                "the mesh has no two adjacent faces with distinct centroids (isolated or duplicated "
-                "triangles, e.g. a triangle soup that welding did not join), so the filter has no "
-                "neighbourhood scale; pass `sigma_s` to give one."
+                no_scale_message("the bilateral normal filter", "passing `sigma_s`")
             )
     N = face_normals(V, F)
     W = spatial_weights(

@@ -8,6 +8,7 @@ import numpy as np
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_choice, check_positive
 from ..geometry import face_areas, face_centroids, face_normals, update_vertices
+from ._guard import no_scale_message
 from ._normals import (
     MEASURES,
     PatchSet,
@@ -29,6 +30,9 @@ PRESETS: dict[str, dict[str, object]] = {
     "cad": {"sigma_r": 0.3, "n_iter": 40, "vertex_iter": 20, "radius_factor": 2.0},
     "smooth": {"sigma_r": 0.35, "n_iter": 5, "vertex_iter": 10, "radius_factor": 2.0},
 }
+
+
+_NO_SCALE = no_scale_message("guided normal filtering", "gnf(..., radius=..., sigma_s=...)")
 
 
 def _pick(value, name: str, preset: dict):
@@ -129,11 +133,7 @@ def gnf(
         if radius is None:
             lc0 = mean_centroid_distance(V, F, pairs=pairs)
             if not lc0 > 0:
-                raise InvalidInputError(
-                    "the mesh has no two adjacent faces with distinct centroids (isolated or duplicated "
-                    "triangles, e.g. a triangle soup that welding did not join); pass `radius` "
-                    "and `sigma_s` to give the filter a scale."
-                )
+                raise InvalidInputError(_NO_SCALE)
             radius = float(p["radius_factor"]) * lc0
         nbr = face_radius_neighbors(face_centroids(V, F), radius, adjacency=ps.P)
     else:
@@ -145,11 +145,7 @@ def gnf(
         N = face_normals(X, F)
         s = sigma_s if sigma_s is not None else mean_centroid_distance(X, F, pairs=pairs)
         if not s > 0:
-            raise InvalidInputError(
-                "the mesh has no two adjacent faces with distinct centroids (isolated or duplicated "
-                "triangles, e.g. a triangle soup that welding did not join), so the filter has no "
-                "neighbourhood scale; pass `sigma_s` to give one."
-            )
+            raise InvalidInputError(_NO_SCALE)
         g = guided_normals(N, A, ps, measure=measure)
         N = joint_bilateral_normals(N, g, spatial_weights(C, A, nbr, s), sigma_r)
         X = update_vertices(X, F, N, n_iter=vertex_iter)

@@ -2,13 +2,15 @@
 
 Both use the uniform (umbrella) operator ``U(v_i) = (1 / |N_i|) sum_{j in N_i} v_j - v_i`` over the
 1-ring vertex neighbours ``N_i`` (Taubin 1995, Eq. 2 with weights ``w_ij = 1 / |N_i|``), i.e.
-``U = -D^-1 L`` for the binary Laplacian ``L = D - C`` of Eq. (4.1). Isolated vertices do not move.
+``U = -D^-1 L`` for the binary Laplacian ``L = D - C`` of Eq. (4.1). Isolated vertices do not move,
+nor do connected components without an interior vertex (separate triangles of a soup).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
@@ -18,12 +20,27 @@ from ._registry import register
 
 def _umbrella(V: np.ndarray, F: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
     """Row-stochastic (n, n) matrix ``D^-1 C`` of the uniform 1-ring average, and the (n,) mask of
-    vertices that have neighbours."""
+    the vertices that move: those with neighbours in a connected component that has at least one
+    interior vertex (a vertex on no boundary edge). A component made only of boundary vertices (a
+    separate triangle, a strip one triangle wide) would shrink towards its centroid at every
+    step, so it is left as it is."""
     n = V.shape[0]
     C = adjacency_matrix(F, n)
     d = np.asarray(C.sum(axis=1)).ravel()
     inv = np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)
-    return (sp.diags(inv) @ C).tocsr(), d > 0
+    move = d > 0
+    if F.shape[0]:
+        E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        E = E[E[:, 0] != E[:, 1]]
+        key, counts = np.unique(E[:, 0] * n + E[:, 1], return_counts=True)
+        b = key[counts == 1]
+        boundary = np.zeros(n, dtype=bool)
+        boundary[b // n] = True
+        boundary[b % n] = True
+        _, label = connected_components(C, directed=False)
+        interior = move & ~boundary
+        move &= np.isin(label, label[interior])
+    return (sp.diags(inv) @ C).tocsr(), move
 
 
 def _check_finite_number(value, name: str) -> float:

@@ -61,6 +61,7 @@ from ._guard import (
     LOWPASS_MU,
     apply_trust,
     is_folded,
+    no_scale_message,
     noise_sigma,
     unfold,
 )
@@ -951,11 +952,7 @@ def fine(
     if sigma_c is None:
         lc = mean_centroid_distance(V, F)
         if not lc > 0:
-            raise InvalidInputError(
-                "the mesh has no two adjacent faces with distinct centroids (isolated or "
-                "duplicated triangles, e.g. a triangle soup that welding did not join), so the "
-                "filter has no neighbourhood scale; pass `sigma_c` to give one."
-            )
+            raise InvalidInputError(no_scale_message("TSGSP's fine step", "passing `sigma_c`"))
         sigma_c = lc * float(np.sqrt(patch / 6.0))
     X = V.copy()
     Cc = face_centroids(X, F)
