@@ -1,20 +1,86 @@
-"""Shared fixtures: small analytic meshes and access to the shared data folder."""
+"""Shared fixtures and helpers: small analytic meshes, the shared data folder, peers.
+
+Missing prerequisites -- the shared data folder, a file in it, a peer library (Open3D, PyMeshLab,
+DracoPy), Chromium for the viewer's browser tests -- skip a test on a user's machine with a message
+and fail it under ``CI=true``, where ``.ci/run`` installs them all (:func:`skip_or_fail`).
+"""
 
 from __future__ import annotations
+
+import importlib
+import os
+from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 import pytest
 
 from spectrageo.datasets import data_dir
 
+# the peers the differential tests and the benchmarks compare against; .ci/run installs them
+PEERS = ("open3d", "pymeshlab", "DracoPy")
+_NO_DATA = "shared data not found (set SPECTRAGEO_DATA to the folder ../shared/data)"
+
+
+def in_ci() -> bool:
+    """True under ``CI=true`` (``.ci/run`` exports it; so do GitHub Actions and most CI systems)."""
+    return os.environ.get("CI", "").strip().lower() in {"1", "true", "yes"}
+
+
+def skip_or_fail(reason: str) -> NoReturn:
+    """Skip with ``reason`` on a user's machine; fail under ``CI=true``, where nothing may skip
+    for a missing prerequisite (the data, the peers and Chromium are always there)."""
+    __tracebackhide__ = True  # reports name the calling test's line
+    if in_ci():
+        pytest.fail(f"{reason} [CI=true: fails instead of skipping]", pytrace=False)
+    pytest.skip(reason, allow_module_level=True)
+
+
+def find_shared_data() -> Path | None:
+    """The shared data folder, or None when it is absent: a folder without the data's README
+    (an empty or wrong ``SPECTRAGEO_DATA``) counts as absent."""
+    d = data_dir()
+    if d is None or not (d / "README.md").is_file():
+        return None
+    return d
+
+
+def optional_shared_data() -> Path | None:
+    """For tests that use real files when present and synthetic ones otherwise: the folder, or
+    None on a user's machine without it; fails under ``CI=true`` when it is absent."""
+    __tracebackhide__ = True  # reports name the calling test's line
+    d = find_shared_data()
+    if d is None and in_ci():
+        pytest.fail(_NO_DATA + " [CI=true: the real files must be used]", pytrace=False)
+    return d
+
 
 @pytest.fixture(scope="session")
-def shared_data():
-    """Path of the shared data folder; tests needing it skip with a message when it is absent."""
-    d = data_dir()
+def shared_data() -> Path:
+    """Path of the shared data folder (:func:`skip_or_fail` when it is absent)."""
+    d = find_shared_data()
     if d is None:
-        pytest.skip("shared data not found (set SPECTRAGEO_DATA to the folder ../shared/data)")
+        skip_or_fail(_NO_DATA)
     return d
+
+
+def shared_file(root: Path, *parts: str) -> Path:
+    """``root / parts`` (a file or folder of the shared data); :func:`skip_or_fail` when absent."""
+    __tracebackhide__ = True  # reports name the calling test's line
+    p = Path(root).joinpath(*parts)
+    if not p.exists():
+        skip_or_fail(f"{'/'.join(parts)} not found in the shared data folder {root}")
+    return p
+
+
+def require_module(name: str):
+    """Import ``name`` (a peer or an optional extra) or :func:`skip_or_fail`. Any exception counts
+    as missing: Open3D's wheel raises OSError when libusb-1.0 is not installed."""
+    __tracebackhide__ = True  # reports name the calling test's line
+    try:
+        return importlib.import_module(name)
+    except Exception as exc:  # noqa: BLE001 - ImportError, OSError (missing shared library), ...
+        skip_or_fail(f"{name} is not usable: {type(exc).__name__}: {exc}")
 
 
 def icosphere(subdivisions: int = 2):
@@ -101,3 +167,19 @@ def cube_mesh():
 @pytest.fixture
 def grid_mesh():
     return grid()
+
+
+def outlier_recall_precision(
+    keep: np.ndarray, injected: np.ndarray, detectable: np.ndarray | None = None
+) -> tuple[float, float]:
+    """``(recall, precision)`` of the points a filter removed (``~keep``) against the injected
+    outliers: recall over ``detectable`` (default: all injected; pass the injected outliers that
+    lie far enough from the surface to be told apart from it), precision over all removed points
+    (a removed injected outlier, detectable or not, is a true positive). A filter that keeps every
+    outlier has recall 0; one that removes nothing has precision 0."""
+    removed = ~np.asarray(keep, dtype=bool)
+    injected = np.asarray(injected, dtype=bool)
+    target = injected if detectable is None else np.asarray(detectable, dtype=bool)
+    recall = np.count_nonzero(removed & target) / max(np.count_nonzero(target), 1)
+    precision = np.count_nonzero(removed & injected) / max(np.count_nonzero(removed), 1)
+    return float(recall), float(precision)

@@ -16,7 +16,7 @@ from spectrageo.complete import (
 from spectrageo.geometry import boundary_edges, boundary_loops
 from spectrageo.graph import adjacency_matrix
 
-from conftest import icosphere
+from conftest import icosphere, shared_file
 
 
 def _rms(X, V, unknown):
@@ -97,7 +97,8 @@ def _cut_holes(V, F, centers, radius):
 
 
 def test_fill_holes_closes_every_loop():
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
+
     V, F = icosphere(3)
     Fh = _cut_holes(V, F, [V[0], V[100], -V[0]], 0.35)
     assert len(boundary_loops(Fh, len(V))) == 3
@@ -198,7 +199,8 @@ def test_liepa_patch_orientation_and_angle_weight():
 def test_fill_holes_keeps_touching_parts_apart():
     """Coincident vertices inside the surface (two parts that touch) are not welded: the filled
     mesh has no edge with more than two faces, and the untouched part keeps its faces."""
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
+
     V, F = icosphere(2)
     V2 = V + np.array([2.0, 0.0, 0.0])  # second sphere touching the first at (1, 0, 0)
     i = int(np.argmax(V[:, 0]))
@@ -232,7 +234,8 @@ def test_fill_holes_long_loop_split(monkeypatch):
     """A loop longer than DP_MAX_LOOP is cut by chords into pieces: the result is closed, every
     edge has two faces, the orientation is consistent and the fill stays within the rim's range;
     the input faces come first, unchanged."""
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
+
     from spectrageo.complete import holes
 
     V, F = _grid(40)
@@ -559,13 +562,12 @@ def test_cli_round_trip_mesh_and_animation(tmp_path, sphere, capsys):
 
 # ------------------------------------------------------------------------------ real data
 def test_fill_holes_shared_holes_watertight(shared_data):
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
+
     from spectrageo import io
 
     for name in ("elephant-with-holes", "holes", "mech-holes-shark"):
-        p = shared_data / "holes" / f"{name}.off"
-        if not p.is_file():
-            pytest.skip(f"{p} missing")
+        p = shared_file(shared_data, "holes", f"{name}.off")
         m = io.read_mesh(p)
         V2, F2 = fill_holes(m.vertices, m.faces)
         assert boundary_edges(F2).shape[0] == 0, name
@@ -595,9 +597,7 @@ def test_motion_beats_li_and_lia_on_shared_animation(shared_data, name):
     from spectrageo.io import read_animation
     from spectrageo.metrics import nmsve
 
-    p = shared_data / "animations" / f"{name}.npz"
-    if not p.is_file():
-        pytest.skip(f"{p} missing")
+    p = shared_file(shared_data, "animations", f"{name}.npz")
     a = read_animation(p)
     A = np.asarray(a.frames[:8], dtype=np.float64)
     F = np.asarray(a.faces)
@@ -617,8 +617,7 @@ def test_grabber_sequence_wrli_below_per_frame_li(shared_data):
     pixel of every 16th row here; the benchmark takes every 4th)."""
     from spectrageo.evaluate.completion import _grabber
 
-    if not (shared_data / "scans" / "pcl" / "grabber_sequence").is_dir():
-        pytest.skip("grabber frames missing")
+    shared_file(shared_data, "scans", "pcl", "grabber_sequence")
     rows = {r["method"]: r for r in _grabber(shared_data, ("wrli", "seq-li"), 0.3, 0, step=16)}
     assert set(rows) == {"wrli", "seq-li"}
     assert rows["wrli"]["n"] > 500 and np.isfinite(rows["wrli"]["rms"])

@@ -202,7 +202,6 @@ def test_select_neighborhoods_matches_brute_force(noisy_sphere):
 
 
 def test_tsgsp_saliency_lowers_theta_and_is_deterministic(noisy_sphere):
-    pytest.importorskip("spectrageo.saliency")
     V, F, Vn = noisy_sphere
     a = denoise.denoise(Vn, F, method="tsgsp-saliency")
     b = denoise.denoise(Vn, F, method="tsgsp-saliency")

@@ -16,12 +16,12 @@ from spectrageo import denoise, io
 from spectrageo.evaluate.denoise import THESIS_THETA
 from spectrageo.metrics import theta_deg
 
+from conftest import shared_file
+
 
 @pytest.mark.parametrize("pair", sorted(THESIS_THETA))
 def test_tsgsp_ranks_ahead_of_gnf_as_in_table_5_4(shared_data, pair):
-    d = shared_data / "denoise" / pair
-    if not (d / "Noisy.obj").exists():
-        pytest.skip(f"pair {pair} not in the shared data")
+    d = shared_file(shared_data, "denoise", pair, "Noisy.obj").parent
     noisy = io.read_mesh(d / "Noisy.obj")
     clean = io.read_mesh(d / "Original.obj")
     V0, F = clean.vertices, clean.faces

@@ -19,6 +19,8 @@ from spectrageo._errors import InvalidInputError  # noqa: E402
 from spectrageo.cli.main import main  # noqa: E402
 from spectrageo.geometry import Mesh, PointCloud  # noqa: E402
 
+from conftest import outlier_recall_precision  # noqa: E402
+
 
 def _grid_mesh(n=12, seed=0):
     rng = np.random.default_rng(seed)
@@ -51,6 +53,16 @@ def _cloud(n=6000, n_out=200, seed=0):
     P = np.c_[u, 0.05 * np.sin(6 * u[:, 0]) + 0.002 * rng.standard_normal(n)]
     O = rng.uniform([0, 0, -0.3], [1, 1, 0.3], (n_out, 3))
     return np.r_[P, O]
+
+
+def _labels(X, n_out):
+    """Injected outliers (the last ``n_out`` rows of :func:`_cloud`) and those of them farther
+    than 0.02 (10 sigma of the surface noise) from the surface: the others (about 5 %, uniform
+    heights in [-0.3, 0.3]) lie on the surface and no filter can tell them apart."""
+    injected = np.zeros(len(X), dtype=bool)
+    injected[len(X) - n_out :] = True
+    off = np.abs(X[:, 2] - 0.05 * np.sin(6 * X[:, 0]))
+    return injected, injected & (off > 0.02)
 
 
 # ----------------------------------------------------------------------------- batch
@@ -222,6 +234,8 @@ def test_tiled_rpca_many_tiles_equal_untiled(tmp_path, tile):
     np.testing.assert_array_equal(r.scores, ref.scores)
     np.testing.assert_array_equal(r.keep, ref.keep)
     np.testing.assert_array_equal(np.load(tmp_path / "o.npy"), X[ref.keep])
+    recall, precision = outlier_recall_precision(r.keep, *_labels(X, 200))  # not vacuous
+    assert recall >= 0.95 and precision >= 0.9, (recall, precision)
 
 
 def test_tiled_rpca_smaller_tiles_close_to_untiled(tmp_path):
@@ -234,7 +248,16 @@ def test_tiled_rpca_smaller_tiles_close_to_untiled(tmp_path):
         processes=False, workers=2,
     )  # fmt: skip
     assert r.n_tiles == 8
-    assert np.mean(r.keep == ref.keep) >= 0.98
+    # both runs find the outliers: measured on _cloud(seed=0..19) recall 0.97-1.0 of the
+    # detectable outliers (tiled and untiled), precision 0.93-1.0; keeping every outlier gives
+    # recall 0, removing surface points instead lowers the precision
+    injected, detectable = _labels(X, 200)
+    for keep in (ref.keep, r.keep):
+        recall, precision = outlier_recall_precision(keep, injected, detectable)
+        assert recall >= 0.95 and precision >= 0.9, (recall, precision)
+    # and mostly the same points: 0-16 of the 6200 masks' entries differ (20 seeds), against
+    # about 200 if one run kept the outliers
+    assert np.count_nonzero(r.keep != ref.keep) <= 0.15 * 200
 
 
 def test_tiled_ply_keeps_properties_and_cli(tmp_path):

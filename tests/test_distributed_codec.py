@@ -7,9 +7,6 @@ Skipped when dask/distributed are absent (they are the optional ``dist`` extra).
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -21,6 +18,8 @@ from spectrageo._errors import InvalidInputError  # noqa: E402
 from spectrageo.geometry import MeshAnimation  # noqa: E402
 from spectrageo.metrics import kg_error  # noqa: E402
 from test_compress_animation import _synthetic  # noqa: E402
+
+from conftest import shared_file
 
 THREADS = {"workers": 2, "processes": False, "progress": False}
 
@@ -96,11 +95,8 @@ def test_worker_processes_and_atomic_file(anim, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["a.sga"]  # no temporary left
 
 
-def test_real_animation_equals_serial():
-    root = os.environ.get("SPECTRAGEO_DATA", str(Path(__file__).parents[2] / "shared" / "data"))
-    path = Path(root) / "animations" / "horse-gallop.npz"
-    if not path.exists():
-        pytest.skip(f"shared data not found at {path} (set SPECTRAGEO_DATA)")
+def test_real_animation_equals_serial(shared_data):
+    path = shared_file(shared_data, "animations", "horse-gallop.npz")
     a = io.read_animation(path)
     A, F = a.frames[:20], a.faces
     data = _same_as_serial(A, F, method="blocks", block=8)

@@ -25,6 +25,8 @@ from spectrageo._errors import InvalidInputError
 from spectrageo.cli.main import main
 from spectrageo.outliers import remove_outliers, rpca_scores
 
+from conftest import shared_file
+
 torch = pytest.importorskip("torch", reason="torch is not installed: the GPU path needs it")
 
 #: Largest |score difference| (spacings) between the torch and the numba path (float32 state).
@@ -38,9 +40,7 @@ TORCH_CPU = torch.device("cpu")
 
 @pytest.fixture(scope="module")
 def bunny(shared_data):
-    path = shared_data / "scans" / "bunny" / "bun000.ply.gz"
-    if not path.exists():
-        pytest.skip(f"{path} not found")
+    path = shared_file(shared_data, "scans", "bunny", "bun000.ply.gz")
     return np.asarray(io.read(path).points)
 
 

@@ -24,7 +24,7 @@ from spectrageo import InvalidInputError, io
 from spectrageo.geometry import Mesh, PointCloud
 from spectrageo.io import _common
 
-from conftest import icosphere
+from conftest import icosphere, shared_file
 
 
 def assert_error(path, *patterns: str, args=("info",), extra=("--json",)) -> str:
@@ -213,9 +213,7 @@ def test_laz_layer_sizes_beyond_the_chunk(tmp_path):
 
 def test_real_laz_with_duplicated_chunk(tmp_path, shared_data):
     pytest.importorskip("lazrs")
-    src = shared_data / "scans" / "lidar" / "autzen_trim.laz"
-    if not src.exists():
-        pytest.skip("autzen_trim.laz not in the shared data")
+    src = shared_file(shared_data, "scans", "lidar", "autzen_trim.laz")
     raw = src.read_bytes()
     p = tmp_path / "autzen_dup.laz"
     p.write_bytes(raw[:5000] + raw[1500:5000] + raw[5000:])
@@ -224,7 +222,6 @@ def test_real_laz_with_duplicated_chunk(tmp_path, shared_data):
 
 # ------------------------------------------------------------------------------------------ PCD
 def test_pcd_binary_compressed_claiming_268m_points(tmp_path):
-    pytest.importorskip("lzf")
     n = 268_435_456
     head = (
         "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"

@@ -12,6 +12,8 @@ from spectrageo._errors import InvalidInputError
 from spectrageo.register import Match, Scene, adaptive_dbscan, identify, make_scene
 from spectrageo.register._segment import adaptive_eps, remove_planes
 
+from conftest import shared_file, skip_or_fail
+
 # ------------------------------------------------------------------------------ segmentation
 
 
@@ -186,18 +188,13 @@ def _library(shared):
     lib = load_library(shared)
     names = ("bunny", "cow", "armadillo", "fandisk")
     if any(n not in lib for n in names):
-        pytest.skip(f"shared models missing: {[LIBRARY[n] for n in names if n not in lib]}")
+        skip_or_fail(f"shared models missing: {[LIBRARY[n] for n in names if n not in lib]}")
     return {n: lib[n] for n in names}
 
 
 @pytest.fixture(scope="module")
-def small_case(request):
-    from spectrageo.datasets import data_dir
-
-    d = data_dir()
-    if d is None:
-        pytest.skip("shared data not found (set SPECTRAGEO_DATA to the folder ../shared/data)")
-    lib = _library(d)
+def small_case(shared_data):
+    lib = _library(shared_data)
     scene_lib = {k: lib[k] for k in ("bunny", "cow")}
     sc = make_scene(scene_lib, n_objects=2, clutter=1, image_size=(480, 360), rng=3)
     res = identify(sc.points, lib, rng=0)
@@ -244,9 +241,7 @@ def test_identify_milk_in_pcl_scene(shared_data):
     from spectrageo.metrics.registration import rotation_error_deg, translation_error
     from spectrageo.register.scenes import random_rotation
 
-    d = shared_data / "scans" / "pcl"
-    if not (d / "milk.pcd").is_file():
-        pytest.skip("scans/pcl/milk.pcd missing from the shared data")
+    d = shared_file(shared_data, "scans", "pcl", "milk.pcd").parent
     S = io.read(d / "milk_cartoon_all_small_clorox.pcd").points
     M = io.read(d / "milk.pcd").points
     # the model was cut out of this scan; move it by a known motion so that the pose is real work

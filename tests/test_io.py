@@ -101,7 +101,8 @@ def test_ply_float32_option(tmp_path, rich_mesh):
 
 
 def test_ply_binary_body_matches_plyfile_writer(rich_mesh):
-    plyfile = pytest.importorskip("plyfile")
+    import plyfile
+
     from spectrageo.io import _ply
 
     ours = _ply.write_ply(
@@ -399,8 +400,9 @@ def test_pcd_float64_and_rgba(tmp_path, pcd_format):
 
 def test_pcd_binary_compressed_layout_is_structure_of_arrays(tmp_path):
     """Decode an LZF block built independently: all x, then all y, then all z, then intensity."""
-    lzf = pytest.importorskip("lzf")
     import struct
+
+    import lzf
 
     P = np.arange(12, dtype=np.float32).reshape(4, 3)
     inten = np.array([5, 6, 7, 8], dtype=np.uint16)

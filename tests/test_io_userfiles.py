@@ -10,11 +10,12 @@ import zipfile
 
 import numpy as np
 import pytest
+import trimesh
 
 from spectrageo import InvalidInputError, io
 from spectrageo.geometry import Mesh, PointCloud
 
-from conftest import icosphere
+from conftest import icosphere, shared_file
 
 
 def put(tmp_path, name, content):
@@ -244,9 +245,7 @@ def test_obj_corner_index_errors(tmp_path):
 
 
 def test_spot_convert_keeps_texcoords(tmp_path, shared_data):
-    src = shared_data / "meshes" / "spot.obj"
-    if not src.exists():
-        pytest.skip("spot.obj not in the shared data")
+    src = shared_file(shared_data, "meshes", "spot.obj")
     n_vt = sum(line.startswith("vt ") for line in src.read_text().splitlines())
     out = tmp_path / "spot_out.obj"
     from spectrageo.cli.main import main
@@ -384,7 +383,6 @@ def test_xyz_misshaped_rows(tmp_path):
 
 
 # ---------------------------------------------------------------------------------- GLB / glTF
-trimesh = pytest.importorskip("trimesh")
 
 
 def test_glb_box(tmp_path):

@@ -14,18 +14,14 @@ import scipy.sparse as sp
 from spectrageo import denoise, metrics, noise
 from spectrageo._errors import InvalidInputError
 from spectrageo.cli.main import main
-from spectrageo.datasets import data_dir, denoise_pairs, fandisk
+from spectrageo.datasets import denoise_pairs, fandisk
 from spectrageo.learn import _features as fe
 from spectrageo.learn import _nn
 from spectrageo.learn._weights import DEFAULT_WEIGHTS, load_weights, save_weights, unrotate_unit
 from spectrageo.learn.bm3d_cnn import bm3d_cnn
 from spectrageo.learn.dae import dae, dae_animation, train_frames_model
 
-DATA = data_dir()
-needs_data = pytest.mark.skipif(DATA is None, reason="shared data folder not found")
-shipped = pytest.mark.skipif(
-    not all(p.is_file() for p in DEFAULT_WEIGHTS.values()), reason="shipped weights not built"
-)
+from conftest import shared_file, skip_or_fail
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +118,6 @@ def test_fast_paths_match_their_references(noisy_fandisk):
     assert 0 < got.sum() < got.size and np.array_equal(got, want)
 
 
-@shipped
 def test_bm3d_cnn_chunks_do_not_change_the_result(noisy_fandisk):
     from spectrageo.learn import BM3DCNNModel
 
@@ -311,7 +306,6 @@ def fandisk_small():
     return m.vertices[used], inv.reshape(F.shape)
 
 
-@shipped
 def test_shipped_weights_metadata():
     total = sum(p.stat().st_size for p in DEFAULT_WEIGHTS.values())
     assert total < 20 * 2**20
@@ -331,7 +325,6 @@ def test_shipped_weights_metadata():
         check_training_meshes(meta["training_meshes"])  # none is a validation / benchmark shape
 
 
-@shipped
 def test_shipped_weights_run_without_torch(tmp_path):
     code = textwrap.dedent(
         """
@@ -364,14 +357,12 @@ def test_shipped_weights_run_without_torch(tmp_path):
 
 
 # --------------------------------------------------------------------------- denoising
-@shipped
-@needs_data
-def test_bm3d_cnn_lowers_theta_on_a_shared_pair():
+def test_bm3d_cnn_lowers_theta_on_a_shared_pair(shared_data):
     from spectrageo import io
 
-    pair = {p[0]: p for p in denoise_pairs(DATA)}.get("Fandisk0.3")
+    pair = {p[0]: p for p in denoise_pairs(shared_data)}.get("Fandisk0.3")
     if pair is None:
-        pytest.skip("pair Fandisk0.3 not in the shared data")
+        skip_or_fail(f"pair Fandisk0.3 not in the shared data folder {shared_data}")
     n, o = io.read_mesh(pair[1]), io.read_mesh(pair[2])
     X = denoise.denoise(n.vertices, o.faces, method="bm3d-cnn")
     th_noisy = metrics.theta_deg(n.vertices, o.vertices, o.faces)
@@ -379,11 +370,8 @@ def test_bm3d_cnn_lowers_theta_on_a_shared_pair():
     assert th < 0.5 * th_noisy
 
 
-@needs_data
-def test_dae_trained_on_first_frames_lowers_error():
-    path = DATA / "animations" / "horse-gallop.npz"
-    if not path.is_file():
-        pytest.skip("horse-gallop.npz not in the shared data")
+def test_dae_trained_on_first_frames_lowers_error(shared_data):
+    path = shared_file(shared_data, "animations", "horse-gallop.npz")
     z = np.load(path)
     A = z["vertices"][:7].astype(np.float64)
     F = z["faces"].astype(np.int64)
@@ -450,7 +438,6 @@ def test_denoiser_option_validation(tmp_path):
         dae(V, F, weights=tmp_path / "nope.npz")
 
 
-@shipped
 def test_iteration_options_are_checked():
     V, F = fandisk_small()
     with pytest.raises(InvalidInputError, match="`n_iter` must be > 0"):
@@ -478,7 +465,6 @@ def test_registered():
     assert "5.1.3" in denoise.get("dae").reference
 
 
-@shipped
 def test_cli_denoise_mesh_and_animation(tmp_path, noisy_fandisk):
     from spectrageo import io
     from spectrageo.geometry import Mesh, MeshAnimation

@@ -11,7 +11,7 @@ from spectrageo import io, metrics
 from spectrageo._errors import InvalidInputError
 from spectrageo.cli.main import main as cli
 
-from conftest import cube, icosphere
+from conftest import cube, icosphere, skip_or_fail
 
 
 # ------------------------------------------------------------------ independent references
@@ -415,7 +415,7 @@ def _pairs(shared_data):
 
     pairs = denoise_pairs(shared_data)
     if not pairs:
-        pytest.skip("no denoising pairs in the shared data")
+        skip_or_fail(f"no denoising pairs in the shared data folder {shared_data}")
     return pairs
 
 

@@ -10,6 +10,8 @@ from spectrageo import io, noise
 from spectrageo.outliers import remove_outliers, rpca_scores
 from spectrageo.outliers._clusters import cluster_outliers
 
+from conftest import shared_file
+
 
 def _plane(n_side=60, seed=0):
     rng = np.random.default_rng(seed)
@@ -91,9 +93,7 @@ def test_rpca_scores_clusters_option_and_input_order():
 @pytest.mark.slow
 def test_blobs_on_a_real_scan(shared_data):
     """Tuning scan: the cluster rule lifts the F1 on blobs and flags almost nothing on the scan."""
-    path = shared_data / "scans/bunny/bun000.ply.gz"
-    if not path.exists():
-        pytest.skip("shared bunny scan not available")
+    path = shared_file(shared_data, "scans", "bunny", "bun000.ply.gz")
     P = io.read(path, kind="points").points
     clean = remove_outliers(P, return_points=False)
     assert clean.info["n_cluster_outliers"] <= 0.002 * P.shape[0]

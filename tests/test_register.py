@@ -20,6 +20,8 @@ from spectrageo.register import (
 )
 from spectrageo.register._common import apply_transform, make_transform, random_rotation
 
+from conftest import shared_file
+
 
 def _small_motion(rng, deg, trans):
     w = rng.normal(size=3)
@@ -34,9 +36,7 @@ def _small_motion(rng, deg, trans):
 def bunny(shared_data):
     from spectrageo import io
 
-    folder = shared_data / "scans" / "bunny"
-    if not (folder / "bun000.ply.gz").is_file():
-        pytest.skip("bunny scans not found in the shared data folder")
+    folder = shared_file(shared_data, "scans", "bunny", "bun000.ply.gz").parent
     return {n: io.read_point_cloud(folder / f"{n}.ply.gz").points for n in ("bun000", "bun045")}
 
 
@@ -53,10 +53,7 @@ def bunny_gt(shared_data):
 def model(shared_data):
     from spectrageo import io
 
-    p = shared_data / "meshes" / "elephant.off"
-    if not p.is_file():
-        pytest.skip("meshes/elephant.off not found in the shared data folder")
-    return io.read_mesh(p)
+    return io.read_mesh(shared_file(shared_data, "meshes", "elephant.off"))
 
 
 # --------------------------------------------------------------------------- narrow phase

@@ -9,7 +9,7 @@ import pytest
 from spectrageo import InvalidInputError
 from spectrageo.geometry import boundary_loops, duplicate_faces, mesh_topology
 
-from conftest import cube, grid, icosphere
+from conftest import cube, grid, icosphere, shared_file
 
 TET_V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
 TET_F = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
@@ -208,7 +208,8 @@ def test_duplicate_faces_agree_with_repair_helper():
 
 
 def test_agrees_with_trimesh():
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
+
     for V, F in (icosphere(2), cube(3), grid(7, 4), torus(9, 5), annulus(12, 3)):
         t = mesh_topology(V, F)
         tm = trimesh.Trimesh(V, F, process=False)
@@ -249,9 +250,7 @@ def test_shared_meshes(shared_data):
         "elephant-with-holes.off": (106, -110),
     }
     for name, (loops, chi) in expected.items():
-        path = shared_data / "holes" / name
-        if not path.is_file():
-            pytest.skip(f"{path} not found")
+        path = shared_file(shared_data, "holes", name)
         m = io.read(path)
         t = mesh_topology(m.vertices, m.faces)
         assert (t["n_boundary_loops"], t["euler_characteristic"]) == (loops, chi), name

@@ -128,8 +128,6 @@ def test_feature_curves_fallback_clusters_curvature():
 def test_feature_curves_mesh_match_library():
     from spectrageo import saliency
 
-    if not hasattr(saliency, "feature_curves"):
-        pytest.skip("spectrageo.saliency.feature_curves not available")
     V, F = cube(4)
     mask, _ = _analysis.feature_vertices(V, F, patch=15)
     lab = _analysis.feature_curves(V, F, mask, patch=15)
