@@ -1174,7 +1174,8 @@ def robot_denoise_tiled(
 
     As :func:`spectrageo.outliers.robot_pipeline` with ``output="cloud"``: the RPCA step is the
     tiled ``rpca`` of :func:`remove_outliers_tiled` (tiles of at most ``min(tile, 2^22)`` points,
-    the untiled run's own, so the keep mask equals the untiled one); given its keep mask, the
+    the untiled run's own, so the keep mask equals the untiled one when ``tile >= block_size``;
+    with smaller tiles it is an approximation); given its keep mask, the
     filter equals the untiled one to rounding (reach ``(k, k)`` per pass, the global default
     ``sigma1`` gathered first; module docstring).
 
