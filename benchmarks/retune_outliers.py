@@ -372,7 +372,7 @@ def validation(data: Path, label: str) -> None:
     ro = [r for r in rows if r["method"] == "rpca-oracle" and r["kind"] != "clean"]
     cl = [r for r in rows if r["method"] == "rpca" and r["kind"] == "clean"]
     head = (
-        f"## Validation split, defaults `{label}`\n\n"
+        f"## Outlier removal on the validation split, defaults `{label}`\n\n"
         "Defaults: " + ", ".join(f"{n}={cfg[n]}" for n, _ in SPACE) + ".\n\n"
         f"rpca mean F1 over {len(rp)} cases: {np.mean([r['f1'] for r in rp]):.4f} "
         f"(min {np.min([r['f1'] for r in rp]):.3f}); rpca-oracle "

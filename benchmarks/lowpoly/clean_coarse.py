@@ -127,7 +127,7 @@ def write(rows: list[dict], out: Path, tag: str) -> None:
         w.writeheader()
         w.writerows(rows)
     lines = [
-        "## Clean coarse meshes: do no harm (issue 53)",
+        f"## Clean coarse meshes: do no harm ({tag or 'all'})",
         "",
         "`python benchmarks/lowpoly/clean_coarse.py`: area change (%), largest vertex move (% of "
         "the diagonal), mean normal change (degrees); target |area| <= 1 %, move <= 0.5 %, "
