@@ -78,13 +78,8 @@ PACKAGES = [
     ("spectrageo.datasets", "embedded and shared data"),
 ]
 
-# Exported names left out of the reference for now, with the reason. Their docstrings live in
-# files that are being edited elsewhere; remove an entry once its docstring builds cleanly.
-EXCLUDE: dict[str, str] = {
-    # src/spectrageo/outliers/rpca.py: its Parameters section lists the parameters out of order
-    # (numpydoc PR03).
-    "spectrageo.outliers.rpca_scores": "parameters documented out of order",
-}
+# Exported names left out of the reference, with the reason (none at present).
+EXCLUDE: dict[str, str] = {}
 
 
 def _home(obj: object) -> str | None:

@@ -319,6 +319,48 @@ def rpca_scores(
         Points per independent RPCA block (memory: ``12 (k + 1)`` bytes per block point for the
         float32 solver state, twice that for float64, plus about ``60 + 4 k`` bytes per cloud
         point for the sorted copy, the normalised points, the neighbour lists and the scores).
+    smoothed : bool
+        Also return the first column of ``E`` (the smoothed position of every point).
+    on_nonconvergence : {"warn", "raise", "ignore"}
+        Policy when a block reaches ``max_iter`` first.
+    workers : int
+        Threads of the neighbour search and the other numba kernels and of the solver (-1: all
+        cores; blocks of fewer than ``2 * 10000`` points run the solver on one thread). The
+        scores are bit for bit the same for every value (the solver's point ranges and the
+        order of their partial sums follow the block size, not the threads).
+    refine : bool
+        Second pass over rebuilt patches and local baseline (steps 5-6).
+    tangent_weight : float
+        Weight ``w`` in ``[0, 1]`` of the tangential part of the residual (step 7);
+        ``refine=False, tangent_weight=1`` gives the plain first-column scores of Eq. (5.99).
+    rank_tol : float
+        Fraction in ``[0, 1)`` of the points that may change rank level in one iteration when
+        the ALM stops by the ranking rule (step 3); 0 stops by ``tol`` only.
+    dtype : {"float32", "float64"}
+        Precision of the solver state (the normalised points, ``R``, ``W``). float32 halves the
+        memory of a block and moves scores by about ``1e-5`` spacings (measured on the shared
+        scans; the tests bound it by ``1e-3``); the Gram matrices whose eigenvalues drive the
+        thresholding, the residual and the scores are always accumulated in float64.
+    clusters : bool
+        Also flag the points of small volumetric clusters (step 8).
+    device : {"cpu", "cuda", "auto"} or torch.device
+        Where the ALM iterations of step 3 run (:func:`spectrageo._device.resolve_device`;
+        ``"auto"`` = ``"cuda"`` when PyTorch sees a GPU). ``"cpu"`` (default) is the fused numba
+        kernel; ``"cuda"`` runs the same iteration in PyTorch on the GPU
+        (:mod:`spectrageo.outliers._torch`: same ``mu`` schedule, ``lam``, stopping rules and
+        SVT through the eigendecomposition of the Gram matrix, float32 state with float64 Gram
+        and residual accumulation); a ``torch.device`` selects that path on any torch device,
+        ``torch.device("cpu")`` included. The neighbour search, the rebuilt patches, the normals
+        of step 7, the baseline and the clusters stay on the CPU. Tolerance: both paths differ
+        only by floating-point rounding (order of the sums, fused multiply-adds). Measured on
+        the shared bunny scan, clean and with 10 % injected ``uniform``/``halo`` outliers (torch
+        on the CPU against numba, both stopping at the same iteration): max ``|diff|`` of the
+        scores ``5e-5`` spacings in float32 and ``3e-8`` in float64, identical refined patches
+        and clusters; ``2.1e-4`` on a 1.1M-point cloud (``docs/scaling.md``). Stated tolerance: ``1e-3`` spacings (the tests' bound); keep masks then
+        agree except for points whose score lies within ``1e-3`` of the threshold.
+    second_pass : {"replay", "full"}
+        How step 5 scores the rebuilt patches (see step 5): ``"replay"`` reruns the rebuilt
+        rows alone with Gram-corrected operators of the first pass, ``"full"`` reruns every row.
     partition : {"tiles", "blocks"}
         How a cloud of more than ``block_size`` points is split (below that, both are one
         block). ``"tiles"`` (default): the k-d tiles of ``spectrageo outliers --tile``
@@ -341,48 +383,6 @@ def rpca_scores(
         Used by the tile function of :mod:`spectrageo.distributed`: the region's sorted cloud
         and its own points' neighbours from the halo search (:func:`_complete_knn`); leave
         unset.
-    smoothed : bool
-        Also return the first column of ``E`` (the smoothed position of every point).
-    on_nonconvergence : {"warn", "raise", "ignore"}
-        Policy when a block reaches ``max_iter`` first.
-    workers : int
-        Threads of the neighbour search and the other numba kernels and of the solver (-1: all
-        cores; blocks of fewer than ``2 * 10000`` points run the solver on one thread). The
-        scores are bit for bit the same for every value (the solver's point ranges and the
-        order of their partial sums follow the block size, not the threads).
-    refine : bool
-        Second pass over rebuilt patches and local baseline (steps 5-6).
-    tangent_weight : float
-        Weight ``w`` in ``[0, 1]`` of the tangential part of the residual (step 7);
-        ``refine=False, tangent_weight=1`` gives the plain first-column scores of Eq. (5.99).
-    rank_tol : float
-        Fraction in ``[0, 1)`` of the points that may change rank level in one iteration when
-        the ALM stops by the ranking rule (step 3); 0 stops by ``tol`` only.
-    clusters : bool
-        Also flag the points of small volumetric clusters (step 8).
-    second_pass : {"replay", "full"}
-        How step 5 scores the rebuilt patches (see step 5): ``"replay"`` reruns the rebuilt
-        rows alone with Gram-corrected operators of the first pass, ``"full"`` reruns every row.
-    dtype : {"float32", "float64"}
-        Precision of the solver state (the normalised points, ``R``, ``W``). float32 halves the
-        memory of a block and moves scores by about ``1e-5`` spacings (measured on the shared
-        scans; the tests bound it by ``1e-3``); the Gram matrices whose eigenvalues drive the
-        thresholding, the residual and the scores are always accumulated in float64.
-    device : {"cpu", "cuda", "auto"} or torch.device
-        Where the ALM iterations of step 3 run (:func:`spectrageo._device.resolve_device`;
-        ``"auto"`` = ``"cuda"`` when PyTorch sees a GPU). ``"cpu"`` (default) is the fused numba
-        kernel; ``"cuda"`` runs the same iteration in PyTorch on the GPU
-        (:mod:`spectrageo.outliers._torch`: same ``mu`` schedule, ``lam``, stopping rules and
-        SVT through the eigendecomposition of the Gram matrix, float32 state with float64 Gram
-        and residual accumulation); a ``torch.device`` selects that path on any torch device,
-        ``torch.device("cpu")`` included. The neighbour search, the rebuilt patches, the normals
-        of step 7, the baseline and the clusters stay on the CPU. Tolerance: both paths differ
-        only by floating-point rounding (order of the sums, fused multiply-adds). Measured on
-        the shared bunny scan, clean and with 10 % injected ``uniform``/``halo`` outliers (torch
-        on the CPU against numba, both stopping at the same iteration): max ``|diff|`` of the
-        scores ``5e-5`` spacings in float32 and ``3e-8`` in float64, identical refined patches
-        and clusters; ``2.1e-4`` on a 1.1M-point cloud (``docs/scaling.md``). Stated tolerance: ``1e-3`` spacings (the tests' bound); keep masks then
-        agree except for points whose score lies within ``1e-3`` of the threshold.
 
     Returns
     -------
