@@ -283,9 +283,14 @@ def layer_order(frames, F, *, rho: float = RHO, eta: float = ETA) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- reconstruction
+def _norm3(X: np.ndarray) -> np.ndarray:
+    """Euclidean norms along the last axis (length 3), summed in the order x, y, z."""
+    return np.sqrt(X[..., 0] * X[..., 0] + X[..., 1] * X[..., 1] + X[..., 2] * X[..., 2])
+
+
 def _face_normals(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     cr = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    a = np.linalg.norm(cr, axis=1)
+    a = _norm3(cr)
     N = cr / np.where(a > 0, a, 1.0)[:, None]
     return N, 0.5 * a
 
@@ -294,8 +299,91 @@ def _unit_blocks(E: np.ndarray) -> np.ndarray:
     """Re-normalise every normal (3 consecutive columns) of a (m, 3k) matrix (Eq. 5.68)."""
     m, c = E.shape
     X = E.reshape(m, c // 3, 3)
-    nrm = np.linalg.norm(X, axis=2, keepdims=True)
+    nrm = _norm3(X)[..., None]
     return (X / np.where(nrm > 0, nrm, 1.0)).reshape(m, c)
+
+
+def _rpca_low_rank(M: np.ndarray, *, max_iter: int = 100, tol: float = 1e-5) -> np.ndarray:
+    """Low-rank part ``E`` of the robust PCA ``M = E + S`` (principal component pursuit, Eq.
+    4.18), by the inexact augmented Lagrangian method of Eq. 4.19-4.22 with the continuation of
+    :func:`spectrageo.linalg.rpca` (``lam = 1 / sqrt(max(m, n))``, ``mu_0 = 1.25 / ||M||_2``,
+    ``mu <- min(1.5 mu, 1e7 mu_0)``, stop at ``||M - E - S||_F <= tol ||M||_F``).
+
+    The same iteration as ``rpca(M, max_iter=max_iter, tol=tol).low_rank`` (its row-chunked
+    engine, whose element-wise kernels it shares), with every singular value thresholding
+    ``D_{1/mu}(X) = X V diag((s - 1/mu)_+ / s) V^T`` taken from the thin SVD of
+    :func:`._dense_fixed.svd_values` (Householder QR, one-sided Jacobi) instead of LAPACK, so
+    that the decoder gets the same bits on every machine.
+    """
+    from ..linalg._kernels import ialm_prepare, ialm_update
+    from ._dense_fixed import matmul, svd_values
+
+    M = np.asarray(M, dtype=np.float64)
+    transposed = M.shape[0] < M.shape[1]
+    A = np.ascontiguousarray(M.T if transposed else M)
+    m, n = A.shape
+    lam = 1.0 / math.sqrt(m)
+    fro = math.sqrt(float(_sum_squares(A)))
+    E = np.zeros((m, n))
+    if fro == 0:
+        return E.T if transposed else E
+    s, V, _info = svd_values(A)
+    mu = 1.25 / s[0]
+    mu_max = mu * 1e7
+    R = np.zeros((m, n))
+    X = np.empty((m, n))
+    Ymu = np.empty((m, n))
+    Xn = np.empty((m, n))
+    mu_prev = mu
+    eps = np.finfo(np.float64).eps
+    for _ in range(max_iter):
+        # D_{1/mu}: numerically non-zero singular values above the threshold
+        p = int(np.count_nonzero(s > s[0] * max(m, n) * eps)) if s[0] > 0 else 0
+        shr = np.maximum(s[:p] - 1.0 / mu, 0.0)
+        k = int(np.count_nonzero(shr > 0))
+        mu_next = min(mu * 1.5, mu_max)
+        ialm_prepare(A, R, lam / mu_prev, mu_prev / mu, X, Ymu)
+        if k:
+            Pa = np.ascontiguousarray(V[:, :k] * (shr[:k] / s[:k]))
+            Pb = np.ascontiguousarray(V[:, :k].T)
+            Ec = matmul(matmul(X, Pa), Pb)
+        else:
+            Ec = np.zeros((m, n))
+        res2 = ialm_update(A, Ec, Ymu, lam / mu, mu / mu_next, R, E, Xn)
+        mu_prev, mu = mu, mu_next
+        if math.sqrt(res2) / fro <= tol:
+            break
+        s, V, _info = svd_values(Xn)
+    return np.ascontiguousarray(E.T) if transposed else E
+
+
+def _svd_wide(E: np.ndarray):
+    """Thin SVD ``(U, s, V, info)`` of a matrix with fewer rows than columns, from that of its
+    transpose (:func:`._dense_fixed.svd`)."""
+    from ._dense_fixed import svd
+
+    U, s, V, info = svd(np.ascontiguousarray(E.T))
+    return V, s, U, info
+
+
+@njit(cache=True)
+def _mean(x):  # pragma: no cover - compiled
+    """Mean of a 1-D array summed in index order."""
+    acc = 0.0
+    for i in range(x.size):
+        acc += x[i]
+    return acc / max(x.size, 1)
+
+
+@njit(cache=True)
+def _sum_squares(A):  # pragma: no cover - compiled
+    """``sum A^2`` over the rows in order (fixed summation order)."""
+    m, n = A.shape
+    acc = 0.0
+    for i in range(m):
+        for j in range(n):
+            acc += A[i, j] * A[i, j]
+    return acc
 
 
 class Reconstructor:
@@ -378,36 +466,42 @@ class Reconstructor:
 
     # -- Eq. (5.66)-(5.72)
     def _denoised_normals(self, N: np.ndarray) -> np.ndarray:
-        from ..linalg import rpca
+        """Denoised face normals of the new frame (Eq. 5.66-5.72); every factorisation and
+        product is a fixed-order kernel of :mod:`._dense_fixed` (the same bits everywhere)."""
+        from ._dense_fixed import matmul, matmul_tn, qr, svd
 
         if self.svd is None:
             self.history.append(N)
             M = np.concatenate(self.history, axis=1)  # Eq. (5.66)
-            E = rpca(M, on_nonconvergence="ignore", max_iter=100, tol=1e-5).low_rank
-            E = _unit_blocks(E)  # Eq. (5.67)-(5.68)
+            E = _unit_blocks(_rpca_low_rank(M, max_iter=100, tol=1e-5))  # Eq. (5.67)-(5.68)
             if len(self.history) >= NT_BAR:
-                U, s, Vt = np.linalg.svd(E, full_matrices=False)
+                U, s, V, _info = svd(E) if E.shape[0] >= E.shape[1] else _svd_wide(E)
                 keep = s > 1e-6 * s[0]
-                self.svd = (U[:, keep], s[keep], Vt[:, keep].T)
+                self.svd = (
+                    np.ascontiguousarray(U[:, keep]),
+                    s[keep],
+                    np.ascontiguousarray(V[:, keep]),
+                )
                 self.history = []
             return E[:, -3:]
         U, s, V = self.svd
         q = s.size
-        P = U.T @ N
-        Rm = N - U @ P
-        Q, R = np.linalg.qr(Rm)  # Eq. (5.69)
+        N = np.ascontiguousarray(N)
+        P = matmul_tn(U, N)
+        Rm = N - matmul(U, P)
+        Q, R = qr(Rm)  # Eq. (5.69)
         K = np.block([[np.diag(s), P], [np.zeros((3, q)), R]])  # Eq. (5.70)
-        Uk, sk, Vkt = np.linalg.svd(K)
-        Uk, sk, Vkt = Uk[:, :q], sk[:q], Vkt[:q]
-        U2 = np.concatenate([U, Q], axis=1) @ Uk  # Eq. (5.71)
-        Vn = Vkt.T[q:]  # the new frame's rows of the right factor
-        Fd = _unit_blocks((U2 * sk) @ Vn.T)
+        Uk, sk, Vk, _info = svd(K)
+        Uk, sk, Vk = np.ascontiguousarray(Uk[:, :q]), sk[:q], Vk[:, :q]
+        U2 = matmul(np.concatenate([U, Q], axis=1), Uk)  # Eq. (5.71)
+        Vn = np.ascontiguousarray(Vk[q:])  # the new frame's rows of the right factor
+        Fd = _unit_blocks(matmul(U2 * sk, np.ascontiguousarray(Vn.T)))
         # Eq. (5.72): shift the window -- drop the oldest frame, keep the denoised new one
-        Vold = V[3:] @ Uk[:q]  # right factor of the kept old columns in the new basis
+        Vold = matmul(np.ascontiguousarray(V[3:]), np.ascontiguousarray(Uk[:q]))
         Vstack = np.concatenate([Vold, Vn], axis=0)
-        Qv, Rv = np.linalg.qr(Vstack)
-        u2, s2, v2t = np.linalg.svd(sk[:, None] * Rv.T)
-        self.svd = (U2 @ u2, s2, Qv @ v2t.T)
+        Qv, Rv = qr(Vstack)
+        u2, s2, v2, _info = svd(np.ascontiguousarray(sk[:, None] * Rv.T))
+        self.svd = (matmul(U2, u2), s2, matmul(Qv, v2))
         return Fd
 
     # -- Eq. (5.73)-(5.76)
@@ -423,18 +517,20 @@ class Reconstructor:
         if not move.any():
             return X
         ct = self.motion_sum / max(self.t, 1)
-        mean_ct = float(ct.mean())
+        mean_ct = float(_mean(ct))
         kappa = np.where(is_known, 4.0, 1.0) / (1.0 + ct / mean_ct if mean_ct > 0 else 1.0)
-        nu = kappa[self.F].mean(axis=1)  # Eq. (5.75), per face
+        F0, F1, F2 = self.F[:, 0], self.F[:, 1], self.F[:, 2]
+        nu = (kappa[F0] + kappa[F1] + kappa[F2]) / 3.0  # Eq. (5.75), per face
         X = X.copy()
         F = self.F
         wsum = self.VF @ nu
         wsum = np.where(wsum > 0, wsum, 1.0)
         for _ in range(FINE_ITERS):  # Eq. (5.74) with the centroids of Eq. (5.76)
-            c = X[F].mean(axis=1)
+            c = (X[F[:, 0]] + X[F[:, 1]] + X[F[:, 2]]) / 3.0
             acc = np.zeros_like(X)
             for k in range(3):
-                d = np.einsum("ij,ij->i", Nd, c - X[F[:, k]])
+                g = c - X[F[:, k]]
+                d = Nd[:, 0] * g[:, 0] + Nd[:, 1] * g[:, 1] + Nd[:, 2] * g[:, 2]
                 np.add.at(acc, F[:, k], (nu * d)[:, None] * Nd)
             X[move] += acc[move] / wsum[move, None]
         return X

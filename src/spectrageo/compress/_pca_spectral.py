@@ -205,5 +205,9 @@ def reconstruct(F: np.ndarray, n: int, chunks, nf: int, step: float) -> np.ndarr
     G = _synthesise_many(q.reshape(k + 1, band.size, 3), n, subs, dic, layout, sizes)
     X = np.repeat(G[0][None], nf, axis=0)  # every frame, also when no component was sent
     if k:
-        X += (U @ G[1:].reshape(k, 3 * n)).reshape(nf, n, 3)
+        from ._dense_fixed import matmul
+
+        # fixed summation order over the components (no BLAS: the same bits on every machine)
+        Gk = np.ascontiguousarray(G[1:].reshape(k, 3 * n))
+        X += matmul(np.ascontiguousarray(U), Gk).reshape(nf, n, 3)
     return X

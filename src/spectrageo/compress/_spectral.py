@@ -17,6 +17,8 @@ Algorithm 6 runs submesh after submesh.
 The encoder sends the feature vectors ``U^T v`` (Eq. 5.45) quantised with one uniform step
 ``step`` (the rate knob) and entropy coded per frequency octave and coordinate; the decoder forms
 ``U c`` per submesh and averages the overlapping copies with the degree weights of Algorithm 8.
+Every dictionary and product is computed by the fixed-order kernels of :mod:`._dense_fixed`
+(no BLAS or LAPACK), so a file decodes to the same coordinates, bit for bit, on every machine.
 
 The geometry is split into layers by frequency (the first ``k/16`` coefficients of every submesh,
 then up to ``k/4``, then the rest), each in its own checksummed chunk: a prefix of the file that
@@ -32,7 +34,6 @@ smallest size ``n_l`` whose relative low-pass residual (Eq. 5.43, Frobenius norm
 from __future__ import annotations
 
 import struct
-import warnings
 
 import numpy as np
 
@@ -149,24 +150,28 @@ WORKERS: int | None = None
 
 class _Explicit:
     """Dictionaries held as dense bases ``U_i`` (n_i, k_i): orthogonal iterations (``k`` below the
-    submesh size, or a file without :data:`DIRECT_FULL`) or the trivial basis of a one-vertex mesh."""
+    submesh size, or a file without :data:`DIRECT_FULL`) or the trivial basis of a one-vertex mesh.
+
+    The products are the fixed-order loops of :mod:`._dense_fixed` (the same on every machine).
+    """
 
     def __init__(self, bases: list[np.ndarray]) -> None:
         self.bases = bases
         self.sizes = np.array([U.shape[1] for U in bases], dtype=np.int64)
 
-    # many small products: a multithreaded BLAS only adds synchronisation cost
     def analyse(self, X: np.ndarray, parts) -> list[np.ndarray]:
-        from ..linalg._common import single_thread_blas
+        from ._dense_fixed import matmul_tn
 
-        with single_thread_blas():
-            return [U.T @ X[part] for U, part in zip(self.bases, parts)]
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        return [matmul_tn(U, X[part]) for U, part in zip(self.bases, parts)]
 
     def synthesise(self, coefs) -> list[np.ndarray]:
-        from ..linalg._common import single_thread_blas
+        from ._dense_fixed import matmul
 
-        with single_thread_blas():
-            return [U[:, : c.shape[0]] @ c for U, c in zip(self.bases, coefs)]
+        return [
+            matmul(np.ascontiguousarray(U[:, : c.shape[0]]), np.ascontiguousarray(c))
+            for U, c in zip(self.bases, coefs)
+        ]
 
     def explicit(self) -> _Explicit:
         return self
@@ -177,7 +182,8 @@ class _Full:
 
     Should the compiled decomposition fail on a submesh (an eigenvalue of the QL iteration not
     converging; a property of the connectivity, so encoder and decoder fail alike), every submesh
-    falls back to LAPACK's dense decomposition (``basis="exact"``).
+    falls back to the dense decomposition of ``basis="exact"`` (:func:`_fixed_bases`, which turns
+    to Jacobi rotations where the QL iteration fails).
     """
 
     def __init__(self, C, subs) -> None:
@@ -190,11 +196,8 @@ class _Full:
         self._fallback = None
 
     def _dense(self) -> _Explicit:
-        from ..spectral import submesh_eigenbases
-
         k = int(self.sizes.max())
-        bases = [U for _i, _w, U in submesh_eigenbases(self.C, self.subs, k, method="exact")]
-        return _Explicit(bases)
+        return _Explicit(_fixed_bases(self.C, self.subs, k, "exact", 4, 1, 0))
 
     def analyse(self, X: np.ndarray, parts) -> list[np.ndarray]:
         if self._fallback is None:
@@ -225,18 +228,96 @@ class _Full:
         return self._explicit
 
 
+def _fixed_bases(C, subs, k: int, method: str, zeta: int, n_iter: int, seed) -> list[np.ndarray]:
+    """The dictionaries of :func:`spectrageo.spectral.submesh_eigenbases` (binary Laplacian,
+    ``method`` ``"oi"`` or ``"exact"``, subspace tracking from the previous submesh, Rayleigh-Ritz
+    step, signs by the largest-magnitude entry) computed with the fixed-order kernels of
+    :mod:`._dense_fixed` instead of BLAS and LAPACK, so that every machine gets the same bases.
+
+    ``"exact"`` and the first submesh of ``"oi"``: the ``k`` lowest eigenvectors of the dense
+    submesh Laplacian (:func:`._dense_fixed.eigh_lowest`). The other submeshes of ``"oi"``:
+    ``n_iter`` orthogonal iterations (Algorithm 6) started from the previous submesh's basis:
+    ``T^zeta U`` with ``T = (L + delta I)^-1`` by ``zeta`` envelope-Cholesky solves (Eq. 5.42),
+    orthonormalised by a Householder QR (Eq. A.3-A.4), then the Ritz vectors ``Q W`` of
+    ``Q^T L Q = W diag(theta) W^T`` in ascending order.
+    """
+    from .._validation import as_rng
+    from ..spectral.orthogonal import DELTA_REL, _nb_permuted_laplacian, _SubmeshSystems
+    from . import _dense_fixed as D
+
+    systems = _SubmeshSystems(C, True, False, None)
+    gen = as_rng(seed)
+    bases: list[np.ndarray] = []
+    U_prev = None
+    for part in subs.parts:
+        ni = part.size
+        ki = int(min(k, ni))
+        L, (ptr, ind, val) = systems.laplacian(part)
+        if method == "exact" or U_prev is None or ni <= 2:
+            _w, U, _info = D.eigh_lowest(L.toarray(), ki)
+            bases.append(U)
+            U_prev = U
+            continue
+        U = _carry_over(U_prev, ni, ki, gen)
+        # the shifted factor of spectrageo.spectral.orthogonal.ShiftedFactor, without fastmath
+        dg = float(np.abs(L.diagonal()).mean())
+        delta = DELTA_REL * dg if dg > 0 else DELTA_REL
+        perm = D.reverse_cuthill_mckee(ptr.astype(np.int64), ind.astype(np.int64))
+        Ap, Ai, Ax = _nb_permuted_laplacian(ptr, ind, val, perm, delta)
+        Rp, Ri, Rx, ok = D.envelope_cholesky(Ap, Ai, Ax)
+        if not ok:  # L + delta I is positive definite; kept for safety: the exact basis
+            _w, U, _info = D.eigh_lowest(L.toarray(), ki)
+            bases.append(U)
+            U_prev = U
+            continue
+        Lp, Li, Lx = D.transpose_rows(Rp, Ri, Rx)
+        for _ in range(n_iter):
+            Z = np.ascontiguousarray(U[perm])
+            D.solve_power(Lp, Li, Lx, Rp, Ri, Rx, Z, int(zeta))
+            Y = np.empty_like(Z)
+            Y[perm] = Z
+            Q, _R = D.qr(Y)
+            LQ = np.ascontiguousarray(L @ Q)  # scipy.sparse: one fixed loop over the nonzeros
+            H = D.matmul_tn(Q, LQ)
+            H = 0.5 * (H + H.T)
+            _theta, W, _info = D.eigh(H)
+            U = D.matmul(Q, W)
+        D.fix_signs(U)
+        bases.append(U)
+        U_prev = U
+    return bases
+
+
+def _carry_over(U: np.ndarray, n: int, k: int, gen) -> np.ndarray:
+    """The previous submesh's basis as the start of a submesh of ``n`` vertices and ``k``
+    columns: rows cut or padded with random rows (then re-orthonormalised), columns cut or padded
+    with random columns, as in :func:`spectrageo.spectral.submesh_eigenbases`. The submeshes of
+    the codec all have the same size (and the same ``k``), so there the basis is passed on
+    unchanged and the random generator is never drawn from."""
+    from ._dense_fixed import qr
+
+    if U.shape[0] > n:
+        U = qr(np.ascontiguousarray(U[:n]))[0]
+    elif U.shape[0] < n:
+        pad = gen.standard_normal((n - U.shape[0], U.shape[1])) / np.sqrt(n)
+        U = qr(np.vstack([U, pad]))[0]
+    if U.shape[1] > k:
+        U = U[:, :k]
+    elif U.shape[1] < k:
+        U = np.column_stack([U, gen.standard_normal((n, k - U.shape[1]))])
+    return np.ascontiguousarray(U)
+
+
 def dictionaries(F: np.ndarray, n: int, p: SpectralParams):
     """Submeshes and their low-frequency dictionaries from the connectivity (same on both sides).
 
     When ``k`` covers every submesh, ``p.direct`` selects the direct computation of the complete
-    bases (:class:`_Full`); otherwise, and always when ``k`` is smaller, the orthogonal iterations.
-    Returns ``(subs, dic)``: ``dic.sizes`` is the number of basis vectors of every submesh,
-    ``dic.analyse(X, subs.parts)`` the coefficients ``U_i^T X[part_i]`` and
+    bases (:class:`_Full`); otherwise, and always when ``k`` is smaller, the orthogonal iterations
+    (:func:`_fixed_bases`). Returns ``(subs, dic)``: ``dic.sizes`` is the number of basis vectors
+    of every submesh, ``dic.analyse(X, subs.parts)`` the coefficients ``U_i^T X[part_i]`` and
     ``dic.synthesise(coefs)`` the per-submesh values ``U_i[:, :m_i] c_i``.
     """
-    from .._errors import ConvergenceWarning
     from ..graph import adjacency_matrix
-    from ..spectral import submesh_eigenbases
     from ._spectral_fast import overlapped_submeshes
 
     C = adjacency_matrix(F, n)
@@ -253,20 +334,7 @@ def dictionaries(F: np.ndarray, n: int, p: SpectralParams):
         # the subspace is the whole space: the dictionary is the complete eigenbasis
         return subs, _Full(C, subs)
     method = "exact" if p.basis == "exact" else "oi"
-    bases = [None] * len(subs)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        for i, _w, U in submesh_eigenbases(
-            C,
-            subs,
-            k,
-            method=method,
-            zeta=p.zeta,
-            n_iter=p.n_iter,
-            rng=p.seed,
-        ):
-            bases[i] = U
-    return subs, _Explicit(bases)
+    return subs, _Explicit(_fixed_bases(C, subs, k, method, p.zeta, p.n_iter, p.seed))
 
 
 def _band(c: np.ndarray) -> np.ndarray:
@@ -274,7 +342,8 @@ def _band(c: np.ndarray) -> np.ndarray:
     c = np.asarray(c, dtype=np.int64)
     out = np.zeros(c.shape, dtype=np.int64)
     nz = c > 0
-    out[nz] = np.floor(np.log2(c[nz])).astype(np.int64) + 1
+    # floor(log2(c)) + 1 is the bit length of c: the exponent of frexp, exact (no logarithm)
+    out[nz] = np.frexp(c[nz].astype(np.float64))[1]
     return out
 
 

@@ -5,7 +5,8 @@ orthogonal iteration of Algorithm 6 runs on the whole space: ``T^zeta U`` spans 
 its Rayleigh-Ritz step is the eigendecomposition of the submesh Laplacian ``L = D - C`` itself,
 whatever the starting subspace. That decomposition is computed here directly, per submesh:
 
-* ``L = Q T Q^T``, Householder tridiagonalisation (LAPACK ``dsytrd``);
+* ``L = Q T Q^T``, unblocked Householder tridiagonalisation
+  (:func:`spectrageo.compress._dense_fixed.tridiagonalise`);
 * ``T = Z diag(w) Z^T`` by the implicit QL method with Wilkinson shifts, ``Z`` being the product of
   the plane rotations of the iteration, which are recorded instead of accumulated into a matrix;
 * the basis is ``U = Q Z P S``: ``P`` orders the eigenvalues ascending (stable sort) and ``S``
@@ -15,14 +16,15 @@ whatever the starting subspace. That decomposition is computed here directly, pe
 
 ``U`` is never formed for coding: the coefficients are ``U^T x = S P^T Z^T (Q^T x)`` and the
 synthesis ``U c = Q (Z (P S c))``, where ``Q`` is applied by its ``n_i - 1`` reflectors and ``Z`` by
-its rotations, ``O(n_i^2)`` per coordinate instead of the ``O(n_i^3)`` of forming ``Q Z``. Encoder
-and decoder run the same operations on the same Laplacian, so they use the same basis bit for bit.
+its rotations, ``O(n_i^2)`` per coordinate instead of the ``O(n_i^3)`` of forming ``Q Z``.
 
-The submeshes are independent, so they are processed in chunks by a pool of threads; the kernels
-are compiled with numba (``nogil``) and call LAPACK through SciPy's Cython bindings, one BLAS thread
-each. Every submesh is computed by the same sequence of operations whatever the number of threads,
-so the result does not depend on it. :func:`overlapped_submeshes` is the submesh construction of
-:mod:`spectrageo.spectral.partition` with its breadth-first growth compiled (same result).
+Every step is a compiled loop of :mod:`spectrageo.compress._dense_fixed` (no BLAS or LAPACK, no
+``fastmath``), so the encoder and every decoder, on any CPU, compute the same basis bit for bit.
+The submeshes are independent, so they are processed in chunks by a pool of threads (the kernels
+release the GIL); every submesh is computed by the same sequence of operations whatever the
+number of threads, so the result does not depend on it. :func:`overlapped_submeshes` is the
+submesh construction of :mod:`spectrageo.spectral.partition` with its breadth-first growth
+compiled (same result).
 """
 
 from __future__ import annotations
@@ -30,22 +32,10 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 
-import llvmlite.binding as llvm
 import numpy as np
-from numba import njit, types
-from numba.extending import get_cython_function_address
+from numba import njit
 
-
-def _lapack(name: str, nargs: int):
-    """LAPACK routine ``name`` of SciPy's Cython bindings as a numba external function (all
-    arguments are pointers); bound by symbol name so that the compiled kernels can be cached."""
-    symbol = f"spectrageo_cython_lapack_{name}"
-    llvm.add_symbol(symbol, get_cython_function_address("scipy.linalg.cython_lapack", name))
-    return types.ExternalFunction(symbol, types.void(*([types.voidptr] * nargs)))
-
-
-_dsytrd = _lapack("dsytrd", 10)
-_dorgqr = _lapack("dorgqr", 9)
+from ._dense_fixed import apply_q, apply_qt, ql_rotations, rotate, rotate_t, tridiagonalise
 
 #: submeshes handed to a worker thread at a time
 CHUNK = 16
@@ -72,163 +62,6 @@ def _dense_laplacian(indptr, indices, part, buf):
 
 
 @njit(nogil=True, cache=True)
-def _tridiagonalise(L):
-    """``L = Q T Q^T`` in place (LAPACK ``dsytrd``): returns ``(A, tau, d, e, info)``.
-
-    ``A`` (the overwritten ``L``) holds the Householder vectors of ``Q`` in its rows (row ``i``,
-    columns ``i+2..``: LAPACK's lower storage seen from C order); ``d``, ``e`` are the diagonal and
-    off-diagonal of ``T``.
-    """
-    n = L.shape[0]
-    d = np.empty(n)
-    e = np.zeros(n)
-    tau = np.zeros(max(n - 1, 1))
-    ch = np.empty(1, np.uint8)
-    ch[0] = 76  # 'L'
-    nn = np.empty(1, np.int32)
-    nn[0] = n
-    lw = np.empty(1, np.int32)
-    lw[0] = -1
-    info = np.zeros(1, np.int32)
-    q = np.empty(1)
-    _dsytrd(
-        ch.ctypes,
-        nn.ctypes,
-        L.ctypes,
-        nn.ctypes,
-        d.ctypes,
-        e.ctypes,
-        tau.ctypes,
-        q.ctypes,
-        lw.ctypes,
-        info.ctypes,
-    )
-    lw[0] = max(int(q[0]), 1)
-    work = np.empty(lw[0])
-    _dsytrd(
-        ch.ctypes,
-        nn.ctypes,
-        L.ctypes,
-        nn.ctypes,
-        d.ctypes,
-        e.ctypes,
-        tau.ctypes,
-        work.ctypes,
-        lw.ctypes,
-        info.ctypes,
-    )
-    return L, tau, d, e, int(info[0])
-
-
-@njit(nogil=True, cache=True)
-def _ql(d, e, idx, cs, sn):
-    """Eigenvalues of the symmetric tridiagonal ``(d, e)`` by the implicit QL method with Wilkinson
-    shifts (in place into ``d``, unsorted), recording the plane rotations.
-
-    The eigenvectors are ``Z = G_1 G_2 ... G_M`` where ``G_t`` rotates coordinates ``(i_t, i_t + 1)``
-    by ``(c_t, s_t)``: ``(Z G)[:, i] = c Z[:, i] - s Z[:, i+1]``, ``(Z G)[:, i+1] = s Z[:, i] + c
-    Z[:, i+1]``. Returns ``(idx, cs, sn, M, info)``; ``info = 1`` if an eigenvalue needed more
-    than 60 iterations. ``idx``, ``cs``, ``sn`` are the scratch arrays for the rotations (grown
-    and returned when too short).
-    """
-    n = d.size
-    cap = idx.size
-    M = 0
-    if n > 0:
-        e[n - 1] = 0.0
-    for l in range(n):
-        it = 0
-        while True:
-            m = l
-            while m < n - 1:
-                dd = abs(d[m]) + abs(d[m + 1])
-                if abs(e[m]) + dd == dd:
-                    break
-                m += 1
-            if m == l:
-                break
-            it += 1
-            if it > 60:
-                return idx, cs, sn, M, 1
-            if M + (m - l) > cap:
-                cap = 2 * cap + (m - l)
-                idx2 = np.empty(cap, np.int32)
-                cs2 = np.empty(cap)
-                sn2 = np.empty(cap)
-                idx2[:M] = idx[:M]
-                cs2[:M] = cs[:M]
-                sn2[:M] = sn[:M]
-                idx, cs, sn = idx2, cs2, sn2
-            g = (d[l + 1] - d[l]) / (2.0 * e[l])
-            r = np.hypot(g, 1.0)
-            g = d[m] - d[l] + e[l] / (g + (r if g >= 0.0 else -r))
-            s = 1.0
-            c = 1.0
-            p = 0.0
-            i = m - 1
-            early = False
-            while i >= l:
-                f = s * e[i]
-                b = c * e[i]
-                r = np.sqrt(f * f + g * g)
-                e[i + 1] = r
-                if r == 0.0:
-                    d[i + 1] -= p
-                    e[m] = 0.0
-                    early = True
-                    break
-                ri = 1.0 / r
-                s = f * ri
-                c = g * ri
-                g = d[i + 1] - p
-                r = (d[i] - g) * s + 2.0 * c * b
-                p = s * r
-                d[i + 1] = g + p
-                g = c * r - b
-                idx[M] = i
-                cs[M] = c
-                sn[M] = s
-                M += 1
-                i -= 1
-            if early:
-                continue
-            d[l] -= p
-            e[l] = g
-            e[m] = 0.0
-    return idx, cs, sn, M, 0
-
-
-@njit(nogil=True, cache=True)
-def _rotate_t(idx, cs, sn, M, Y):
-    """``Y <- Z^T Y = G_M^T ... G_1^T Y`` (rows of ``Y`` are the coordinates)."""
-    k = Y.shape[1]
-    for t in range(M):
-        i = idx[t]
-        c = cs[t]
-        s = sn[t]
-        for col in range(k):
-            f = Y[i + 1, col]
-            y = Y[i, col]
-            Y[i + 1, col] = s * y + c * f
-            Y[i, col] = c * y - s * f
-
-
-@njit(nogil=True, cache=True)
-def _rotate(idx, cs, sn, M, Y):
-    """``Y <- Z Y = G_1 ... G_M Y``."""
-    k = Y.shape[1]
-    for t in range(M - 1, -1, -1):
-        i = idx[t]
-        c = cs[t]
-        s = sn[t]
-        for col in range(k):
-            f = Y[i + 1, col]
-            y = Y[i, col]
-            Y[i, col] = c * y + s * f
-            Y[i + 1, col] = c * f - s * y
-
-
-@njit(nogil=True, cache=True)
 def _workspace(offs, lo, hi):
     """Scratch for the submeshes ``lo..hi-1``: a Laplacian buffer and rotation arrays."""
     nmax = 1
@@ -245,56 +78,24 @@ def _decompose(indptr, indices, part, ws):
     ``ws`` is the scratch of :func:`_workspace`. Returns ``(A, tau, idx, cs, sn, M, order, sign,
     info)``: the reflectors of ``Q``, the ``M`` rotations of ``Z``, ``order`` the eigenvalue
     indices in ascending order (stable sort; column ``j`` of ``U`` is eigenvector ``order[j]``) and
-    ``sign`` (+-1 per eigenvector) making the first row of ``U`` non-negative. ``info != 0`` on
-    failure.
+    ``sign`` (+-1 per eigenvector) making the first row of ``U`` non-negative. ``info != 0`` when
+    the QL iteration does not converge.
     """
     n = part.size
     buf, idx, cs, sn = ws
-    A, tau, d, e, info = _tridiagonalise(_dense_laplacian(indptr, indices, part, buf))
-    if info != 0:
-        z = np.zeros(0, np.int64)
-        return A, tau, idx, cs, sn, 0, z, np.zeros(0), info
-    idx, cs, sn, M, info = _ql(d, e, idx, cs, sn)
+    A = _dense_laplacian(indptr, indices, part, buf)
+    tau, d, e = tridiagonalise(A)
+    # first row of U = first row of Z (Q leaves the first coordinate alone) = e_0^T Z, made
+    # by the QL iteration as it records the rotations
+    r = np.zeros(n)
+    r[0] = 1.0
+    idx, cs, sn, M, info = ql_rotations(d, e, idx, cs, sn, r)
     order = np.argsort(d, kind="mergesort")
-    # first row of U = first row of Z (Q leaves the first coordinate alone) = (Z^T e_0)^T
-    r = np.zeros((n, 1))
-    r[0, 0] = 1.0
-    _rotate_t(idx, cs, sn, M, r)
     sign = np.ones(n)
     for j in range(n):
-        if r[j, 0] < 0.0:
+        if r[j] < 0.0:
             sign[j] = -1.0
     return A, tau, idx, cs, sn, M, order, sign, info
-
-
-@njit(nogil=True, cache=True)
-def _apply_reflectors(A, tau, Y, transpose):
-    """``Y <- Q^T Y`` (``transpose``) or ``Y <- Q Y``, ``Q = H_0 H_1 ... H_{n-2}`` with the
-    reflectors in the rows of ``A`` (each ``H_i`` is symmetric: ``Q^T`` applies ``H_0`` first)."""
-    n, k = Y.shape
-    for j in range(n - 1):
-        i = j if transpose else n - 2 - j
-        t = tau[i]
-        if t == 0.0:
-            continue
-        for c in range(k):
-            s = Y[i + 1, c]
-            for r in range(i + 2, n):
-                s += A[i, r] * Y[r, c]
-            s *= t
-            Y[i + 1, c] -= s
-            for r in range(i + 2, n):
-                Y[r, c] -= s * A[i, r]
-
-
-@njit(nogil=True, cache=True, inline="always")
-def _apply_qt(A, tau, Y):
-    _apply_reflectors(A, tau, Y, True)
-
-
-@njit(nogil=True, cache=True, inline="always")
-def _apply_q(A, tau, Y):
-    _apply_reflectors(A, tau, Y, False)
 
 
 @njit(nogil=True, cache=True)
@@ -317,15 +118,15 @@ def _transform_range(indptr, indices, flat, offs, lo, hi, src, out, status, synt
                 q = order[j]
                 for c in range(d):
                     Y[q, c] = sign[q] * src[o + j, c]
-            _rotate(idx, cs, sn, M, Y)
-            _apply_q(A, tau, Y)
+            rotate(idx, cs, sn, M, Y)
+            apply_q(A, tau, Y)
             out[o : offs[i + 1]] = Y
         else:
             for a in range(part.size):
                 for c in range(d):
                     Y[a, c] = src[part[a], c]
-            _apply_qt(A, tau, Y)
-            _rotate_t(idx, cs, sn, M, Y)
+            apply_qt(A, tau, Y)
+            rotate_t(idx, cs, sn, M, Y)
             for j in range(part.size):
                 q = order[j]
                 for c in range(d):
@@ -345,55 +146,9 @@ def _synthesise_range(indptr, indices, flat, offs, lo, hi, coef, out, status):
 
 
 @njit(nogil=True, cache=True)
-def _form_q(A, tau):
-    """The orthogonal ``Q`` (row-major) of :func:`_tridiagonalise` (LAPACK ``dorgqr``)."""
-    n = A.shape[0]
-    Q = np.zeros((n, n))
-    Q[0, 0] = 1.0
-    m = n - 1
-    if m == 0:
-        return Q, 0
-    # lower storage: Q = diag(1, Q'), with Q' the product of the reflectors held in the Fortran
-    # block A[1:, :n-1], which is the C-order block A[:n-1, 1:]
-    B = np.ascontiguousarray(A[:m, 1:])
-    mm = np.empty(1, np.int32)
-    mm[0] = m
-    lw = np.empty(1, np.int32)
-    lw[0] = -1
-    info = np.zeros(1, np.int32)
-    q = np.empty(1)
-    _dorgqr(
-        mm.ctypes,
-        mm.ctypes,
-        mm.ctypes,
-        B.ctypes,
-        mm.ctypes,
-        tau.ctypes,
-        q.ctypes,
-        lw.ctypes,
-        info.ctypes,
-    )
-    lw[0] = max(int(q[0]), 1)
-    work = np.empty(lw[0])
-    _dorgqr(
-        mm.ctypes,
-        mm.ctypes,
-        mm.ctypes,
-        B.ctypes,
-        mm.ctypes,
-        tau.ctypes,
-        work.ctypes,
-        lw.ctypes,
-        info.ctypes,
-    )
-    Q[1:, 1:] = B.T  # B in C order is Q'^T
-    return Q, int(info[0])
-
-
-@njit(nogil=True, cache=True)
 def _bases_range(indptr, indices, flat, offs, lo, hi, boffs, out, status):
-    """The explicit bases ``U_i`` of the submeshes ``lo..hi-1``, row-major into
-    ``out[boffs[i]:boffs[i + 1]]``."""
+    """The explicit bases ``U_i = Q (Z P S)`` of the submeshes ``lo..hi-1``, row-major into
+    ``out[boffs[i]:boffs[i + 1]]`` (``Z`` and ``Q`` applied to the signed permutation)."""
     ws = _workspace(offs, lo, hi)
     for i in range(lo, hi):
         part = flat[offs[i] : offs[i + 1]]
@@ -404,10 +159,9 @@ def _bases_range(indptr, indices, flat, offs, lo, hi, boffs, out, status):
             W = np.zeros((n, n))
             for j in range(n):
                 W[order[j], j] = sign[order[j]]
-            _rotate(idx, cs, sn, M, W)
-            Q, info = _form_q(A, tau)
-            if info == 0:
-                out[boffs[i] : boffs[i + 1]] = np.dot(Q, W).ravel()
+            rotate(idx, cs, sn, M, W)
+            apply_q(A, tau, W)
+            out[boffs[i] : boffs[i + 1]] = W.ravel()
         status[i] = info
 
 
@@ -445,8 +199,6 @@ class FullBases:
         self.workers = default_workers() if workers is None else max(1, int(workers))
 
     def _run(self, kernel, *args) -> None:
-        from ..linalg._common import single_thread_blas
-
         m = len(self.parts)
         status = np.zeros(m, dtype=np.int64)
         ranges = [(a, min(a + CHUNK, m)) for a in range(0, m, CHUNK)]
@@ -454,13 +206,12 @@ class FullBases:
         def job(r):
             kernel(self.indptr, self.indices, self.flat, self.offs, r[0], r[1], *args, status)
 
-        with single_thread_blas():
-            if self.workers == 1 or len(ranges) <= 1:
-                for r in ranges:
-                    job(r)
-            else:
-                with ThreadPoolExecutor(min(self.workers, len(ranges))) as ex:
-                    list(ex.map(job, ranges))
+        if self.workers == 1 or len(ranges) <= 1:
+            for r in ranges:
+                job(r)
+        else:
+            with ThreadPoolExecutor(min(self.workers, len(ranges))) as ex:
+                list(ex.map(job, ranges))
         if status.any():
             i = int(np.flatnonzero(status)[0])
             raise np.linalg.LinAlgError(
