@@ -185,14 +185,24 @@ def test_delta_codecs_factorise_only_for_rate_control(monkeypatch, method):
 @pytest.mark.parametrize("method", ["feature", "saliency"])
 def test_files_with_the_first_anchor_scheme_decode_as_before(method):
     """Files coded before the anchor-scheme byte existed (METIS, one part per anchor) keep
-    decoding to what they decoded to then; new files record scheme 1 and round trip."""
+    decoding to what they decoded to then, up to rounding; new files record scheme 1 and
+    round trip."""
     from pathlib import Path
 
     here = Path(__file__).parent / "data" / "sgc"
     old = (here / f"{method}_anchors_v0.sgc").read_bytes()
     want = np.load(here / f"{method}_anchors_v0_decoded.npy")
-    assert compress.info(old)["parameters"]["anchor_scheme"] == 0
-    np.testing.assert_array_equal(compress.decode(old)[0], want)
+    info = compress.info(old)
+    assert info["parameters"]["anchor_scheme"] == 0
+    # The golden arrays were decoded by SuperLU and BLAS; the decoder now solves Eq. (5.54)
+    # with the fixed-order Cholesky. Both solve the same system, exact up to rounding, so the
+    # coordinates differ by rounding noise amplified by the conditioning of L^T L (about 1e-9
+    # of the step here), whereas a change in what is decoded (anchors, mask, dequantisation)
+    # moves them by the order of the quantisation step (a fraction of the bounding-box
+    # diagonal). A millionth of the step tells the two apart.
+    diag = float(np.linalg.norm(want.max(axis=0) - want.min(axis=0)))
+    atol = 1e-6 * info["parameters"]["step"] * diag
+    np.testing.assert_allclose(compress.decode(old)[0], want, rtol=0, atol=atol)
     V, F = icosphere(3)
     V = V + 0.01 * np.random.default_rng(1).standard_normal(V.shape)  # the fixtures' mesh
     new = compress.encode(V, F, method=method)

@@ -6,7 +6,10 @@ of ``R_x = A_x A_x^T`` (Eq. 5.46) are the eigen-trajectories, ``delta_x = L A_x^
 ``L = D - C`` the binary, unnormalised mesh Laplacian) the delta coordinates and
 ``U_x^T delta_x^T`` (Eq. 5.48) what is coded. The decoder rebuilds ``delta~ = U_x U^_x`` and solves
 the sparse least-squares system ``[L; I_a] A~^T = [delta~; Q(A_a^T)]`` (Eq. 5.50-5.51) with one
-factorisation of ``L^T L + I_a^T I_a`` for all frames.
+factorisation of ``L^T L + I_a^T I_a`` for all frames. Every floating-point step of the decoder
+(dictionary QR, the product ``U_x U^_x``, the sparse Cholesky and its solves) runs in a fixed
+order without BLAS or LAPACK (:mod:`spectrageo.linalg._fixed`), so a file decodes to the same
+bits on every machine.
 
 Methods (the thesis's variants, Section 5.2.2, Table 5.12):
 
@@ -196,14 +199,15 @@ def choose_anchors(V0: np.ndarray, L: sp.csr_matrix, fraction: float) -> np.ndar
 class _Solver:
     """Factorisation of ``L^T L + w^2 I_a^T I_a`` for Eq. (5.51), reused for every frame.
 
-    The shared SPD factorisation (:func:`spectrageo.linalg._common.spd_factor`: minimum-degree
-    order, symmetric mode, no pivoting; on the 20k-vertex joint 4x fewer factor entries and
-    11x faster than the reverse Cuthill-McKee order used before); right-hand sides are solved
-    64 columns at a time.
+    The fixed-order sparse Cholesky of :mod:`spectrageo.linalg._fixed` (minimum-degree order,
+    supernodal factor, no BLAS or LAPACK), so that a file decodes to the same bits on every
+    machine. ``L`` is the binary ``D - C``: the matrix is formed exactly. Right-hand sides
+    are solved 64 columns at a time (each column's result does not depend on the others, so
+    the serial and parallel reconstructions agree bit for bit).
     """
 
     def __init__(self, L: sp.csr_matrix, anchors: np.ndarray, weight: float) -> None:
-        from ..linalg._common import spd_factor
+        from ..linalg._fixed import SparseCholesky
 
         n = L.shape[0]
         self.L = L
@@ -212,8 +216,8 @@ class _Solver:
         d = np.zeros(n)
         d[anchors] = self.w2
         try:
-            self.lu = spd_factor(L.T @ L + sp.diags(d))
-        except RuntimeError as exc:  # singular: cannot happen with one anchor per component
+            self.chol = SparseCholesky(L.T @ L + sp.diags(d))
+        except np.linalg.LinAlgError as exc:  # cannot happen with one anchor per component
             raise InvalidInputError(f".sga reconstruction system is singular ({exc}).") from None
 
     def solve(self, delta: np.ndarray, anchor_pos: np.ndarray) -> np.ndarray:
@@ -222,7 +226,7 @@ class _Solver:
         rhs[self.anchors] += self.w2 * anchor_pos
         out = np.empty_like(rhs)
         for j in range(0, rhs.shape[1], 64):
-            out[:, j : j + 64] = self.lu.solve(np.ascontiguousarray(rhs[:, j : j + 64]))
+            out[:, j : j + 64] = self.chol.solve(rhs[:, j : j + 64])
         return out
 
 
@@ -261,13 +265,12 @@ def _entropy_bits(q: np.ndarray) -> float:
 
 
 def _orthonormal(Uq: np.ndarray) -> np.ndarray:
-    """Deterministic re-orthonormalisation of dequantised dictionary columns (QR, signs kept)."""
-    if Uq.shape[1] == 0:
-        return Uq
-    Q, R = np.linalg.qr(Uq)
-    s = np.sign(np.diag(R))
-    s[s == 0] = 1.0
-    return Q * s
+    """Deterministic re-orthonormalisation of dequantised dictionary columns: the ``Q`` of a
+    Householder QR with ``R``'s diagonal made positive, summed in a fixed order
+    (:func:`spectrageo.linalg._fixed.orthonormal_columns`, no LAPACK), the same at both ends."""
+    from ..linalg._fixed import orthonormal_columns
+
+    return orthonormal_columns(Uq)
 
 
 # ----------------------------------------------------------------------------- block coding
@@ -401,7 +404,13 @@ def encode_block(plan: _BlockPlan, method: str, step: float, ratio: float, rd: f
 
 
 def decode_block(chunks, p: Params, nf: int, n: int, anchors: np.ndarray, step: float) -> tuple:
-    """Dequantised ``(delta~ list of (n, nf), anchor positions (nf, n_a, 3) or None)``."""
+    """Dequantised ``(delta~ list of (n, nf), anchor positions (nf, n_a, 3) or None)``.
+
+    ``delta~ = U_x U^_x`` (Eq. 5.49-5.50) with the fixed-order product of
+    :func:`spectrageo.linalg._fixed.matmul` (no BLAS), so that every machine gets the same bits.
+    """
+    from ..linalg._fixed import matmul
+
     tags = [t for t, _ in chunks]
     want = [TAG_BASIS, TAG_COEFF, TAG_ANCHOR_POS]
     if tags != want:
@@ -449,7 +458,7 @@ def decode_block(chunks, p: Params, nf: int, n: int, anchors: np.ndarray, step: 
             P = np.zeros(ks[c] * n)
             P[:count] = lo + vals[pos : pos + count] * ((hi - lo) / ((1 << PCA_BITS) - 1))
             pos += count
-            deltas.append((Qs[c] @ P.reshape(ks[c], n)).T)
+            deltas.append(matmul(Qs[c], P.reshape(ks[c], n)).T)
     else:
         groups = np.repeat(np.arange(sum(ks)), n)
         q = decode_groups(chunks[1][1], groups, sum(ks), "coefficients").astype(np.float64)
@@ -458,7 +467,7 @@ def decode_block(chunks, p: Params, nf: int, n: int, anchors: np.ndarray, step: 
             k = ks[c]
             P = q[pos : pos + k * n].reshape(k, n) * step
             pos += k * n
-            deltas.append((Qs[c] @ P).T)
+            deltas.append(matmul(Qs[c], P).T)
     na = anchors.size
     grp = np.broadcast_to(
         (np.minimum(np.arange(nf), 1)[:, None, None] * 3 + np.arange(3)[None, None, :]),

@@ -31,7 +31,10 @@ low-frequency drift); at higher rates sending every delta wins, so the choice mo
 The grid was chosen on the compression tuning split (fandisk, partLp) only.
 
 Decoder: the sparse least-squares system ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54) through its
-normal equations ``(L^T L + I_a^T I_a) v = L^T delta + I_a^T v_a``, factorised once.
+normal equations ``(L^T L + I_a^T I_a) v = L^T delta + I_a^T v_a``, factorised once by the
+fixed-order sparse Cholesky of :mod:`spectrageo.linalg._fixed` (no BLAS or LAPACK), so that the
+same file decodes to the same bits on every machine; the encoder's rate control uses the same
+solver.
 
 The uniform (feature-unaware) baseline of Fig. 5.69-5.70 is ``feature_fraction=1``.
 """
@@ -185,19 +188,23 @@ def _farthest_points(indptr, indices, seeds, n_a, out):  # pragma: no cover - ji
 
 
 class _Solver:
-    """Factorised normal equations of ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54)."""
+    """Factorised normal equations of ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54):
+    ``(L^T L + I_a^T I_a) v = L^T delta + I_a^T v_a`` with the fixed-order sparse Cholesky
+    (:class:`spectrageo.linalg._fixed.SparseCholesky`), so that the encoder's rate control
+    and every decoder compute the same bits. ``L`` is the binary ``D - C``: the matrix has
+    integer entries and is formed exactly; the right-hand side is a sparse product (no BLAS).
+    SPD because every connected component holds an anchor."""
 
     def __init__(self, L: sp.csr_matrix, a: np.ndarray) -> None:
-        from ..linalg._common import spd_factor
+        from ..linalg._fixed import SparseCholesky
 
         n = L.shape[0]
         P = sp.csr_matrix((np.ones(a.size), (np.arange(a.size), a)), shape=(a.size, n))
         self.L, self.P = L, P
-        # SPD (one anchor per connected component): no pivoting, symmetric ordering
-        self.lu = spd_factor(L.T @ L + P.T @ P)
+        self.chol = SparseCholesky(L.T @ L + P.T @ P)
 
     def solve(self, delta: np.ndarray, va: np.ndarray) -> np.ndarray:
-        return self.lu.solve(np.asarray(self.L.T @ delta + self.P.T @ va))
+        return self.chol.solve(np.asarray(self.L.T @ delta + self.P.T @ va))
 
 
 def _feature_rank(V, F, seed: int) -> np.ndarray | None:
