@@ -109,6 +109,15 @@ SECTIONS = [
     ("learned_denoise", _script("learned_denoise")),
     ("learned_refine", _script("learned_refine")),
     ("viewer", _script("viewer")),
+    # the sealed test split: run once at the end of a change, to report (never to choose)
+    (
+        "test_split/denoise",
+        [*_script("test_split/run"), "--final", "--task", "denoise", "--no-oracle"],
+    ),
+    (
+        "test_split/outliers",
+        [*_script("test_split/run"), "--final", "--task", "outliers", "--no-oracle"],
+    ),
 ]
 
 HEADER = """# Benchmarks
