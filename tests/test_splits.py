@@ -136,7 +136,8 @@ def test_shared_files_are_not_held_out():
 
 
 def test_every_case_file_exists(shared_data):  # shared_data fails under CI=true when absent
-    missing = sorted({f for c in S.CASES for f in c.files if not (shared_data / f).exists()})
+    shared = [c for c in S.CASES if c.root == "shared"]
+    missing = sorted({f for c in shared for f in c.files if not (shared_data / f).exists()})
     assert not missing, f"registry files missing under {shared_data}: {missing}"
 
 
@@ -164,7 +165,8 @@ def test_denoise_validation_is_not_held_out_for_the_consulted_rules():
 def test_cases_are_unique_and_valid():
     keys = [(c.task, c.file, c.name, c.seed, c.corruption) for c in S.CASES]
     assert len(keys) == len(set(keys))
-    assert S.cases("denoise", "test") == ()  # room for the sealed test split
+    assert {c.root for c in S.cases("denoise", "test")} == {"test"}
+    assert all(c.root == "shared" for c in S.CASES if c.split != "test")
 
 
 def test_lookups():
@@ -202,3 +204,21 @@ def test_registry_imports_no_application_package():
         isinstance(n, ast.ImportFrom) and n.module in ("__future__", "dataclasses")
         for n in imported
     )
+
+
+def test_sealed_test_split_matches_its_manifest():
+    """The registry's test cases are the files of ``benchmarks/test_split/manifest.csv`` (the
+    download list with sources and checksums), and no test file is read by another split."""
+    import csv
+    from pathlib import Path
+
+    manifest = Path(__file__).resolve().parents[1] / "benchmarks" / "test_split" / "manifest.csv"
+    with open(manifest, newline="") as f:
+        rows = list(csv.DictReader(f))
+    want = {(r["task"], r["name"], r["file"], r["group"]) for r in rows}
+    got = {(c.task, c.name, c.file, c.group) for c in S.CASES if c.split == "test"}
+    assert got == want
+    assert {r["split"] for r in rows} == {"test"}
+    test_names = {c.name.lower() for c in S.CASES if c.split == "test"}
+    other = {Path(f).stem.lower() for c in S.CASES if c.split != "test" for f in c.files}
+    assert not test_names & other

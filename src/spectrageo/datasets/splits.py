@@ -65,6 +65,9 @@ class Case:
         Defaults (qualified names as in :data:`DEFAULTS`, or a named rule) whose design or value
         looked at this case although it is not tuning data; the case is not held out for them.
     note : str
+    root : {"shared", "test"}
+        The folder ``file`` is relative to: the shared data folder, or the sealed test data
+        folder (``$SPECTRAGEO_TEST_DATA``, fetched by ``benchmarks/test_split/fetch.py``).
     """
 
     task: str
@@ -77,8 +80,11 @@ class Case:
     sources: tuple[str, ...] = ()
     consulted_by: tuple[str, ...] = ()
     note: str = ""
+    root: str = "shared"
 
     def __post_init__(self) -> None:
+        if self.root not in ("shared", "test"):
+            raise ValueError(f"`root` must be 'shared' or 'test'; got {self.root!r}.")
         if self.split not in SPLITS:
             raise ValueError(f"`split` must be one of {SPLITS}; got {self.split!r}.")
         if self.group not in GROUPS:
@@ -1162,6 +1168,191 @@ def _learn_cases() -> list[Case]:
     return out
 
 
+# ========================================================================= sealed test split
+#: the sealed test split (denoising, outlier removal): public files no other case reads, run
+#: once at the end of a change to report (``benchmarks/test_split/run.py --final``), never to
+#: choose. Files are relative to ``$SPECTRAGEO_TEST_DATA``; per-run corruptions and seeds
+#: (``case_seed("test/<name>", kind, level)``) are listed in ``benchmarks/test_split/manifest.csv``.
+def _test_cases() -> list[Case]:
+    return [
+        _c(
+            "denoise",
+            "denoise/nefertiti.obj",
+            "test",
+            "organic",
+            "generated",
+            name="nefertiti",
+            root="test",
+        ),
+        _c(
+            "denoise",
+            "denoise/fertility.off",
+            "test",
+            "organic",
+            "generated",
+            name="fertility",
+            root="test",
+        ),
+        _c(
+            "denoise",
+            "denoise/cheburashka.obj",
+            "test",
+            "organic",
+            "generated",
+            name="cheburashka",
+            root="test",
+        ),
+        _c(
+            "denoise",
+            "denoise/teddy.obj",
+            "test",
+            "organic",
+            "generated",
+            name="teddy",
+            root="test",
+        ),
+        _c(
+            "denoise",
+            "denoise/alligator.obj",
+            "test",
+            "organic",
+            "generated",
+            name="alligator",
+            root="test",
+        ),
+        _c(
+            "denoise",
+            "denoise/ADIS16480.stl",
+            "test",
+            "cad",
+            "generated",
+            name="ADIS16480",
+            root="test",
+        ),
+        _c(
+            "denoise",
+            "denoise/1002_tray_bottom.stl",
+            "test",
+            "cad",
+            "generated",
+            name="1002_tray_bottom",
+            root="test",
+        ),
+        _c(
+            "denoise",
+            "denoise/counter.stl",
+            "test",
+            "cad",
+            "generated",
+            name="counter",
+            root="test",
+        ),
+        _c("denoise", "denoise/fox.ply", "test", "lowpoly", "generated", name="fox", root="test"),
+        _c(
+            "denoise",
+            "denoise/bob_small.ply",
+            "test",
+            "lowpoly",
+            "generated",
+            name="bob_small",
+            root="test",
+        ),
+        _c(
+            "denoise",
+            "denoise/idler_riser.stl",
+            "test",
+            "lowpoly",
+            "generated",
+            name="idler_riser",
+            root="test",
+        ),
+        _c("denoise", "denoise/igea.ply", "test", "large", "generated", name="igea", root="test"),
+        _c(
+            "denoise",
+            "denoise/pairs/Julius0.2/Noisy.obj",
+            "test",
+            "organic",
+            "pair",
+            name="Julius0.2",
+            sources=("denoise/pairs/Julius0.2/Original.obj",),
+            root="test",
+        ),
+        _c(
+            "denoise",
+            "denoise/pairs/Nicolo0.2/Noisy.obj",
+            "test",
+            "organic",
+            "pair",
+            name="Nicolo0.2",
+            sources=("denoise/pairs/Nicolo0.2/Original.obj",),
+            root="test",
+        ),
+        _c(
+            "outliers",
+            "outliers/kinect_capture0001.pcd",
+            "test",
+            "scan",
+            "blobs, flying, halo, lidar, mixed, none, uniform",
+            name="kinect_capture0001",
+            root="test",
+        ),
+        _c(
+            "outliers",
+            "outliers/kinect_osd_test55.pcd",
+            "test",
+            "scan",
+            "blobs, flying, halo, lidar, mixed, none, uniform",
+            name="kinect_osd_test55",
+            root="test",
+        ),
+        _c(
+            "outliers",
+            "outliers/rgbd_fragment_frag_115.ply",
+            "test",
+            "scan",
+            "blobs, flying, halo, lidar, mixed, none, uniform",
+            name="rgbd_fragment_frag_115",
+            root="test",
+        ),
+        _c(
+            "outliers",
+            "outliers/lidar_isprs_samp52.pcd",
+            "test",
+            "scan",
+            "blobs, flying, halo, lidar, mixed, none, uniform",
+            name="lidar_isprs_samp52",
+            root="test",
+        ),
+        _c(
+            "outliers",
+            "outliers/lidar_riegl_airborne.laz",
+            "test",
+            "scan",
+            "blobs, flying, halo, lidar, mixed, none, uniform",
+            name="lidar_riegl_airborne",
+            root="test",
+        ),
+        _c(
+            "outliers",
+            "outliers/lidar_uav_yellowscan.laz",
+            "test",
+            "scan",
+            "blobs, flying, halo, lidar, mixed, none, uniform",
+            name="lidar_uav_yellowscan",
+            root="test",
+        ),
+        _c(
+            "outliers",
+            "outliers/lidar_mobile_vegetation.las",
+            "test",
+            "scan",
+            "blobs, flying, halo, lidar, mixed, none, uniform",
+            name="lidar_mobile_vegetation",
+            root="test",
+        ),
+    ]
+
+
 #: every evaluation case, in the order the evaluations run them
 CASES: tuple[Case, ...] = tuple(
     _denoise_cases()
@@ -1176,6 +1367,7 @@ CASES: tuple[Case, ...] = tuple(
     + _register_cases()
     + _saliency_cases()
     + _learn_cases()
+    + _test_cases()
 )
 
 
