@@ -8,12 +8,18 @@ extension   read                                          write
 ``.ply``    mesh or points (plyfile), ascii/binary,       Mesh, PointCloud (binary or ascii)
             normals, colours, extra properties
 ``.obj``    mesh or points (meshio), polygons fanned      Mesh, PointCloud (meshio)
-``.off``    mesh or points, COFF/NOFF, polygons fanned    Mesh, PointCloud (meshio)
+``.off``    mesh or points, COFF/NOFF, polygons fanned,   Mesh, PointCloud (meshio)
+            ``OFF BINARY``/``NOFF BINARY`` (big-endian)
 ``.stl``    mesh (trimesh), corners welded unless         Mesh (binary or ascii, trimesh)
             ``weld=False``
-``.pcd``    points, ascii/binary/binary_compressed        PointCloud (``pcd_format=``)
-``.xyz``    points, 3 or 6 columns (normals)              PointCloud
-``.npy``    points, (n, 3) array                          PointCloud
+``.pcd``    points, ascii/binary/binary_compressed,       PointCloud (``pcd_format=``)
+            field names in any case (``X Y Z``)
+``.xyz``    points, 3 or more columns (normals, colours,  PointCloud
+            scalars), optional point-count first line
+``.pts``    points (Leica/PDAL text): optional count      (read only)
+            line, ``x y z [intensity] [r g b]``
+``.npy``    points, (n, 3) array or structured array      PointCloud ((n, 3) array)
+            with fields ``x y z``
 ``.las``    points (laspy, optional extra)                PointCloud
 ``.laz``    points (laspy + lazrs, optional extra)        PointCloud
 ``.npz``    MeshAnimation (``vertices``, ``faces``)       MeshAnimation, PointCloudSequence

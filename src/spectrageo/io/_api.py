@@ -49,6 +49,7 @@ _READER_SPECS: dict[str, tuple[str, str, dict[str, Any]]] = {
     ".stl": ("_simple", "read_stl", {}),
     ".pcd": ("_pcd", "read_pcd", {}),
     ".xyz": ("_simple", "read_xyz", {}),
+    ".pts": ("_simple", "read_pts", {}),
     ".npy": ("_simple", "read_npy", {}),
     ".las": ("_las", "read_las", {"compressed": False}),
     ".laz": ("_las", "read_las", {"compressed": True}),
@@ -163,7 +164,7 @@ def read(
     Parameters
     ----------
     path : str or path-like
-        A file (``.ply .obj .off .stl .pcd .xyz .npy .las .laz .glb .gltf .3mf``, each optionally
+        A file (``.ply .obj .off .stl .pcd .xyz .pts .npy .las .laz .glb .gltf .3mf``, each optionally
         ``.gz``), a ``.npz`` animation/sequence, a compressed mesh (``.sgc``) or animation
         (``.sga``) of :mod:`spectrageo.compress` (decoded whole; a cut file is an error, see
         ``decode(..., partial=True)``), or a folder of numbered frame files.

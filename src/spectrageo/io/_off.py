@@ -8,6 +8,7 @@ only for mixed polygon sizes), keeping vertex and face order exactly.
 
 Conventions: ``#`` starts a comment; the counts may sit on the keyword line (``OFF 8 6 0``); vertex
 colours of ``COFF`` become ``vertex_colors`` (uint8 when written as integers 0-255, floats otherwise);
+``OFF BINARY`` files are read by :func:`read_off_binary`;
 normals of ``NOFF`` become vertex normals; polygons are fan-triangulated in file order; per-face
 colours are ignored. ``4OFF``/``nOFF`` (other dimensions) are rejected.
 
@@ -27,7 +28,7 @@ import tempfile
 import numpy as np
 
 from .._errors import InvalidInputError, UnsupportedFormatError
-from ._common import fan_triangulate, text_colors
+from ._common import check_alloc, fan_triangulate, text_colors
 from ._raw import RawGeometry
 
 _KEYWORD = re.compile(r"(ST)?(C)?(N)?(4)?(n)?OFF(BINARY)?")
@@ -43,6 +44,9 @@ def _table(lines: list[str]) -> np.ndarray | None:
 
 
 def read_off(raw: bytes, name: str) -> RawGeometry:
+    head = raw[: raw.find(b"\n") if b"\n" in raw else len(raw)].split(b"#", 1)[0].split()
+    if head and (head[0].endswith(b"OFFBINARY") or head[1:2] == [b"BINARY"]):
+        return read_off_binary(raw, name)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
@@ -120,6 +124,146 @@ def read_off(raw: bytes, name: str) -> RawGeometry:
         )
     faces = _faces(flines, name, nv)
     return RawGeometry(V, faces, normals, colors)
+
+
+def read_off_binary(raw: bytes, name: str) -> RawGeometry:
+    """Binary OFF (``OFF BINARY`` / ``NOFF BINARY`` / ``STOFF BINARY`` keyword line).
+
+    After the keyword line: int32 counts ``nv nf ne``, ``nv`` vertex records of float32 ``x y z``
+    (then ``nx ny nz`` for NOFF and ``s t`` for STOFF, read as normals and ignored respectively),
+    then per face an int32 vertex count ``k``, ``k`` int32 indices and, as Geomview writes it, an
+    int32 number of colour components followed by that many float32 (the colours are ignored);
+    faces without the colour count (as pmp-library writes them) are read too, the layout being
+    the one whose records fill the file exactly. Values are big-endian (the format's byte order);
+    little-endian files (older pmp-library) are recognised when the big-endian vertex count does
+    not fit the file. Polygons are fan-triangulated in file order, as in ascii OFF.
+
+    Raises
+    ------
+    InvalidInputError
+        Truncated data, face records that fill the file in neither layout, face sizes below 3,
+        indices out of range, no vertices. :class:`~spectrageo.UnsupportedFormatError` (a
+        subclass) for binary COFF, 4OFF and nOFF.
+    """
+    end = raw.find(b"\n")
+    if end < 0:
+        raise InvalidInputError(f"{name}: truncated binary OFF (nothing after the keyword line).")
+    keyword = raw[:end].split()[0].decode("latin-1")
+    m = _KEYWORD.fullmatch(keyword.removesuffix("BINARY") + "BINARY")
+    if m is None:
+        raise InvalidInputError(f"{name}: not an OFF file (first keyword {keyword[:20]!r}).")
+    st, has_c, has_n, four, ndim, _binary = m.groups()
+    if has_c or four or ndim:
+        raise UnsupportedFormatError(
+            f"{name}: binary OFF variant {keyword!r} is not supported (OFF, NOFF and STOFF BINARY "
+            "only; colours, 4-D and n-D vertices are not)."
+        )
+    body = raw[end + 1 :]
+    if len(body) < 12:
+        raise InvalidInputError(
+            f"{name}: truncated binary OFF: {len(body)} bytes after the keyword line, the counts "
+            "need 12."
+        )
+    stride = 3 + (3 if has_n else 0) + (2 if st else 0)
+    order = ">"
+    nv, nf, _ne = (int(v) for v in np.frombuffer(body, ">i4", 3))
+    if not 0 <= nv * stride * 4 <= len(body) - 12:
+        le = [int(v) for v in np.frombuffer(body, "<i4", 3)]
+        if 0 < le[0] * stride * 4 <= len(body) - 12 and le[1] >= 0:
+            order, (nv, nf, _ne) = "<", le
+    if nv < 0 or nf < 0:
+        raise InvalidInputError(f"{name}: negative counts in binary OFF header ({nv}, {nf}).")
+    if nv == 0:
+        raise InvalidInputError(f"{name}: OFF file has no vertices.")
+    need = nv * stride * 4
+    if need > len(body) - 12:
+        raise InvalidInputError(
+            f"{name}: truncated binary OFF: {nv} vertices declared need {need} bytes, "
+            f"{len(body) - 12} bytes follow the counts."
+        )
+    check_alloc(nv * stride * 8, name, f"{nv} OFF vertices")
+    vt = np.frombuffer(body, f"{order}f4", nv * stride, 12).reshape(nv, stride).astype(np.float64)
+    V = np.ascontiguousarray(vt[:, :3])
+    normals = np.ascontiguousarray(vt[:, 3:6]) if has_n else None
+    rest = body[12 + need :]
+    if len(rest) % 4:
+        raise InvalidInputError(
+            f"{name}: malformed binary OFF: the {len(rest)} bytes after the vertices are not whole "
+            "int32 face records (truncated or trailing bytes)."
+        )
+    words = np.frombuffer(rest, f"{order}i4").astype(np.int64)
+    faces = _binary_faces(words, nf, nv, name)
+    return RawGeometry(V, faces, normals, None)
+
+
+def _binary_faces(words: np.ndarray, nf: int, nv: int, name: str) -> np.ndarray:
+    """Faces of binary OFF from the int32 words after the vertices (both layouts, see above)."""
+    if nf == 0:
+        if len(words):
+            raise InvalidInputError(
+                f"{name}: binary OFF declares 0 faces, but {4 * len(words)} bytes follow the "
+                "vertices; the counts disagree with the body."
+            )
+        return np.zeros((0, 3), dtype=np.int64)
+    if not len(words):
+        raise InvalidInputError(f"{name}: truncated binary OFF: {nf} faces declared, none present.")
+    k = int(words[0])
+    if k < 3:
+        raise InvalidInputError(f"{name}: binary OFF face 0 has {k} vertices; at least 3 needed.")
+    polys = None
+    for with_colors in (True, False):
+        # uniform records (all faces of one size, one colour count): one reshape, no loop
+        ncol = int(words[k + 1]) if with_colors and len(words) > k + 1 else 0
+        width = 1 + k + (1 + ncol if with_colors else 0)
+        if ncol >= 0 and len(words) == nf * width:
+            rec = words.reshape(nf, width)
+            if (rec[:, 0] == k).all() and (not with_colors or (rec[:, k + 1] == ncol).all()):
+                polys = rec[:, 1 : 1 + k]
+                break
+        polys = _walk_faces(words, nf, with_colors)
+        if polys is not None:
+            break
+    if polys is None:
+        raise InvalidInputError(
+            f"{name}: malformed or truncated binary OFF: the {4 * len(words)} bytes after the "
+            f"vertices do not hold the {nf} declared face records."
+        )
+    if isinstance(polys, np.ndarray):
+        idx = polys
+    else:
+        idx = np.concatenate([np.asarray(p, dtype=np.int64) for p in polys])
+        small = next((i for i, p in enumerate(polys) if len(p) < 3), None)
+        if small is not None:
+            raise InvalidInputError(
+                f"{name}: binary OFF face {small} has {len(polys[small])} vertices; at least 3 "
+                "needed."
+            )
+    if idx.size and (idx.min() < 0 or idx.max() >= nv):
+        raise _out_of_range(name, int(idx[(idx < 0) | (idx >= nv)][0]), nv)
+    return fan_triangulate(polys, name)[0]
+
+
+def _walk_faces(words: np.ndarray, nf: int, with_colors: bool) -> list[np.ndarray] | None:
+    """Variable-size face records, read one after another (each record's start depends on the
+    sizes before it, so this is a sequential walk); None when they do not fill ``words`` exactly."""
+    polys = []
+    pos, n = 0, len(words)
+    for _ in range(nf):
+        if pos >= n:
+            return None
+        k = int(words[pos])
+        if k < 0 or pos + 1 + k > n:
+            return None
+        polys.append(words[pos + 1 : pos + 1 + k])
+        pos += 1 + k
+        if with_colors:
+            if pos >= n:
+                return None
+            ncol = int(words[pos])
+            if ncol < 0:
+                return None
+            pos += 1 + ncol
+    return polys if pos == n else None
 
 
 def _out_of_range(name: str, value, nv: int) -> InvalidInputError:

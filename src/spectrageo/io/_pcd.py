@@ -10,7 +10,8 @@ is parsed here and the body decoded with numpy, vectorised for the three encodin
   another (structure of arrays): all x, then all y, ... each field a contiguous ``n * size * count``
   byte run. Decoding is one ``frombuffer`` per field.
 
-Field mapping: ``x y z`` -> points; ``normal_x normal_y normal_z`` -> normals; ``rgb`` (packed in a
+Field mapping (names matched case-insensitively, so PDAL's ``X Y Z`` are the coordinates):
+``x y z`` -> points; ``normal_x normal_y normal_z`` -> normals; ``rgb`` (packed in a
 float32 or uint32 as 0x00RRGGBB) -> uint8 colours (n, 3); ``rgba`` (uint32 0xAARRGGBB) -> uint8 colours
 (n, 4), or (n, 3) when every alpha byte is 0 (PCL writes 0 for "unset"); padding fields named ``_``
 are dropped; every other field becomes an attribute of shape (n,) or (n, COUNT). ``VIEWPOINT`` (the
@@ -301,9 +302,28 @@ def _unpack_colors(col: np.ndarray, with_alpha: bool) -> np.ndarray:
     return np.stack([r, g, b], axis=1)
 
 
+_KNOWN_FIELDS = ("x", "y", "z", "normal_x", "normal_y", "normal_z", "rgb", "rgba")
+
+
+def _canonical_names(dts):
+    """Rename the known fields (``x y z``, ``normal_*``, ``rgb``, ``rgba``) written in another case
+    (``X Y Z`` as PDAL writes them) to their lower-case names; a field already spelled in lower case
+    keeps the role and the other spelling stays an attribute."""
+    present = {f for f, _, _ in dts}
+    out = []
+    for f, dt, c in dts:
+        low = f.lower()
+        if low in _KNOWN_FIELDS and f != low and low not in present:
+            present.add(low)
+            f = low
+        out.append((f, dt, c))
+    return out
+
+
 def read_pcd(raw: bytes, name: str) -> RawGeometry:
     hdr, pos = _parse_header(raw, name)
     dts, n, _height, data = _layout(hdr, name)
+    dts = _canonical_names(dts)
     fields = [f for f, _, _ in dts]
     for c in ("x", "y", "z"):
         if c not in fields:

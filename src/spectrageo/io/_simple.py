@@ -1,8 +1,9 @@
-"""Small formats: XYZ text, ``.npy`` point arrays and STL (through trimesh)."""
+"""Small formats: XYZ and PTS text, ``.npy`` point arrays and STL (through trimesh)."""
 
 from __future__ import annotations
 
 import io
+import re
 import tokenize
 import warnings
 
@@ -54,6 +55,9 @@ def _find_group(names: list[str], groups, width: int) -> list[int] | None:
 def read_xyz(raw: bytes, name: str) -> RawGeometry:
     """Delimited text of points, one per line: ``x y z`` and optional normals, colours, scalars.
 
+    A first line holding a single integer followed by rows of 3 or more values is a point count
+    (as some exporters write it) and is skipped; it must equal the number of data rows.
+
     Separators: spaces/tabs, ``,`` or ``;`` (chosen from the first data line; with ``;`` a decimal
     comma is accepted). Lines starting with ``#`` or ``//`` are comments; blank lines are skipped.
 
@@ -84,7 +88,7 @@ def read_xyz(raw: bytes, name: str) -> RawGeometry:
     ------
     InvalidInputError
         Rows with a different number of values or non-numeric values (naming the line), fewer than
-        3 columns, no data rows.
+        3 columns, no data rows, a count line that disagrees with the rows.
     """
     try:
         text = raw.decode("utf-8-sig")
@@ -104,6 +108,9 @@ def read_xyz(raw: bytes, name: str) -> RawGeometry:
         break
     if first is None:
         raise InvalidInputError(f"{name}: XYZ file holds no points.")
+    declared, first = _count_line(lines, first, name)
+    if first is None:
+        raise InvalidInputError(f"{name}: XYZ file holds no points (only a count line).")
     head = lines[first].strip()
     sep = ";" if ";" in head else "," if "," in head else None
     names: list[str] | None = None
@@ -137,6 +144,7 @@ def read_xyz(raw: bytes, name: str) -> RawGeometry:
         ) from exc
     if table.size == 0:
         raise InvalidInputError(f"{name}: XYZ file holds no points.")
+    _check_count(declared, table.shape[0], name, "XYZ")
     k = table.shape[1]
     if k < 3:
         raise InvalidInputError(
@@ -154,6 +162,48 @@ def read_xyz(raw: bytes, name: str) -> RawGeometry:
     if names is not None:
         return _xyz_by_names(table, names, name)
     return _xyz_guess(table)
+
+
+def _next_data_line(lines: list[str], start: int) -> int | None:
+    for i in range(start, len(lines)):
+        s = lines[i].strip()
+        if s and not _is_comment(s):
+            return i
+    return None
+
+
+def _count_line(lines: list[str], first: int, name: str) -> tuple[int | None, int | None]:
+    """``(declared_count, first_data_line)``: a first line with a single value followed by a line of
+    3 or more values is a count line (an error unless it is a non-negative integer)."""
+    toks = lines[first].split()
+    if len(toks) != 1 or "," in toks[0] or ";" in toks[0]:
+        return None, first
+    nxt = _next_data_line(lines, first + 1)
+    if nxt is None:
+        return None, first
+    ntoks = lines[nxt].strip()
+    sep = ";" if ";" in ntoks else "," if "," in ntoks else None
+    if len(_split(ntoks, sep)) < 3:
+        return None, first
+    if re.fullmatch(r"[+-]?[0-9]+", toks[0]) is None:
+        raise InvalidInputError(
+            f"{name}: line {first + 1} holds the single value {toks[0][:30]!r} above rows of "
+            f"{len(_split(ntoks, sep))} values; expected a point count (a non-negative integer)."
+        )
+    count = int(toks[0])
+    if count < 0:
+        raise InvalidInputError(
+            f"{name}: the point count on line {first + 1} is negative ({count})."
+        )
+    return count, nxt
+
+
+def _check_count(declared: int | None, n_rows: int, name: str, fmt: str) -> None:
+    if declared is not None and declared != n_rows:
+        raise InvalidInputError(
+            f"{name}: the {fmt} count line declares {declared} points, the file holds {n_rows} "
+            "data rows."
+        )
 
 
 def _bad_line(lines: list[str], start: int, sep, decimal_comma: bool, exc: Exception) -> str:
@@ -241,6 +291,62 @@ def _xyz_by_names(table: np.ndarray, names: list[str], name: str) -> RawGeometry
     return RawGeometry(table[:, xyz].copy(), None, normals, colors, attrs)
 
 
+def read_pts(raw: bytes, name: str) -> RawGeometry:
+    """Leica/PDAL point text (``.pts``): an optional point count line, then ``x y z [i] [r g b]``.
+
+    Rows have 3 values (``x y z``), 4 (``x y z intensity``), 6 (``x y z r g b``) or 7
+    (``x y z intensity r g b``), separated by spaces, tabs or commas; blank lines are skipped. The
+    intensity becomes the float64 attribute ``intensity``; colours must be integers in 0..255
+    (uint8). A count line, when present, must equal the number of rows.
+
+    Raises
+    ------
+    InvalidInputError
+        A count line that disagrees with the rows, rows of another width or of varying width,
+        non-numeric values, colours outside 0..255, no data rows.
+    """
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    lines = text.splitlines()
+    first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
+    if first is None:
+        raise InvalidInputError(f"{name}: PTS file holds no points.")
+    declared, first = _count_line(lines, first, name)
+    if first is None:
+        raise InvalidInputError(f"{name}: PTS file holds no points (only a count line).")
+    sep = "," if "," in lines[first] else None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            table = np.loadtxt(
+                io.StringIO("\n".join(lines[first:])), dtype=np.float64, ndmin=2, delimiter=sep
+            )
+    except ValueError as exc:
+        raise InvalidInputError(
+            f"{name}: malformed PTS text: {_bad_line(lines, first, sep, False, exc)}."
+        ) from exc
+    if table.size == 0:
+        raise InvalidInputError(f"{name}: PTS file holds no points.")
+    _check_count(declared, table.shape[0], name, "PTS")
+    k = table.shape[1]
+    if k not in (3, 4, 6, 7):
+        raise InvalidInputError(
+            f"{name}: PTS rows must have 3, 4, 6 or 7 values (x y z [intensity] [r g b]); got {k}."
+        )
+    attrs = {"intensity": table[:, 3].copy()} if k in (4, 7) else {}
+    colors = None
+    if k >= 6:
+        rgb = table[:, k - 3 :]
+        if not all(_byte_column(rgb[:, j]) for j in range(3)):
+            raise InvalidInputError(
+                f"{name}: PTS colour values (last 3 columns) must be integers in 0..255."
+            )
+        colors = rgb.astype(np.uint8)
+    return RawGeometry(table[:, :3].copy(), None, None, colors, attrs)
+
+
 def write_xyz(P: np.ndarray, normals=None) -> bytes:
     table = P if normals is None else np.hstack([P, np.asarray(normals, dtype=np.float64)])
     buf = io.BytesIO()
@@ -307,9 +413,15 @@ def parse_npy(raw: bytes, name: str) -> np.ndarray:
 
 
 def read_npy(raw: bytes, name: str) -> RawGeometry:
-    """A (n, 3) numeric array saved with :func:`numpy.save` (pickles are refused; the header's
-    shape must match the data, see :func:`parse_npy`)."""
+    """A (n, 3) numeric array saved with :func:`numpy.save`, or a 1-D structured array with fields
+    ``x y z`` (names matched case-insensitively, as pyntcloud saves clouds); the other numeric
+    scalar fields of a structured array become float64 attributes, the rest are ignored.
+
+    Pickles are refused; the header's shape must match the data, see :func:`parse_npy`.
+    """
     arr = parse_npy(raw, name)
+    if arr.dtype.names is not None:
+        return _npy_structured(arr, name)
     if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "iuf":
         raise InvalidInputError(
             f"{name}: .npy must hold a numeric (n, 3) array; got dtype {getattr(arr, 'dtype', type(arr))}."
@@ -320,6 +432,35 @@ def read_npy(raw: bytes, name: str) -> RawGeometry:
             "(sequences go in a .npz file or a folder of frames)."
         )
     return RawGeometry(arr.astype(np.float64))
+
+
+def _npy_structured(arr: np.ndarray, name: str) -> RawGeometry:
+    fields = list(arr.dtype.names)
+    low = {f.lower(): f for f in reversed(fields)}  # the first spelling wins
+    if arr.ndim != 1:
+        raise InvalidInputError(
+            f"{name}: a structured .npy point array must be 1-D (one record per point); got shape "
+            f"{arr.shape}."
+        )
+    xyz = []
+    for c in "xyz":
+        f = low.get(c)
+        if f is None:
+            raise InvalidInputError(
+                f"{name}: structured .npy lacks field '{c}' (fields: {' '.join(fields)})."
+            )
+        if arr.dtype[f].kind not in "iuf" or arr.dtype[f].shape != ():
+            raise InvalidInputError(
+                f"{name}: structured .npy field '{f}' must be a numeric scalar; got {arr.dtype[f]}."
+            )
+        xyz.append(f)
+    V = np.stack([arr[f].astype(np.float64) for f in xyz], axis=1)
+    attrs = {
+        f: arr[f].astype(np.float64)
+        for f in fields
+        if f not in xyz and arr.dtype[f].kind in "iuf" and arr.dtype[f].shape == ()
+    }
+    return RawGeometry(V, None, None, None, attrs)
 
 
 def write_npy(P: np.ndarray) -> bytes:
