@@ -301,7 +301,7 @@ cylinder 33.3 -> 12.0). The protocol's validation split, measured afterwards wit
 folded, 10 changed, 44.33 -> 43.43 (8 better, 2 worse by at most 0.46); at 0.5 62 folded, 22
 changed, 41.40 -> 39.06 (19 better, 3 worse by at most 0.63). Not in the thesis.
 
-Coarse meshes (:func:`coarse_shape`, issue 53). Low-poly models (game assets, decimated meshes,
+Coarse meshes (:func:`coarse_shape`). Low-poly models (game assets, decimated meshes,
 coarse CAD exports; 12 to a few thousand vertices) turn by tens of degrees from one vertex to the
 next. The quadric statistics above measure that turning as a large residual (level 0.02-0.54 on
 clean low-poly files: pmp-library's icosahedron, Blender's suzanne, assimp's spider), the detail
@@ -325,25 +325,10 @@ above call noisy is called coarse, and treated as clean by the gate, when
 
     coarse  <=>  o >= COARSE_OFFSET (0.12)  and  c >= COARSE_CORR (0.28)
 
-(the offset alone would also take the protocol's mildly anisotropic noise, ``c`` 0.39 at level 0.1
-on rocker-arm and spot, which the filter improves; the correlation alone would take those too,
-their ``o`` being below 0.08). Chosen on tuning data only (``benchmarks/lowpoly/manifest.csv``,
-tuning half: the files at even positions of the sorted names of the fetched low-poly files and the
-shared CAD parts of the ``denoise-gate`` tuning half, clean and with Gaussian noise along the
-normals and impulses at 0.1, 0.3 and 0.5; and the protocol's 68 tuning cases): ``COARSE_OFFSET``
-is the geometric midpoint between the largest ``o`` of a protocol tuning case (0.099, knot2) and
-the smallest of a clean low-poly file the gate called noisy (0.139, suzanne), rounded;
-``COARSE_CORR`` the geometric midpoint between the largest ``c`` of a noisy low-poly tuning case
-the filter improved with ``o`` above 0.12 (0.201, assimp's 3DSMaxExport with Gaussian noise 0.3)
-and that smallest clean one (0.382, suzanne), rounded. Tuning figures: the protocol's 68 cases
-unchanged (mean theta of tsgsp 8.54 degrees); the 102 noisy low-poly tuning cases 25.06 -> 20.72
-(the filter made most of the newly kept ones worse: the 8-vertex boxes with Gaussian noise
-0.1-0.5, 4-20 degrees in, 49-85 out; spider and suzanne with impulses, 3-11 in, 30-37 out).
-Known limits: noise on a model of a few dozen vertices cannot be told from its shape, and such
-meshes are left as they are even where the filter would have helped (icosahedron and chamfered
-cube with Gaussian noise 0.3-0.5: 17-41 degrees kept, against 8-18 filtered); Gaussian noise of
-0.1 on suzanne (``c`` 0.25) is still filtered, and made worse (15 -> 30 degrees). The measure
-costs one pass over the edges. Not in the thesis.
+Both thresholds were chosen on the tuning split; see docs/decisions.md#coarse-meshes. Limits:
+noise on a model of a few dozen vertices cannot be told from its shape, so such meshes are left as
+they are even where a filter would help; a smooth low-poly model with weak noise (``c`` below
+``COARSE_CORR``) is still filtered. The measure costs one pass over the edges. Not in the thesis.
 
 Trust region. Displacements are capped at ``trust`` times the noise standard deviation of
 :func:`noise_sigma` (see :func:`apply_trust`). Eq. (5.15)'s plane-fit estimate counts curvature

@@ -128,22 +128,7 @@ def read_xyz(raw: bytes, name: str) -> RawGeometry:
     decimal_comma = sep == ";" and "," in body  # European CSV: "1,5;2,25;3"
     if decimal_comma:
         body = body.replace(",", ".")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
-            table = np.loadtxt(
-                io.StringIO(body),
-                dtype=np.float64,
-                ndmin=2,
-                comments=list(_COMMENTS),
-                delimiter=sep,
-            )
-    except ValueError as exc:
-        raise InvalidInputError(
-            f"{name}: malformed XYZ text: {_bad_line(lines, body_start, sep, decimal_comma, exc)}."
-        ) from exc
-    if table.size == 0:
-        raise InvalidInputError(f"{name}: XYZ file holds no points.")
+    table = _load_table(body, lines, body_start, sep, decimal_comma, name, "XYZ", _COMMENTS)
     _check_count(declared, table.shape[0], name, "XYZ")
     k = table.shape[1]
     if k < 3:
@@ -226,6 +211,28 @@ def _bad_line(lines: list[str], start: int, sep, decimal_comma: bool, exc: Excep
         elif len(toks) != width:
             return f"line {i + 1} has {len(toks)} values, line {first + 1} has {width}"
     return exc_text(exc)
+
+
+def _load_table(body, lines, start, sep, decimal_comma, name, fmt, comments) -> np.ndarray:
+    """The numbers of the text ``body`` (the lines of ``lines`` from ``start`` on) as an
+    (n_rows, n_cols) float64 array; a malformed or empty table is an ``InvalidInputError``."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+            table = np.loadtxt(
+                io.StringIO(body),
+                dtype=np.float64,
+                ndmin=2,
+                comments=list(comments) or None,
+                delimiter=sep,
+            )
+    except ValueError as exc:
+        raise InvalidInputError(
+            f"{name}: malformed {fmt} text: {_bad_line(lines, start, sep, decimal_comma, exc)}."
+        ) from exc
+    if table.size == 0:
+        raise InvalidInputError(f"{name}: {fmt} file holds no points.")
+    return table
 
 
 def _unit_rows(block: np.ndarray) -> bool:
@@ -317,18 +324,7 @@ def read_pts(raw: bytes, name: str) -> RawGeometry:
     if first is None:
         raise InvalidInputError(f"{name}: PTS file holds no points (only a count line).")
     sep = "," if "," in lines[first] else None
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            table = np.loadtxt(
-                io.StringIO("\n".join(lines[first:])), dtype=np.float64, ndmin=2, delimiter=sep
-            )
-    except ValueError as exc:
-        raise InvalidInputError(
-            f"{name}: malformed PTS text: {_bad_line(lines, first, sep, False, exc)}."
-        ) from exc
-    if table.size == 0:
-        raise InvalidInputError(f"{name}: PTS file holds no points.")
+    table = _load_table("\n".join(lines[first:]), lines, first, sep, False, name, "PTS", ("#",))
     _check_count(declared, table.shape[0], name, "PTS")
     k = table.shape[1]
     if k not in (3, 4, 6, 7):
