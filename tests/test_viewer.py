@@ -16,7 +16,7 @@ from spectrageo._errors import InvalidInputError
 from spectrageo.geometry import Mesh, MeshAnimation, PointCloud, mean_curvature
 from spectrageo.geometry.features import classify_vertices
 from spectrageo.viewer import ViewerServer, ViewerSession, _analysis, colorbar
-from spectrageo.viewer.server import _as_int
+from spectrageo.viewer._session import _as_int
 
 from conftest import cube, grid
 

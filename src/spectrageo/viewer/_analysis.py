@@ -1,20 +1,12 @@
 """The computations the viewer shows: feature vertices, feature curves and scalar fields.
 
-Every call into the feature/saliency packages goes through this module, so switching the feature
-detector is a one-line change (:data:`FEATURE_SOURCE`).
-
-Feature vertices (Appendix C, "features highlighted in red"): for meshes the pipeline of
-Section 6.1.1, :func:`spectrageo.saliency.feature_vertices` (vertex saliency of Eq. 6.1-6.4 on patches
-of ``patch`` nearest vertices, 5-class k-means, the 3 most salient classes are features). When that
-function is unavailable, and for point clouds (no faces), the patch classification of Section 4.4
-(Eq. 4.14-4.15, :func:`spectrageo.geometry.features.classify_vertices`) is used: a vertex is a feature
-when its patch is classified as an edge or a corner.
-
-Feature curves (Section 6.1.1, "Feature Curve Identification Based on Mean Curvature"):
-:func:`spectrageo.saliency.feature_curves` for meshes. The fallback (point clouds, or without that
-function) clusters the curvature of the feature vertices with k-means, the number of clusters in
-``[2, 5]`` chosen by the Calinski-Harabasz score (undefined for one cluster); point clouds have no
-mean curvature, their "surface variation" ``l1 / (l1 + l2 + l3)`` of the kNN covariance stands in.
+Every call into the feature/saliency packages goes through this module. Feature vertices
+(Appendix C) of a mesh come from :func:`spectrageo.saliency.feature_vertices` (Section 6.1.1,
+Eq. 6.1-6.4); without it, and for point clouds, from the patch classification of Section 4.4
+(Eq. 4.14-4.15: edges and corners). Feature curves (Section 6.1.1) come from
+:func:`spectrageo.saliency.feature_curves`, else from k-means on the curvature of the feature
+vertices, 2-5 clusters by the Calinski-Harabasz score (for point clouds the surface variation
+``l1 / (l1 + l2 + l3)`` of the kNN covariance stands in for the curvature).
 """
 
 from __future__ import annotations
@@ -57,7 +49,7 @@ def feature_vertices(V, F=None, *, patch: int = 15, normals=None) -> tuple[np.nd
     patch : int
         Patch size (Appendix C default 15).
     normals : (n, 3) float, optional
-        Point normals (point clouds without faces); PCA normals when absent.
+        Point-cloud normals; PCA normals when absent.
     """
     custom = _saliency_fn("feature_vertices")
     if custom is not None and F is not None:
@@ -94,13 +86,9 @@ def curvature(V, F=None) -> np.ndarray:
 def feature_curves(
     V, F, mask: np.ndarray, *, patch: int = 15, max_curves: int = 5, rng=0
 ) -> np.ndarray:
-    """Curve label per vertex (-1 for non-feature vertices), Section 6.1.1.
-
-    ``mask`` is the result of :func:`feature_vertices` with the same ``patch``. For meshes with
-    :func:`spectrageo.saliency.feature_curves` available, its labels are returned (it recomputes the
-    same feature vertices); otherwise the fallback of the module docstring, whose labels are
-    ordered by increasing curvature of the cluster centre (deterministic for a fixed ``rng``).
-    """
+    """Curve label per vertex (-1 off the features), Section 6.1.1; ``mask`` comes from
+    :func:`feature_vertices` with the same ``patch``. The fallback (module docstring) numbers the
+    clusters by increasing curvature of their centres (deterministic for a fixed ``rng``)."""
     lib = _saliency_fn("feature_curves")
     if lib is not None and F is not None and _saliency_fn("feature_vertices") is not None:
         return np.asarray(lib(V, F, patch=patch, max_curves=max_curves).labels, dtype=np.int32)
@@ -132,11 +120,8 @@ def _curves_fallback(V, F, mask, *, max_curves: int = 5, rng=0) -> np.ndarray:
 
 
 def vertex_field(values, n_vertices: int, F=None) -> np.ndarray:
-    """A per-vertex (n,) or per-face (m,) scalar field as per-vertex float64.
-
-    Per-face values are averaged over each vertex's incident faces (the first-ring mean of
-    Eq. 6.14); vertices without faces get NaN (drawn grey).
-    """
+    """A per-vertex (n,) or per-face (m,) scalar field as per-vertex float64: face values averaged
+    over each vertex's incident faces (first-ring mean, Eq. 6.14); NaN (grey) without faces."""
     v = np.asarray(values, dtype=np.float64).ravel()
     if v.size == n_vertices:
         return v

@@ -1,18 +1,10 @@
-"""Level of detail for the viewer: a light proxy of a large mesh, drawn while the camera moves.
+"""Level of detail: a light proxy of a large model, drawn while the camera moves.
 
-Vertex clustering (Rossignac and Borrel's uniform-grid simplification): the bounding box is cut into
-cubic cells; every occupied cell keeps one *representative original vertex* (the one nearest the mean
-of the cell's vertices), each face is mapped to the representatives of its three corners, and faces
-that collapse (two corners in one cell) or repeat are dropped. Because the proxy's vertices are
-original vertices, anything defined per vertex (positions of any animation frame, feature colours,
-heatmaps) maps onto the proxy by gathering ``values[reps]``; the browser does that gathering itself.
-
-The grid resolution is the finest whose proxy stays within the budget (``max_faces`` faces, or
-``max_points`` representatives for a point cloud), found by bisection on the number of cells along
-the longest side of the bounding box.
-
-This is a display aid, not one of the thesis's methods (the thesis's Appendix C viewer draws the full
-model; a software-rendered browser cannot redraw a million triangles at interactive rates).
+Vertex clustering (Rossignac and Borrel's uniform-grid simplification): every occupied cubic cell
+keeps its original vertex nearest the cell's mean, faces map to those representatives, and collapsed
+or repeated faces are dropped, so per-vertex data (any frame, colours) maps onto the proxy as
+``values[reps]``. The finest grid within the face (point) budget is found by bisection. A display
+aid, not a thesis method (the Appendix C viewer draws the full model).
 """
 
 from __future__ import annotations
@@ -32,12 +24,11 @@ class Proxy:
     Attributes
     ----------
     reps : (k,) int64
-        Indices of the original vertices kept (one per occupied cell), ascending.
+        Ascending indices of the original vertices kept (one per occupied cell).
     faces : (m', 3) int64 or None
-        Proxy faces as indices into ``reps`` (``None`` for a point cloud).
+        Proxy faces indexing ``reps`` (``None`` for a point cloud).
     resolution : int
-        Number of grid cells along the longest side of the bounding box (0: no clustering, the
-        model fitted the budget).
+        Cells along the longest bounding-box side (0: the model fitted the budget).
     cell_size : float
         Edge length of the cubic cells.
     """
@@ -100,20 +91,16 @@ def vertex_clustering(
     Parameters
     ----------
     V : (n, 3) float
-        Vertex positions.
     F : (m, 3) int or None
         Faces; ``None`` for a point cloud.
-    max_faces : int, keyword-only
-        Largest number of proxy faces (meshes).
-    max_points : int, keyword-only
-        Largest number of representatives (point clouds).
+    max_faces, max_points : int, keyword-only
+        Largest number of proxy faces (meshes) or representatives (point clouds).
 
     Returns
     -------
     Proxy
-        ``reps`` (k,) original vertex indices and ``faces`` (m', 3) indices into ``reps``, with
-        ``m' <= max_faces`` (meshes) or ``k <= max_points`` (point clouds). When the model already
-        fits the budget it is its own proxy: every vertex, the input faces, ``resolution == 0``.
+        ``m' <= max_faces`` (meshes) or ``k <= max_points`` (point clouds); a model within the
+        budget is its own proxy (every vertex, the input faces, ``resolution == 0``).
 
     Examples
     --------
