@@ -35,7 +35,7 @@ PARTITIONED = """
 import time
 import numpy as np
 from spectrageo.io import read_mesh
-from spectrageo.spectral import overlapped_submeshes, reassemble, submesh_eigenbases
+from spectrageo.spectral import SubmeshOptions, overlapped_submeshes, reassemble, submesh_eigenbases
 from spectrageo.spectral.lowpass import _binary_adjacency
 m = read_mesh({path!r})
 V, F = m.vertices, m.faces
@@ -48,7 +48,7 @@ out = {{"n": n, "n_sub": len(subs), "t_part": t_part}}
 # warm-up: load the compiled (numba, cache=True) kernels once, outside the timings
 head = type(subs)(subs.parts[:3], subs.cores[:3], subs.n_vertices, subs.degrees[:3])
 for method in ("exact", "oi", "doi"):
-    for _ in submesh_eigenbases(C, head, 0.1, method=method, signal=V, ritz=False, rng=0):
+    for _ in submesh_eigenbases(C, head, 0.1, method=method, signal=V, options=SubmeshOptions(ritz=False), rng=0):
         pass
 res = {{}}
 for method in ("exact", "oi", "doi"):
@@ -56,7 +56,7 @@ for method in ("exact", "oi", "doi"):
     vals = [None] * len(subs)
     sizes = []
     for i, _w, U in submesh_eigenbases(C, subs, 0.1, method=method, signal=V if method == "doi" else None,
-                                       ritz=False, rng=0):
+                                       options=SubmeshOptions(ritz=False), rng=0):
         x = V[subs.parts[i]]
         vals[i] = U @ (U.T @ x)
         sizes.append(U.shape[1])

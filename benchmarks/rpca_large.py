@@ -24,7 +24,7 @@ CODE = """
 import time
 import numpy as np
 from spectrageo.graph import knn
-from spectrageo.linalg import rpca
+from spectrageo.linalg import RPCASolverOptions, rpca
 n, k, dt_name, tol = {n}, 10, {dtype!r}, {tol}
 dt = np.dtype(dt_name)
 rng = np.random.default_rng(0)
@@ -45,7 +45,7 @@ for c in range(3):
 del nb
 t_build = time.perf_counter() - t
 t = time.perf_counter()
-res = rpca(M, tol=tol, dtype=dt_name)
+res = rpca(M, tol=tol, options=RPCASolverOptions(dtype=dt_name))
 t_rpca = time.perf_counter() - t
 RESULT = {{"n": n, "rows": 3 * n, "dtype": dt_name, "t_knn": t_knn, "t_build": t_build,
           "t_rpca": t_rpca, "n_iter": res.n_iter, "converged": bool(res.converged),

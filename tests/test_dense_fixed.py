@@ -272,7 +272,7 @@ def test_layered_rpca_follows_the_library_iteration():
     """The fixed-order RPCA of the layered decoder (``fine=True``) runs the iteration of
     :func:`spectrageo.linalg.rpca`; only the SVDs differ (Jacobi instead of LAPACK), so the
     low-rank parts agree to rounding amplified by the iteration (measured: below 1e-13)."""
-    from spectrageo.compress._layered import _rpca_low_rank
+    from spectrageo.compress._layered_reconstruct import _rpca_low_rank
     from spectrageo.linalg import rpca
 
     rng = np.random.default_rng(14)

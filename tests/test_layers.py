@@ -29,7 +29,6 @@ package may import each other as long as they form no cycle)::
 from __future__ import annotations
 
 import ast
-from collections import defaultdict
 from pathlib import Path
 
 import pytest
@@ -38,15 +37,27 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 PKG = SRC / "spectrageo"
 
 RANK = {
-    "_errors": 0, "_validation": 0.5, "_progress": 0.5, "_device": 0.5, "_colormap": 0.5, "_plugins": 0.5,
+    "_errors": 0,
+    "_validation": 0.5,
+    "_progress": 0.5,
+    "_device": 0.5,
+    "_colormap": 0.5,
+    "_plugins": 0.5,
     "geometry": 1,
     "": 1.5,
-    "graph": 2, "io": 2,
-    "linalg": 3, "datasets": 3,
-    "spectral": 4, "metrics": 4, "noise": 4,
-    "denoise": 5, "outliers": 5, "complete": 5,
+    "graph": 2,
+    "io": 2,
+    "linalg": 3,
+    "datasets": 3,
+    "spectral": 4,
+    "metrics": 4,
+    "noise": 4,
+    "denoise": 5,
+    "outliers": 5,
+    "complete": 5,
     "saliency": 6,
-    "compress": 7, "register": 7,
+    "compress": 7,
+    "register": 7,
     "evaluate": 8,
     "learn": 9,
     "distributed": 10,
@@ -196,7 +207,9 @@ def _public_functions():
         private_module = any(part.startswith("_") for part in module.split(".")[1:])
         tree = ast.parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
-            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) or node.name.startswith("_"):
+            if not isinstance(
+                node, (ast.FunctionDef, ast.AsyncFunctionDef)
+            ) or node.name.startswith("_"):
                 continue
             if not private_module or node.name in exported:
                 yield module, node
@@ -206,7 +219,9 @@ def test_public_functions_take_few_parameters():
     wide = []
     for module, node in _public_functions():
         a = node.args
-        params = [p.arg for p in a.posonlyargs + a.args + a.kwonlyargs if p.arg not in ("self", "cls")]
+        params = [
+            p.arg for p in a.posonlyargs + a.args + a.kwonlyargs if p.arg not in ("self", "cls")
+        ]
         if len(params) > MAX_PARAMS:
             wide.append(f"{module}.{node.name}: {len(params)}")
     assert not wide, f"public functions with more than {MAX_PARAMS} parameters: {wide}"
@@ -237,8 +252,14 @@ def test_docstrings_document_without_dominating():
 
 @pytest.mark.parametrize("module", ["spectrageo.cli", "spectrageo.viewer"])
 def test_library_never_imports_the_shells(module):
-    importers = sorted(s for s, t in GRAPH.items() if any(x == module or x.startswith(module + ".") for x in t)
-                       and not (s == module or s.startswith(module + ".")))
-    allowed = {"spectrageo.__main__"} | ({"spectrageo.cli"} if module == "spectrageo.viewer" else set())
+    importers = sorted(
+        s
+        for s, t in GRAPH.items()
+        if any(x == module or x.startswith(module + ".") for x in t)
+        and not (s == module or s.startswith(module + "."))
+    )
+    allowed = {"spectrageo.__main__"} | (
+        {"spectrageo.cli"} if module == "spectrageo.viewer" else set()
+    )
     outside = [s for s in importers if not any(s == a or s.startswith(a + ".") for a in allowed)]
     assert not outside, f"{module} imported by {outside}"

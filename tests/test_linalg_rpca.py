@@ -3,6 +3,7 @@ non-convergence reporting and input validation."""
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import warnings
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from spectrageo import ConvergenceError, ConvergenceWarning, InvalidInputError
-from spectrageo.linalg import RPCAResult, rpca
+from spectrageo.linalg import RPCAResult, RPCASolverOptions, rpca
 from spectrageo.linalg._chunked import CoreAccumulator
 from spectrageo.linalg._common import estimate_rank, noise_sigma_from_singular_values
 
@@ -50,7 +51,7 @@ def knn_like(m_points=2000, k=10, seed=0, offset=0.0):
 def test_ialm_recovers_planted_low_rank_plus_sparse(backend):
     L, S = planted()
     M = L + S
-    res = rpca(M, backend=backend)
+    res = rpca(M, options=RPCASolverOptions(backend=backend))
     assert isinstance(res, RPCAResult)
     assert res.converged and res.residual <= 1e-7
     assert rel(res.low_rank, L) < 1e-3
@@ -63,19 +64,19 @@ def test_ialm_recovers_planted_low_rank_plus_sparse(backend):
 
 def test_ialm_thesis_fixed_mu_recovers_too():
     L, S = planted(100, 80, 3, seed=3)
-    res = rpca(L + S, mu="thesis", backend="dense")
+    res = rpca(L + S, options=RPCASolverOptions(mu="thesis", backend="dense"))
     assert res.converged
     assert rel(res.low_rank, L) < 1e-3
     # fixed mu = m n / (4 ||M||_1) needs more iterations than the continuation schedule
-    assert res.n_iter > rpca(L + S, backend="dense").n_iter
+    assert res.n_iter > rpca(L + S, options=RPCASolverOptions(backend="dense")).n_iter
 
 
 def test_ialm_chunked_and_dense_agree_and_input_untouched():
     L, S = planted(300, 40, 4, seed=1)
     M = L + S
     M0 = M.copy()
-    a = rpca(M, backend="chunked")
-    b = rpca(M, backend="dense")
+    a = rpca(M, options=RPCASolverOptions(backend="chunked"))
+    b = rpca(M, options=RPCASolverOptions(backend="dense"))
     np.testing.assert_array_equal(M, M0)
     assert a.n_iter == b.n_iter
     assert rel(a.low_rank, b.low_rank) < 1e-9
@@ -106,10 +107,10 @@ def test_ialm_zero_matrix():
 
 def test_tall_skinny_chunks_match_single_pass(monkeypatch):
     M = knn_like(4000)
-    ref = rpca(M, backend="dense")
-    one = rpca(M, backend="chunked")
+    ref = rpca(M, options=RPCASolverOptions(backend="dense"))
+    one = rpca(M, options=RPCASolverOptions(backend="chunked"))
     monkeypatch.setattr(rpca_mod, "CHUNK_BYTES", 1715 * 11 * 8)  # 7 row chunks of 1715 rows
-    many = rpca(M, backend="chunked")
+    many = rpca(M, options=RPCASolverOptions(backend="chunked"))
     assert ref.converged and one.converged and many.converged
     assert many.n_iter == one.n_iter
     np.testing.assert_allclose(many.sparse, one.sparse, atol=1e-10 * np.abs(M).max())
@@ -123,7 +124,7 @@ def test_tall_skinny_300k_rows_agrees_with_plain_path():
     M = knn_like(100_000, seed=5)
     big = rpca(M)  # auto -> chunked
     assert big.converged
-    plain = rpca(M, backend="dense")
+    plain = rpca(M, options=RPCASolverOptions(backend="dense"))
     assert big.n_iter == plain.n_iter
     assert rel(big.low_rank, plain.low_rank) < 1e-8
     assert rel(big.sparse, plain.sparse) < 1e-6
@@ -147,8 +148,8 @@ def test_ill_conditioned_tall_matrix_uses_tsqr_and_matches_dense():
     pg.add(M + 1e-6)
     s_pg, _ = pg.finish()
     np.testing.assert_allclose(s_pg, np.linalg.svd(M + 1e-6, compute_uv=False), rtol=1e-8)
-    a = rpca(M, backend="chunked", rng=0)
-    b = rpca(M, backend="dense")
+    a = rpca(M, options=RPCASolverOptions(backend="chunked"), rng=0)
+    b = rpca(M, options=RPCASolverOptions(backend="dense"))
     assert a.converged and b.converged
     assert rel(a.sparse, b.sparse) < 1e-5
 
@@ -177,7 +178,7 @@ def test_core_svd_falls_back_to_gesvd_when_gesdd_fails(monkeypatch):
 def test_float32_mode_close_to_float64():
     M = knn_like(3000, seed=7)
     r64 = rpca(M, tol=1e-6)
-    r32 = rpca(M, tol=1e-6, dtype="float32")
+    r32 = rpca(M, tol=1e-6, options=RPCASolverOptions(dtype="float32"))
     assert r32.low_rank.dtype == np.float32 and r32.sparse.dtype == np.float32
     assert r32.converged
     assert rel(r32.sparse.astype(np.float64), r64.sparse) < 1e-3
@@ -192,7 +193,13 @@ def test_float32_mode_close_to_float64():
 @pytest.mark.parametrize("backend", ["chunked", "dense"])
 def test_godec_hard_threshold_recovers_exactly(backend):
     L, S = planted(seed=0)
-    res = rpca(L + S, method="godec", rank=5, threshold="hard", backend=backend, rng=1)
+    res = rpca(
+        L + S,
+        method="godec",
+        rank=5,
+        options=RPCASolverOptions(threshold="hard", backend=backend),
+        rng=1,
+    )
     assert res.converged
     assert rel(res.low_rank, L) < 1e-5
     assert rel(res.sparse, S) < 1e-5
@@ -213,8 +220,8 @@ def test_godec_soft_threshold_small_bias():
 
 def test_godec_chunked_equals_literal_qr_updates():
     L, S = planted(400, 60, 4, seed=2)
-    a = rpca(L + S, method="godec", rank=4, backend="chunked", rng=3)
-    b = rpca(L + S, method="godec", rank=4, backend="dense", rng=3)
+    a = rpca(L + S, method="godec", rank=4, options=RPCASolverOptions(backend="chunked"), rng=3)
+    b = rpca(L + S, method="godec", rank=4, options=RPCASolverOptions(backend="dense"), rng=3)
     assert a.n_iter == b.n_iter
     assert rel(a.low_rank, b.low_rank) < 1e-8
     assert rel(a.sparse, b.sparse) < 1e-8
@@ -249,7 +256,7 @@ def test_stable_pcp_separates_noise(backend):
     rng = np.random.default_rng(7)
     G = 0.05 * rng.normal(size=L.shape)
     M = L + S + G
-    res = rpca(M, noise_aware=True, backend=backend)
+    res = rpca(M, noise_aware=True, options=RPCASolverOptions(backend=backend))
     assert res.converged and res.noise is not None
     np.testing.assert_allclose(res.low_rank + res.sparse + res.noise, M, atol=1e-9)
     err = rel(res.low_rank, L)
@@ -258,7 +265,7 @@ def test_stable_pcp_separates_noise(backend):
     exact = rpca(M)
     assert err < rel(exact.low_rank, L)
     # noise level given explicitly: same model
-    res2 = rpca(M, noise_aware=True, noise_level=0.05, backend=backend)
+    res2 = rpca(M, noise_aware=True, options=RPCASolverOptions(noise_level=0.05, backend=backend))
     assert rel(res2.low_rank, L) < 0.02
 
 
@@ -312,8 +319,27 @@ def test_nonconvergence_is_reported(kw):
     ],
 )
 def test_validation(M, kw, match):
+    fields = {f.name for f in dataclasses.fields(RPCASolverOptions)}
+    opts = {k: v for k, v in kw.items() if k in fields}
+    direct = {k: v for k, v in kw.items() if k not in fields}
     with pytest.raises(InvalidInputError, match=match):
+        rpca(M, options=RPCASolverOptions(**opts), **direct)
+    with pytest.raises(InvalidInputError, match=match), warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
         rpca(M, **kw)
+
+
+def test_legacy_keywords_warn_and_match_options():
+    rng = np.random.default_rng(5)
+    M = rng.normal(size=(60, 4)) @ rng.normal(size=(4, 30))
+    with pytest.warns(DeprecationWarning, match=r"RPCASolverOptions\(backend=\.\.\., mu=\.\.\.\)"):
+        old = rpca(M, backend="dense", mu="thesis")
+    new = rpca(M, options=RPCASolverOptions(backend="dense", mu="thesis"))
+    np.testing.assert_array_equal(old.sparse, new.sparse)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'speed'"):
+        rpca(M, speed=2)
+    with pytest.raises(InvalidInputError, match="`options` must be a RPCASolverOptions"):
+        rpca(M, options={"backend": "dense"})
 
 
 def test_validation_sparse_input():

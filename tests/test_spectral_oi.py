@@ -15,7 +15,10 @@ from spectrageo.datasets import fandisk
 from spectrageo.graph import adjacency_matrix, knn_graph, laplacian_from_adjacency, mesh_laplacian
 from spectrageo.spectral import (
     DOIResult,
+    LowpassOptions,
+    LowpassResult,
     ShiftedFactor,
+    SubmeshOptions,
     dynamic_orthogonal_iteration,
     fix_signs,
     lowpass,
@@ -159,7 +162,8 @@ def test_submesh_eigenbases_exact_and_tracked(fan):
     # 20 keeps the run short: the convergence factor at 70 columns is ~0.99 per iteration)
     k = 20
     info: list = []
-    tracked = list(submesh_eigenbases(C, subs, k, method="oi", n_iter=3000, tol=1e-11, info=info))
+    opts = SubmeshOptions(n_iter=3000, tol=1e-11)
+    tracked = list(submesh_eigenbases(C, subs, k, method="oi", options=opts, info=info))
     assert all(r.converged for r in info[1:]) and info[0].n_iter == 0  # first one: exact (thesis)
     assert all(r.n_iter > 1 for r in info[1:])  # tracked, not recomputed exactly
     checked = 0
@@ -176,14 +180,14 @@ def test_submesh_eigenbases_exact_and_tracked(fan):
 def test_one_step_oi_lowpass_close_to_exact(fan):
     """Thesis claim (Fig. 5.55): one iteration of T^4 per submesh is almost as good as the exact basis."""
     V, F, _, _ = fan
-    ex = lowpass(V, F, method="exact")
-    oi = lowpass(V, F, method="oi", zeta=4, n_iter=1)
+    ex = lowpass(V, F, method="exact").signal
+    oi = lowpass(V, F, method="oi", options=LowpassOptions(zeta=4, n_iter=1)).signal
     e_ex = np.linalg.norm(ex - V, axis=1).mean()
     e_oi = np.linalg.norm(oi - V, axis=1).mean()
     assert e_ex > 0
     assert e_oi <= 1.2 * e_ex
     # a single T^1 step is clearly worse: the power matters
-    oi1 = lowpass(V, F, method="oi", zeta=1, n_iter=1)
+    oi1 = lowpass(V, F, method="oi", options=LowpassOptions(zeta=1, n_iter=1)).signal
     assert np.linalg.norm(oi1 - V, axis=1).mean() > e_oi
 
 
@@ -206,7 +210,13 @@ def test_doi_meets_thresholds_for_every_submesh(fan):
     # tighter band -> more components
     info2: list = []
     for _ in submesh_eigenbases(
-        C, subs, 0.1, method="doi", signal=V, eps_low=0.005, eps_high=0.008, info=info2
+        C,
+        subs,
+        0.1,
+        method="doi",
+        signal=V,
+        options=SubmeshOptions(eps_low=0.005, eps_high=0.008),
+        info=info2,
     ):
         pass
     assert all(r.residual <= 0.008 and r.converged for r in info2)
@@ -247,7 +257,8 @@ def test_doi_grows_and_shrinks_from_a_bad_start(fan):
     assert not quiet.converged
     # partitioned: one warning naming the count of failed submeshes
     with pytest.warns(ConvergenceWarning, match=r"submeshes did not converge \(doi"):
-        for _ in submesh_eigenbases(C, subs, 0.1, method="doi", signal=V, t_max=1):
+        opts = SubmeshOptions(t_max=1)
+        for _ in submesh_eigenbases(C, subs, 0.1, method="doi", signal=V, options=opts):
             pass
 
 
@@ -263,20 +274,20 @@ def test_oi_nonconvergence_is_reported(fan):
     with pytest.raises(InvalidInputError, match="`on_nonconvergence` must be one of"):
         orthogonal_iteration(L, U0, on_nonconvergence="loud")
     with pytest.warns(ConvergenceWarning, match=r"submeshes did not converge \(oi"):
-        for _ in submesh_eigenbases(C, subs, 20, n_iter=1, tol=1e-12):
+        for _ in submesh_eigenbases(C, subs, 20, options=SubmeshOptions(n_iter=1, tol=1e-12)):
             pass
 
 
 def test_lowpass_keep_all_reproduces_input(fan):
     V, F, _, _ = fan
-    out = lowpass(V, F, keep=1.0, method="exact")
+    out = lowpass(V, F, keep=1.0, method="exact").signal
     np.testing.assert_allclose(out, V, atol=1e-9)
     # a count equal to the submesh size too, also for a 1-D and a 5-D signal
     rng = np.random.default_rng(0)
     X = rng.normal(size=(V.shape[0], 5))
-    np.testing.assert_allclose(lowpass(X, F, keep=700, method="exact"), X, atol=1e-9)
+    np.testing.assert_allclose(lowpass(X, F, keep=700, method="exact").signal, X, atol=1e-9)
     x = X[:, 0]
-    y = lowpass(x, F, keep=1.0, method="exact")
+    y = lowpass(x, F, keep=1.0, method="exact").signal
     assert y.shape == x.shape
     np.testing.assert_allclose(y, x, atol=1e-9)
 
@@ -291,11 +302,12 @@ def test_partitioned_exact_close_to_whole_mesh():
     # the "whole" method is that reference (checked on a smaller sphere: one dense solve is enough)
     Vs, Fs = icosphere(2)
     np.testing.assert_allclose(
-        lowpass(Vs, Fs, keep=0.1, method="whole"),
+        lowpass(Vs, Fs, keep=0.1, method="whole").signal,
         lowpass_whole(Vs, mesh_laplacian(Vs, Fs), keep=0.1),
         atol=1e-10,
     )
-    part = lowpass(Vn, F, keep=0.1, method="exact", submesh_size=500)
+    part = lowpass(Vn, F, keep=0.1, method="exact", options=LowpassOptions(submesh_size=500))
+    part = part.signal
     e_whole = np.linalg.norm(whole - Vn, axis=1).mean()
     e_part = np.linalg.norm(part - Vn, axis=1).mean()
     assert 0.7 * e_whole < e_part < 1.3 * e_whole
@@ -305,11 +317,11 @@ def test_partitioned_exact_close_to_whole_mesh():
 
 def test_point_cloud_graph_and_weighted_laplacians(fan):
     V, F, C, _ = fan
-    a = lowpass(V, F, method="oi", rng=1)
-    b = lowpass(V, C=C, method="oi", rng=1)
+    a = lowpass(V, F, method="oi", rng=1).signal
+    b = lowpass(V, C=C, method="oi", rng=1).signal
     np.testing.assert_array_equal(a, b)
     W = knn_graph(V, 8)
-    pc = lowpass(V, C=W, keep=0.1, method="exact")
+    pc = lowpass(V, C=W, keep=0.1, method="exact").signal
     assert pc.shape == V.shape and np.isfinite(pc).all()
     assert np.linalg.norm(pc - V, axis=1).mean() < 0.1 * np.ptp(V, axis=0).max()
 
@@ -323,26 +335,49 @@ def test_point_cloud_graph_and_weighted_laplacians(fan):
         np.testing.assert_allclose(out.mean(axis=0), V.mean(axis=0), atol=1e-4 * size)
 
     for kind in ("gaussian", "cotangent"):
-        out = lowpass(V, F, laplacian=kind, method="oi")
+        out = lowpass(V, F, laplacian=kind, method="oi").signal
         smoothed_a_little(out)
-        full = lowpass(V, F, laplacian=kind, method="exact", keep=1.0)
+        full = lowpass(V, F, laplacian=kind, method="exact", keep=1.0).signal
         np.testing.assert_allclose(full, V, atol=1e-8)
-    w = lowpass(V, C=W, laplacian="weighted", method="doi")
+    w = lowpass(V, C=W, laplacian="weighted", method="doi").signal
     smoothed_a_little(w)
+
+
+def test_lowpass_result_diagnostics_and_legacy_keywords(fan):
+    V, F, _, _ = fan
+    plain = lowpass(V, F, rng=2)
+    assert isinstance(plain, LowpassResult) and plain.submeshes == ()
+    diag = lowpass(V, F, rng=2, options=LowpassOptions(diagnostics=True))
+    assert len(diag.submeshes) > 1 and diag.submeshes[0].n_iter == 0
+    np.testing.assert_allclose(diag.signal, plain.signal, atol=1e-9)
+    info: list = []
+    with pytest.warns(DeprecationWarning, match="`info` is deprecated"):
+        old = lowpass(V, F, rng=2, info=info)
+    np.testing.assert_array_equal(old.signal, diag.signal)
+    assert [r.residual for r in info] == [r.residual for r in diag.submeshes]
+    with pytest.warns(
+        DeprecationWarning, match=r"LowpassOptions\(submesh_size=\.\.\., zeta=\.\.\.\)"
+    ):
+        legacy = lowpass(V, F, rng=2, zeta=2, submesh_size=600)
+    new = lowpass(V, F, rng=2, options=LowpassOptions(zeta=2, submesh_size=600))
+    np.testing.assert_array_equal(legacy.signal, new.signal)
+    with pytest.raises(InvalidInputError, match="`zeta` must be > 0"):
+        LowpassOptions(zeta=0)
 
 
 def test_determinism_and_progress_free_iteration(fan):
     V, F, C, subs = fan
     for method in ("oi", "doi"):
-        a = lowpass(V, F, method=method, rng=3)
-        b = lowpass(V, F, method=method, rng=3)
+        a = lowpass(V, F, method=method, rng=3).signal
+        b = lowpass(V, F, method=method, rng=3).signal
         assert np.array_equal(a, b)
-    r1 = [U for _, _, U in submesh_eigenbases(C, subs, 20, warm_start=False, rng=5)]
-    r2 = [U for _, _, U in submesh_eigenbases(C, subs, 20, warm_start=False, rng=5)]
+    cold = SubmeshOptions(warm_start=False)
+    r1 = [U for _, _, U in submesh_eigenbases(C, subs, 20, options=cold, rng=5)]
+    r2 = [U for _, _, U in submesh_eigenbases(C, subs, 20, options=cold, rng=5)]
     assert all(np.array_equal(x, y) for x, y in zip(r1, r2))
     # without Rayleigh-Ritz (Algorithm 6 as written) the subspace and the low-pass are the same
     with_rr = list(submesh_eigenbases(C, subs, 20))
-    without = list(submesh_eigenbases(C, subs, 20, ritz=False))
+    without = list(submesh_eigenbases(C, subs, 20, options=SubmeshOptions(ritz=False)))
     for (i, _, Ua), (_, w, Ub) in zip(with_rr[1:], without[1:]):
         assert np.isnan(w).all()
         x = V[subs.parts[i]]
@@ -421,11 +456,20 @@ def test_validation_submesh_eigenbases(fan):
     with pytest.raises(InvalidInputError, match="`info` must be a list"):
         submesh_eigenbases(C, subs, 0.1, info=())
     with pytest.raises(InvalidInputError, match="`n_iter` must be > 0"):
-        submesh_eigenbases(C, subs, 0.1, n_iter=0)
+        SubmeshOptions(n_iter=0)
     with pytest.raises(InvalidInputError, match="`delta` must be > 0"):
-        submesh_eigenbases(C, subs, 0.1, delta=0.0)
+        SubmeshOptions(delta=0.0)
     with pytest.raises(InvalidInputError, match="`tol` must be >= 0"):
-        submesh_eigenbases(C, subs, 0.1, tol=-1.0)
+        SubmeshOptions(tol=-1.0)
+    with pytest.raises(InvalidInputError, match="`eps_low` must be smaller"):
+        SubmeshOptions(eps_low=0.1, eps_high=0.05)
+    with pytest.raises(InvalidInputError, match="`options` must be a SubmeshOptions"):
+        submesh_eigenbases(C, subs, 0.1, options=LowpassOptions())
+    with pytest.warns(DeprecationWarning, match=r"SubmeshOptions\(n_iter=\.\.\.\)"):
+        with pytest.raises(InvalidInputError, match="`n_iter` must be > 0"):
+            submesh_eigenbases(C, subs, 0.1, n_iter=0)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'zeta_'"):
+        submesh_eigenbases(C, subs, 0.1, zeta_=2)
 
 
 def test_validation_lowpass(fan):

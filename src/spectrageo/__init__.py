@@ -1,13 +1,5 @@
-"""spectrageo: spectral processing of static and dynamic 3D geometry.
-
-Triangle meshes, point clouds, mesh animations and point-cloud sequences; graph Laplacians, the
-graph Fourier transform, orthogonal iterations over overlapped submeshes, and low-rank solvers (RPCA,
-matrix completion, incremental SVD, LASSO). Built on them: denoising of meshes and mesh animations
-(spectral and learned), outlier removal for point clouds and point-cloud sequences, saliency and its
-applications, compression of meshes and mesh animations (``spectrageo.compress``), completion of
-holes and missing frames (``spectrageo.complete``), registration and identification in cluttered
-scans (``spectrageo.register``), batch and tiled processing on Dask (``spectrageo.distributed``),
-plus quality metrics, synthetic noise with ground truth and evaluation harnesses.
+"""spectrageo: spectral processing of static and dynamic 3D geometry (meshes, point clouds,
+animations, sequences): Laplacians, GFT, low-rank solvers and the thesis's applications.
 """
 
 from ._errors import (

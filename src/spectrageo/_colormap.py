@@ -8,9 +8,8 @@ import numpy as np
 def jet(
     values, *, n_classes: int = 64, vmin: float | None = None, vmax: float | None = None
 ) -> np.ndarray:
-    """Map scalars to jet RGB colours quantised to ``n_classes`` levels; returns (n, 3) uint8.
-
-    ``vmin``/``vmax`` default to the finite min/max of ``values``; non-finite values map to grey.
+    """Jet RGB colours (n, 3) uint8 in ``n_classes`` levels between ``vmin`` and ``vmax`` (default the
+    finite range); non-finite values are grey.
     """
     v = np.asarray(values, dtype=np.float64).ravel()
     finite = np.isfinite(v)

@@ -1,9 +1,5 @@
-"""Choice of the compute device of the kernels that have a GPU path (issue 21).
-
-``device="cpu"`` runs the numba/numpy kernels and never imports torch; ``"cuda"`` (or
-``"cuda:N"``) runs the GPU path through PyTorch and needs torch built with CUDA and a visible GPU;
-``"auto"`` takes ``"cuda"`` when ``torch.cuda.is_available()`` and ``"cpu"`` otherwise (also when
-torch is not installed). torch is imported lazily, only for ``"cuda"`` and ``"auto"``.
+"""Compute device of the kernels with a GPU path: ``"cpu"`` (numba/numpy, torch never imported),
+``"cuda"`` / ``"cuda:N"`` (PyTorch with a visible GPU) or ``"auto"``.
 """
 
 from __future__ import annotations
@@ -28,24 +24,8 @@ def _import_torch() -> Any:
 
 
 def resolve_device(device: str) -> str:
-    """The device a kernel runs on: ``"cpu"`` or ``"cuda"`` (``"cuda:N"`` when asked for).
-
-    Parameters
-    ----------
-    device : {"cpu", "cuda", "auto"} or "cuda:N"
-        ``"auto"``: ``"cuda"`` when torch is installed and ``torch.cuda.is_available()``, else
-        ``"cpu"``.
-
-    Returns
-    -------
-    str
-        ``"cpu"`` (the numba/numpy path) or the CUDA device string for torch.
-
-    Raises
-    ------
-    InvalidInputError
-        An unknown value, or ``"cuda"`` without torch, without CUDA support in torch or without a
-        visible GPU.
+    """The device a kernel runs on: ``"cpu"`` or a CUDA string (``"auto"``: CUDA when torch sees
+    a GPU). Raises :class:`InvalidInputError` for an unknown value or an unusable ``"cuda"``.
     """
     if not isinstance(device, str):
         raise InvalidInputError(f"`device` must be one of 'cpu', 'cuda', 'auto'; got {device!r}.")
@@ -90,11 +70,8 @@ def resolve_device(device: str) -> str:
 
 
 def resolve_backend(device: Any) -> Any:
-    """``"cpu"`` for the numba/numpy path, else the ``torch.device`` of the torch path.
-
-    ``device`` is a string as in :func:`resolve_device`, or a ``torch.device``: a
-    ``torch.device`` always selects the torch path, also ``torch.device("cpu")`` (the torch
-    path on the CPU, which is how the GPU code is checked on machines without a GPU).
+    """``"cpu"`` for the numba/numpy path, else the ``torch.device`` of the torch path (a
+    ``torch.device``, even a CPU one, always selects torch).
     """
     if isinstance(device, str):
         dev = resolve_device(device)

@@ -1,9 +1,4 @@
-"""Exception and warning hierarchy of spectrageo.
-
-Every error raised on purpose by the library derives from :class:`SpectrageoError`, so a caller can
-catch all of them at once. Input problems are also ``ValueError`` so that generic code that catches
-``ValueError`` keeps working.
-"""
+"""Exception and warning hierarchy; every deliberate error is a :class:`SpectrageoError`."""
 
 from __future__ import annotations
 

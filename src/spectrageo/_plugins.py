@@ -42,4 +42,6 @@ def load_plugins(group: str) -> None:
             register()
         except Exception as exc:  # a broken plugin is an error, named, never skipped
             _LOADED.discard(group)
-            raise SpectrageoError(f"plugin {ep.name!r} ({ep.value}) of {group!r} failed: {exc}") from exc
+            raise SpectrageoError(
+                f"plugin {ep.name!r} ({ep.value}) of {group!r} failed: {exc}"
+            ) from exc

@@ -15,8 +15,7 @@ QUIET = False
 
 
 def progress_enabled() -> bool:
-    """True when progress bars should be drawn: stderr is a terminal and not disabled by env
-    (``SPECTRAGEO_PROGRESS=0``) or ``--quiet``."""
+    """True when stderr is a terminal and neither ``SPECTRAGEO_PROGRESS=0`` nor ``--quiet``."""
     if QUIET:
         return False
     if os.environ.get("SPECTRAGEO_PROGRESS", "").lower() in {"0", "off", "false", "no"}:
@@ -37,11 +36,8 @@ def progress(iterable: Iterable[T], *, desc: str = "", total: int | None = None)
 
 
 class activity:  # noqa: N801 - used as a context manager, like tqdm
-    """Show ``desc: 12.3 s`` on a terminal, refreshed twice a second, while a block runs.
-
-    For single long calls that have no natural loop to count (a denoiser on one large mesh).
-    Draws nothing when :func:`progress_enabled` is False (piped output, ``--quiet``); the line is
-    erased when the block ends.
+    """Show ``desc: 12.3 s`` on a terminal while a block without a natural loop runs (erased at
+    the end; nothing when :func:`progress_enabled` is False).
     """
 
     def __init__(self, desc: str, *, interval: float = 0.5, delay: float = 1.0) -> None:

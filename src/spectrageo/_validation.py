@@ -1,11 +1,9 @@
-"""Input checks at the public boundary.
-
-All functions here raise :class:`~spectrageo._errors.InvalidInputError` with a message that names the
-argument, the expected value and the received one.
-"""
+"""Input checks at the public boundary; errors name the argument, the expected and the received value."""
 
 from __future__ import annotations
 
+import dataclasses
+import warnings
 from typing import Any
 
 import numpy as np
@@ -31,9 +29,7 @@ MIN_EXTENT = 1e-70
 def coordinate_array(
     X: Any, name: str, *, ndim: int = 2, copy: bool = False, allow_empty: bool = False
 ) -> np.ndarray:
-    """``X`` as a float64 array of shape (n, 3) (``ndim=2``) or (T, n, 3) (``ndim=3``), checked
-    for type, shape and emptiness only: the values may be anything, NaN included (the callers
-    apply their own policy for rows without coordinates)."""
+    """``X`` as float64 (n, 3) or (T, n, 3), checked for type, shape and emptiness only."""
     want = "(n, 3)" if ndim == 2 else "(T, n, 3)"
     try:
         arr = np.array(X, dtype=np.float64) if copy else np.asarray(X, dtype=np.float64)
@@ -53,9 +49,9 @@ def coordinate_array(
 def as_points(
     V: Any, name: str = "V", *, allow_empty: bool = False, copy: bool = False
 ) -> np.ndarray:
-    """Return ``V`` as a C-contiguous float64 array of shape (n, 3) with finite entries of
-    magnitude at most :data:`MAX_COORDINATE` (1e150), spanning either nothing (one point, or
-    coincident points) or at least :data:`MIN_EXTENT` (1e-70)."""
+    """``V`` as C-contiguous float64 (n, 3), finite, within :data:`MAX_COORDINATE` and spanning
+    nothing or at least :data:`MIN_EXTENT`.
+    """
     arr = coordinate_array(V, name, copy=copy, allow_empty=allow_empty)
     if not arr.size:
         return np.ascontiguousarray(arr)
@@ -147,10 +143,7 @@ def check_choice(value: Any, name: str, choices: tuple[str, ...] | list[str]) ->
 
 
 def as_rng(rng: Any) -> np.random.Generator:
-    """Return a :class:`numpy.random.Generator` from a seed, a Generator or ``None`` (seed 0).
-
-    ``None`` maps to a fixed seed so that results are reproducible unless the caller asks otherwise.
-    """
+    """A :class:`numpy.random.Generator` from a seed, a Generator or None (seed 0, reproducible)."""
     if isinstance(rng, np.random.Generator):
         return rng
     if rng is None:
@@ -165,9 +158,9 @@ def as_rng(rng: Any) -> np.random.Generator:
 
 
 def as_frames(frames: Any, name: str = "frames") -> np.ndarray:
-    """Validate animation frames: a (T, n, 3) float64 array (or an object with ``.frames``),
-    T, n >= 1, all finite and at most :data:`MAX_COORDINATE` in magnitude; the first bad vertex is
-    named in the error."""
+    """Animation frames (T, n, 3) float64 (or ``.frames``), finite and at most
+    :data:`MAX_COORDINATE`; the first bad vertex is named.
+    """
     A = coordinate_array(getattr(frames, "frames", frames), name, ndim=3)
     if not np.isfinite(A).all():
         bad = np.argwhere(~np.isfinite(A).all(axis=2))[0]
@@ -181,3 +174,29 @@ def as_frames(frames: Any, name: str = "frames") -> np.ndarray:
             f"{bad[0]}, vertex {bad[1]}); squared distances would overflow. Rescale the data."
         )
     return A
+
+
+def options_with_legacy(options: Any, legacy: dict, cls: type, func: str) -> Any:
+    """``options`` (a ``cls`` or None) with the deprecated keywords ``legacy`` of ``func``
+    mapped onto its fields, with a :class:`DeprecationWarning`; :class:`TypeError` for an unknown one.
+    """
+    if options is None:
+        options = cls()
+    elif not isinstance(options, cls):
+        raise InvalidInputError(
+            f"`options` must be a {cls.__name__} or None; got {type(options).__name__}."
+        )
+    if not legacy:
+        return options
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(legacy) - names)
+    if unknown:
+        raise TypeError(f"{func}() got an unexpected keyword argument {unknown[0]!r}")
+    given = ", ".join(f"{k}=..." for k in sorted(legacy))
+    warnings.warn(
+        f"{func}(): passing {', '.join(sorted(legacy))} as keyword arguments is deprecated; "
+        f"use options={cls.__name__}({given}).",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    return dataclasses.replace(options, **legacy)

@@ -1,6 +1,7 @@
 """Geometry containers and per-element quantities (thesis Chapter 3)."""
 
 from .data import Mesh, MeshAnimation, PointCloud, PointCloudSequence
+from .neighbors import knn
 from .pointcloud import pca_normals
 from .primitives import (
     boundary_edges,
@@ -56,6 +57,7 @@ __all__ = [
     "mean_edge_length",
     "mesh_topology",
     "is_soup",
+    "knn",
     "merge_duplicate_vertices",
     "pca_normals",
     "remove_unreferenced",

@@ -55,9 +55,9 @@ def vertex_update_kernel(V, F, N, inv_deg, n_iter):  # pragma: no cover - jitted
 
 @numba.njit(cache=True, nogil=True)
 def jacobi3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
-    """``(A, V)``: cyclic Jacobi rotations of a symmetric 3x3 matrix (backward stable also for
-    repeated eigenvalues); the eigenvalues are on the diagonal of ``A``, the unit eigenvectors
-    the columns of ``V``, unsorted."""
+    """``(A, V)``: cyclic Jacobi of a symmetric 3x3 matrix; eigenvalues on the diagonal of ``A``,
+    unit eigenvectors in the columns of ``V``, unsorted.
+    """
     A = np.empty((3, 3))
     A[0, 0], A[1, 1], A[2, 2] = a00, a11, a22
     A[0, 1] = A[1, 0] = a01
@@ -95,8 +95,7 @@ def jacobi3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def min_eigvec3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
-    """``(lambda_min, x, y, z)``: smallest eigenvalue of a symmetric 3x3 matrix and its unit
-    eigenvector (:func:`jacobi3`)."""
+    """``(lambda_min, x, y, z)`` of a symmetric 3x3 matrix (:func:`jacobi3`)."""
     A, V = jacobi3(a00, a11, a22, a01, a02, a12)
     j = 0
     if A[1, 1] < A[j, j]:
@@ -108,8 +107,7 @@ def min_eigvec3(a00, a11, a22, a01, a02, a12):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def patch_covariance(P, row):  # pragma: no cover - jitted
-    """``(cxx, cyy, czz, cxy, cxz, cyz)`` of ``(1/k) sum (p - mean)(p - mean)^T`` over the points
-    ``P[row]`` (``k = row.size``)."""
+    """Entries ``(cxx, cyy, czz, cxy, cxz, cyz)`` of the covariance of ``P[row]``."""
     k = row.shape[0]
     mx = 0.0
     my = 0.0
@@ -144,8 +142,7 @@ def patch_covariance(P, row):  # pragma: no cover - jitted
 
 @numba.njit(cache=True, parallel=True)
 def patch_min_variance(P, idx, lam, dirs):  # pragma: no cover - jitted
-    """Smallest eigenvalue ``lam[i]`` and its unit eigenvector ``dirs[i]`` of the covariance
-    ``(1/k) sum (p - mean)(p - mean)^T`` of the points ``P[idx[i]]`` (``k`` = row length)."""
+    """Smallest covariance eigenvalue ``lam[i]`` and its direction ``dirs[i]`` of ``P[idx[i]]``."""
     for i in numba.prange(idx.shape[0]):
         cxx, cyy, czz, cxy, cxz, cyz = patch_covariance(P, idx[i])
         w, x, y, z = min_eigvec3(cxx, cyy, czz, cxy, cxz, cyz)
@@ -157,17 +154,10 @@ def patch_min_variance(P, idx, lam, dirs):  # pragma: no cover - jitted
 
 @numba.njit(cache=True, parallel=True)
 def patch_quadric_residual(P, idx, dirs, res, spread):  # pragma: no cover - jitted
-    """Residual variance ``res[i]`` of the least-squares quadric height field
-    ``h = a x^2 + b xy + c y^2 + d x + e y + f`` fitted to the points ``P[idx[i]]`` in the frame
-    whose height axis is the patch's minimum-variance direction ``dirs[i]``:
-    ``res[i] = RSS / (k - 6)`` (the normal equations carry a 1e-10 relative ridge, so
-    near-singular designs still solve). Rows with fewer than 7 points, or whose points all
-    coincide, get ``res[i] = inf`` so that quantiles skip them. ``spread[i]`` is the ratio of
-    the smaller to the larger eigenvalue of the patch's 2x2 second-moment matrix in the tangent
-    plane (0: the points lie on a line, 1: isotropic); near-collinear patches (long thin
-    triangles) let the quadric fit part of the noise; :func:`spectrageo.denoise._guard.noise_sigma` does
-    not filter on it (on the shared meshes skipping rows under 0.1 changed no estimate by more
-    than a few per cent)."""
+    """Residual variance ``RSS / (k - 6)`` of the quadric height field fitted to
+    ``P[idx[i]]`` along ``dirs[i]`` (``inf`` below 7 points or for coincident points), and the
+    tangent ``spread`` (docs/decisions.md#geometry-quadric-spread).
+    """
     k = idx.shape[1]
     for i in numba.prange(idx.shape[0]):
         if k < 7:
@@ -247,8 +237,7 @@ def patch_quadric_residual(P, idx, dirs, res, spread):  # pragma: no cover - jit
 
 @numba.njit(cache=True)
 def neighbour_median_residual(indptr, indices, r, s):  # pragma: no cover - jitted
-    """``s[i] = r[i] - median(r[j] for j in N(i))`` over the CSR adjacency (Eq. N6 of
-    :mod:`spectrageo.denoise._guard`); ``s[i] = 0`` for isolated vertices."""
+    """``s[i] = r[i] - median(r[N(i)])`` over a CSR adjacency (0 when isolated)."""
     n = r.shape[0]
     for i in range(n):
         a, b = indptr[i], indptr[i + 1]
@@ -263,9 +252,9 @@ def neighbour_median_residual(indptr, indices, r, s):  # pragma: no cover - jitt
 
 @numba.njit(cache=True)
 def isolated_spikes(indptr, indices, s, thr, iso, flag):  # pragma: no cover - jitted
-    """``flag[i]``: ``|s[i]| > thr``, larger than every neighbour's ``|s[j]|``, and every
-    neighbour with the sign of ``s[i]`` below ``iso * |s[i]|`` (Eq. N7 of
-    :mod:`spectrageo.denoise._guard`). Returns the number flagged."""
+    """Flag vertices whose ``|s[i]| > thr`` dominates their neighbours (Eq. N7 of
+    :mod:`spectrageo.denoise._guard`); returns the count.
+    """
     n = s.shape[0]
     cnt = 0
     for i in range(n):
@@ -285,10 +274,9 @@ def isolated_spikes(indptr, indices, s, thr, iso, flag):  # pragma: no cover - j
 
 @numba.njit(cache=True)
 def few_face_planes(vf_ptr, vf_idx, FN, sel, cos_tol, max_planes, out):  # pragma: no cover - jitted
-    """``out[t]``: the faces around vertex ``sel[t]`` (CSR ``vf_ptr``/``vf_idx`` into the unit
-    face normals ``FN``) have at most ``max_planes`` distinct normals (greedy clusters, cosine
-    above ``cos_tol``) while there are more faces than that: the vertex sits exactly on a crease
-    or corner of planar parts (Eq. N7 of :mod:`spectrageo.denoise._guard`)."""
+    """``out[t]``: the faces around ``sel[t]`` have at most ``max_planes`` distinct normals
+    (cosine above ``cos_tol``) while being more: a vertex on a crease of planar parts.
+    """
     reps = np.empty((max_planes + 1, 3))
     for t in range(sel.shape[0]):
         i = sel[t]
@@ -332,9 +320,7 @@ def jacobi_rotate(app, aqq, apq, arp, arq):  # pragma: no cover - jitted
 
 @numba.njit(cache=True)
 def max_sq_distance(N, i, members, j):  # pragma: no cover - jitted
-    """``max_q ||N[i] - N[members[j, q]]||^2`` (0 when every member is ``i``; a NaN distance
-    never raises the maximum): the spread of a patch of unit normals around ``N[i]``
-    (Eq. 4.10 / 5.17), shared by the kernels that score patches by it."""
+    """``max_q ||N[i] - N[members[j, q]]||^2``, the spread of a normal patch (Eq. 4.10 / 5.17)."""
     best = 0.0
     for q in range(members.shape[1]):
         g = members[j, q]
@@ -349,10 +335,9 @@ def max_sq_distance(N, i, members, j):  # pragma: no cover - jitted
 
 @numba.njit(cache=True)
 def patch_moments(N, nb_sorted):  # pragma: no cover - jitted
-    """Entries [xx, yy, zz, xy, xz, yz] of ``R_i = N_i^T N_i / k`` for every patch ``i`` of the
-    rows ``N[nb_sorted[i]]``, summed in the order given (TSGSP's fine step passes its members
-    in ascending order, the summation order of the sparse product of ``patch_eigenvalues``),
-    in float64 whatever the dtype of ``N``."""
+    """Entries [xx, yy, zz, xy, xz, yz] of ``R_i = N_i^T N_i / k`` per patch, float64, summed
+    in the order of ``nb_sorted``.
+    """
     m, k = nb_sorted.shape
     out = np.zeros((m, 6))
     for i in range(m):
@@ -384,11 +369,9 @@ def patch_moments(N, nb_sorted):  # pragma: no cover - jitted
 
 @numba.njit(cache=True, parallel=True)
 def patch_bimodality(N, nb, S):  # pragma: no cover - jitted
-    """Sarle's bimodality coefficient ``(g^2 + 1) / kappa`` (``g`` skewness, ``kappa`` kurtosis)
-    of the rows ``N[nb[i]]`` projected on the eigenvector of the middle eigenvalue of their
-    second-moment matrix ``S[i]`` ((m, 6) [xx, yy, zz, xy, xz, yz], :func:`patch_moments`), the
-    direction in which the patch's normals spread most. 1 for any two-valued projection, 5/9
-    for a uniform one, 1/3 for a Gaussian one; 0 where the projections do not vary."""
+    """Sarle's bimodality coefficient ``(g^2 + 1) / kappa`` of each patch projected on the
+    middle eigenvector of its moments ``S[i]`` (1 two-valued, 5/9 uniform, 1/3 Gaussian, 0 constant).
+    """
     m, k = nb.shape
     out = np.zeros(m)
     for i in numba.prange(m):
@@ -427,11 +410,9 @@ def patch_bimodality(N, nb, S):  # pragma: no cover - jitted
 
 @numba.njit(cache=True, parallel=True)
 def sym3_eigenvalues(S):  # pragma: no cover - jitted
-    """Ascending eigenvalues of symmetric 3x3 matrices given as (m, 6) [xx, yy, zz, xy, xz, yz].
-
-    Cyclic Jacobi rotations (backward stable like LAPACK: absolute error of the order of the
-    rounding error times the largest eigenvalue, also for the repeated eigenvalues of flat
-    patches, where the closed-form cubic solution loses half of the digits)."""
+    """Ascending eigenvalues of (m, 6) symmetric 3x3 matrices by cyclic Jacobi, backward
+    stable also for the repeated eigenvalues of flat patches.
+    """
     m = S.shape[0]
     out = np.empty((m, 3))
     for i in numba.prange(m):

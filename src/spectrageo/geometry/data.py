@@ -1,13 +1,6 @@
-"""Light, validated, numpy-backed containers for the four kinds of geometry spectrageo handles.
-
-* :class:`Mesh` – a triangle mesh ``(V, F)`` with optional per-vertex normals/colours and scalar
-  attributes per vertex or face.
-* :class:`PointCloud` – points with optional normals, colours and per-point scalars.
-* :class:`MeshAnimation` – ``frames`` (T, n, 3) sharing one face array (fixed connectivity).
-* :class:`PointCloudSequence` – a list of point clouds whose sizes may vary from frame to frame.
-
-Containers validate on construction (shapes, finiteness, index range) and never copy more than
-needed; arrays handed in are not modified.
+"""Validated, numpy-backed containers: :class:`Mesh`, :class:`PointCloud`, :class:`MeshAnimation`
+(frames (T, n, 3) with one face array) and :class:`PointCloudSequence` (sizes may vary). Input
+arrays are never modified.
 """
 
 from __future__ import annotations
@@ -48,16 +41,9 @@ def _check_attributes(attrs: dict[str, Any] | None, n: int, what: str) -> dict[s
 
 @dataclass(frozen=True, eq=False)
 class Mesh:
-    """Triangle mesh.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-    faces : (m, 3) int64, 0-based indices into ``vertices``.
-    vertex_normals : (n, 3) float, optional
-    vertex_colors : (n, 3) or (n, 4) uint8 or float in [0, 1], optional
-    vertex_attributes, face_attributes : dict of name -> array with n (resp. m) rows, optional
-        Extra scalar properties (e.g. PLY ``quality`` or a saliency map).
+    """Triangle mesh: ``vertices`` (n, 3) float64, ``faces`` (m, 3) int64, optional
+    ``vertex_normals`` (n, 3), ``vertex_colors`` (n, 3|4) and ``vertex_attributes`` /
+    ``face_attributes`` (dicts of per-element arrays).
     """
 
     vertices: np.ndarray

@@ -1,27 +1,6 @@
-"""Classification of faces and vertices into corners, edges and flat areas (Section 4.4, Eq. 4.14-4.15).
-
-For every element ``i`` a patch ``P_i`` of its ``k`` nearest elements is formed (faces by centroid
-distance, vertices by position; the element itself is part of its patch). The normals of the patch
-are stacked into ``N_i`` (k, 3) (Eq. 4.14) and the matrix ``R_i = N_i^T N_i`` (Eq. 4.15) is
-decomposed. With ascending eigenvalues ``l1 <= l2 <= l3``:
-
-* corner: ``l1 ~ l2 ~ l3`` (normals spread in all directions),
-* edge:   ``l1 ~ 0 < l2`` (normals in a plane: two sides of a crease),
-* flat:   ``l1 ~ l2 ~ 0 < l3`` (one dominant direction).
-
-As in the thesis the three classes are found by 3-means clustering of the eigenvalues. Because the
-normals are unit, ``trace(R_i) = k``; the eigenvalues are divided by ``k`` so that every element is a
-point of the simplex ``l1 + l2 + l3 = 1`` and patches of any size are comparable. The clustering is
-deterministic: Lloyd iterations start from the three ideal prototypes (corner ``(1/3, 1/3, 1/3)``,
-edge ``(0, 1/2, 1/2)``, flat ``(0, 0, 1)``) and the final clusters are named by their centres: the
-one with the largest mean ``l1`` is "corner", of the other two the one with the larger mean ``l2`` is
-"edge", the last is "flat".
-
-k-means always returns three non-empty groups, even on a surface without creases, where it would
-split the spread of the noise into three. A cluster is therefore kept as corner or edge only when its
-centre is a feature in absolute terms (mean ``l2`` at least ``min_feature``, default 0.02, about
-the spread of normals tilted by 8 degrees); otherwise its members are labelled flat. Pass
-``min_feature=0`` for the plain 3-means of the thesis.
+"""Classification of faces and vertices into corners, edges and flat areas (Section 4.4, Eq. 4.14-4.15):
+a deterministic 3-means of the eigenvalues of ``R_i = N_i^T N_i / k`` of each patch of normals
+(docs/decisions.md#geometry-feature-floor).
 """
 
 from __future__ import annotations
@@ -34,7 +13,7 @@ import scipy.sparse as sp
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, as_rng, check_positive
-from ..graph.adjacency import knn
+from .neighbors import knn
 from .primitives import face_centroids, face_normals, vertex_normals
 
 FLAT = 0
@@ -48,22 +27,9 @@ _KMEANS_FIT_MAX = 200_000
 
 @dataclass(frozen=True)
 class FeatureClasses:
-    """Result of :func:`classify_faces` / :func:`classify_vertices`.
-
-    Attributes
-    ----------
-    labels : (m,) int8
-        ``0`` flat (:data:`FLAT`), ``1`` edge (:data:`EDGE`), ``2`` corner (:data:`CORNER`).
-    eigenvalues : (m, 3) float64
-        Ascending eigenvalues of ``R_i / k`` (Eq. 4.15), each row sums to 1.
-    neighbors : (m, k) int64
-        Indices of the patch of each element, nearest first (the element itself is included).
-    centers : (3, 3) float64
-        Mean eigenvalues of each final class, rows in label order (flat, edge, corner); zeros
-        for an empty class.
-    n_iter, converged, residual
-        Lloyd iterations of the 3-means, whether the assignment stopped changing, final inertia
-        (mean squared distance of the points to their centres).
+    """Result of :func:`classify_faces` / :func:`classify_vertices`: ``labels`` (m,) int8 (0 flat,
+    1 edge, 2 corner), ascending ``eigenvalues`` (m, 3) of ``R_i / k``, patch ``neighbors`` (m, k),
+    class ``centers`` (3, 3), and the 3-means ``n_iter``, ``converged`` and ``residual`` (inertia).
     """
 
     labels: np.ndarray
@@ -100,19 +66,8 @@ def patch_matrix(neighbors: np.ndarray, n_elements: int | None = None) -> sp.csr
 
 
 def patch_eigenvalues(normals: np.ndarray, neighbors: np.ndarray) -> np.ndarray:
-    """Ascending eigenvalues of ``R_i = N_i^T N_i / k`` for every patch (Eq. 4.14-4.15).
-
-    The six distinct entries of each ``R_i`` are summed with one sparse product (no (m, k, 3)
-    temporary), then all 3x3 matrices are decomposed in batches.
-
-    Parameters
-    ----------
-    normals : (m, 3) float, unit rows
-    neighbors : (m, k) int, patch indices
-
-    Returns
-    -------
-    (m, 3) float64, ascending per row.
+    """Ascending eigenvalues (m, 3) of ``R_i = N_i^T N_i / k`` for unit ``normals`` (m, 3) and
+    patch ``neighbors`` (m, k) (Eq. 4.14-4.15).
     """
     N = np.asarray(normals, dtype=np.float64)
     nb = np.asarray(neighbors, dtype=np.int64)
@@ -149,8 +104,7 @@ def _sym3_eigvalsh(S: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True)
 def _assign(X, centers, labels, sums, counts):  # pragma: no cover - jitted
-    """One Lloyd assignment pass: nearest centre of every row (first on ties), per-cluster sums and
-    counts; returns whether any label changed."""
+    """One Lloyd pass: nearest centre per row, cluster sums and counts; whether a label changed."""
     m, d = X.shape
     kc = centers.shape[0]
     sums[:] = 0.0
@@ -196,24 +150,11 @@ def _lloyd(X: np.ndarray, centers: np.ndarray, max_iter: int):
 def cluster_eigenvalues(
     eigenvalues: np.ndarray, *, min_feature: float = 0.02, max_iter: int = 100, rng=None
 ):
-    """3-means of normalised patch eigenvalues into flat / edge / corner (Section 4.4).
+    """3-means of normalised patch eigenvalues (m, 3) into flat / edge / corner (Section 4.4).
 
-    Parameters
-    ----------
-    eigenvalues : (m, 3) float
-        Ascending eigenvalues of ``R_i / k`` (rows summing to 1), e.g. from :func:`patch_eigenvalues`.
-    min_feature : float
-        Absolute floor on the mean second eigenvalue of a cluster for it to be kept as edge or
-        corner (see the module docstring); 0 gives the plain 3-means.
-    max_iter : int
-        Maximum Lloyd iterations.
-    rng : seed or Generator
-        Only used to subsample the points the centres are fitted on when there are more than
-        200,000 of them (all points are then assigned to the fitted centres).
-
-    Returns
-    -------
-    labels (m,) int8, centers (3, 3) in label order, n_iter, converged, residual.
+    ``min_feature`` is the floor on a feature cluster's mean ``l2`` (0: plain 3-means),
+    ``max_iter`` bounds the Lloyd iterations, ``rng`` subsamples the fit above 200,000 points.
+    Returns ``(labels (m,) int8, centers (3, 3), n_iter, converged, residual)``.
     """
     X = np.asarray(eigenvalues, dtype=np.float64)
     m = X.shape[0]
@@ -277,8 +218,7 @@ def _as_normals(normals, m: int, name: str = "normals") -> np.ndarray:
 
 
 def _check_some_area(N: np.ndarray) -> None:
-    """Refuse a mesh none of whose faces has an area: its normals are all zero, and every
-    patch would be called flat."""
+    """Refuse a mesh without any face of positive area (all patches would be flat)."""
     if not np.any(np.einsum("ij,ij->i", N, N) > 0):
         raise InvalidInputError(
             "every face of the mesh is degenerate (zero area): there are no normals to classify."
@@ -292,21 +232,11 @@ def classify_faces(
 
     Parameters
     ----------
-    V : (n, 3) float
-    F : (m, 3) int
+    V, F : (n, 3) float, (m, 3) int
     patch : int
-        Patch size ``k``: the number of nearest faces (by centroid distance, the face included)
-        whose normals form ``N_i`` (Eq. 4.14). Larger patches find larger-scale features (Fig. 5.5).
-    normals : (m, 3) float, optional
-        Face normals to analyse (e.g. already filtered ones); default: the normals of ``(V, F)``.
-    min_feature : float
-        Absolute floor for a cluster to count as a feature (module docstring); 0 = plain 3-means.
-    rng : seed or Generator
-        See :func:`cluster_eigenvalues` (only used for very large meshes).
-
-    Returns
-    -------
-    :class:`FeatureClasses` with per-face ``labels``.
+        Nearest faces by centroid (itself included) forming ``N_i``; larger finds larger features.
+    normals, min_feature, rng
+        Face normals to analyse (default those of ``(V, F)``); see :func:`cluster_eigenvalues`.
 
     Examples
     --------
@@ -332,15 +262,9 @@ def classify_faces(
 def classify_vertices(
     V, F=None, *, patch: int = 15, normals=None, min_feature: float = 0.02, rng=None
 ) -> FeatureClasses:
-    """Label every vertex (or point) as corner, edge or flat (Section 4.4 applied to vertices).
-
-    The patch of vertex ``i`` is its ``patch`` nearest vertices (itself included) and ``N_i`` stacks
-    their normals. Normals are ``normals`` when given, else the area-weighted vertex normals of
-    ``(V, F)``; a point cloud (``F=None``) needs ``normals``.
-
-    Returns
-    -------
-    :class:`FeatureClasses` with per-vertex ``labels``.
+    """Label every vertex or point as corner, edge or flat (Section 4.4): patches of the
+    ``patch`` nearest vertices, with ``normals`` or the area-weighted vertex normals of ``(V, F)``
+    (a point cloud, ``F=None``, needs ``normals``). Returns a :class:`FeatureClasses`.
     """
     V = as_points(V, "V")
     n = V.shape[0]

@@ -7,7 +7,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 
 from .._validation import as_points, check_choice, check_positive
-from ..graph.adjacency import knn
+from .neighbors import knn
 
 _CHUNK = 200_000
 
@@ -15,23 +15,15 @@ _CHUNK = 200_000
 def pca_normals(
     P, k: int = 10, *, orient: str = "mst", viewpoint=None, return_eigenvalues: bool = False
 ):
-    """Unit normals of a point cloud from the covariance of each point's kNN patch.
+    """Unit normals (n, 3) of a point cloud from each point's kNN covariance (Eq. 6.31).
 
-    For point ``v_i`` with neighbourhood ``Psi_i`` (``k`` nearest neighbours plus itself) the matrix
-    ``(1/|Psi_i|) sum (v - v_i)(v - v_i)^T`` of Eq. (6.31) is formed; its eigenvector of smallest
-    eigenvalue is the normal. (Eq. 6.31 centres on ``v_i`` rather than on the patch mean; we follow it.)
-
-    Orientation (``orient``):
-
-    * ``"mst"`` (default): propagate a consistent sign along a minimum spanning tree of the kNN graph
-      weighted by ``1 - |n_i . n_j|`` (Hoppe et al.), each connected component rooted at its point of
-      largest ``z`` whose normal is made to point to +z;
-    * ``"viewpoint"``: flip normals to face ``viewpoint`` (default: a point far above the bbox centre
-      along +z... i.e. the sensor position for a range scan should be given explicitly);
-    * ``"centroid"``: point away from the cloud's centroid (closed, star-shaped objects);
-    * ``"none"``: raw eigenvector signs (deterministic: largest-magnitude entry positive).
-
-    Returns ``normals`` (n, 3), and the ascending eigenvalues (n, 3) when ``return_eigenvalues``.
+    The matrix ``(1/|Psi_i|) sum (v - v_i)(v - v_i)^T`` over the ``k`` neighbours and ``v_i``
+    (centred on ``v_i`` as in Eq. 6.31) gives the normal as its smallest eigenvector. ``orient``:
+    ``"mst"`` propagates signs along a minimum spanning tree weighted by ``1 - |n_i . n_j|``
+    (Hoppe et al.), each component's highest point facing +z; ``"viewpoint"`` faces ``viewpoint``
+    (default far above the bounding box); ``"centroid"`` points away from the centroid; ``"none"``
+    keeps the largest-magnitude entry positive. ``return_eigenvalues`` also returns the ascending
+    eigenvalues (n, 3).
     """
     P = as_points(P, "P")
     check_positive(k, "k", integer=True)

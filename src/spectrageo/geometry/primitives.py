@@ -1,7 +1,5 @@
-"""Per-face and per-vertex geometric quantities of triangle meshes (thesis Chapter 3).
-
-Degenerate-face policy: a face of zero area has a zero normal (not NaN). Unit-normal functions
-return zero vectors for such faces and for isolated vertices, so no NaN ever reaches the output.
+"""Per-face and per-vertex quantities of triangle meshes (thesis Chapter 3). Zero-area faces and
+isolated vertices get zero normals, never NaN.
 """
 
 from __future__ import annotations
@@ -36,10 +34,8 @@ def _face_cross(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def face_normals(V, F, *, unit: bool = True) -> np.ndarray:
-    """Face (centroid) normals ``(v2 - v1) x (v3 - v1)`` (Eq. 3.2), shape (m, 3).
-
-    With ``unit=True`` (default) rows are normalised; degenerate faces get a zero vector.
-    With ``unit=False`` the vector length is twice the face area.
+    """Face normals ``(v2 - v1) x (v3 - v1)`` (Eq. 3.2), (m, 3): unit (zero for degenerate faces)
+    or, with ``unit=False``, of length twice the face area.
     """
     V, F = _VF(V, F)
     cr = _face_cross(V, F)
@@ -65,11 +61,8 @@ def vertex_face_matrix(F, n_vertices: int) -> sp.csr_matrix:
 
 
 def vertex_normals(V, F, *, weighting: str = "mean") -> np.ndarray:
-    """Unit vertex normals, shape (n, 3).
-
-    ``weighting="mean"``: the plain average of the unit normals of the incident faces (Eq. 3.3).
-    ``weighting="area"``: area-weighted average (sum of un-normalised face normals).
-    Isolated vertices get a zero vector.
+    """Unit vertex normals (n, 3): mean of the incident unit face normals (Eq. 3.3) or
+    area-weighted (``weighting="area"``); zero for isolated vertices.
     """
     check_choice(weighting, "weighting", ("mean", "area"))
     V, F = _VF(V, F)
@@ -121,10 +114,8 @@ def boundary_edges(F, n_vertices: int | None = None) -> np.ndarray:
 
 
 def boundary_loops(F, n_vertices: int | None = None) -> list[np.ndarray]:
-    """Closed boundary loops as arrays of vertex indices (one per hole or open border).
-
-    Non-manifold boundaries (a vertex with several outgoing boundary edges) are split at that vertex
-    deterministically; each returned loop visits each of its edges once.
+    """Closed boundary loops as vertex index arrays; non-manifold boundaries are split at the
+    pinch vertex deterministically.
     """
     B = boundary_edges(F, n_vertices)
     if B.size == 0:
@@ -158,9 +149,8 @@ def boundary_loops(F, n_vertices: int | None = None) -> list[np.ndarray]:
 
 
 def cotangent_weights(V, F) -> sp.csr_matrix:
-    """Symmetric sparse (n, n) matrix of cotangent edge weights ``(cot a + cot b) / 2``.
-
-    Degenerate triangles contribute zero weight (their cotangents are undefined).
+    """Symmetric sparse (n, n) cotangent weights ``(cot a + cot b) / 2`` (zero for degenerate
+    triangles).
     """
     V, F = _VF(V, F)
     n = V.shape[0]
@@ -191,11 +181,8 @@ def vertex_areas(V, F) -> np.ndarray:
 
 
 def mean_curvature(V, F) -> np.ndarray:
-    """Signed mean curvature per vertex from the cotangent Laplacian, shape (n,).
-
-    ``H n = (L_cot V) / (2 A)`` with barycentric areas ``A``; the sign is positive where the
-    curvature vector points against the outward vertex normal (convex regions of an outward-oriented
-    closed mesh). Isolated vertices and zero-area vertices get 0.
+    """Signed mean curvature (n,) from ``H n = (L_cot V) / (2 A)`` with barycentric areas,
+    positive on convex parts of an outward-oriented surface; 0 where the area is zero.
     """
     V, F = _VF(V, F)
     W = cotangent_weights(V, F)

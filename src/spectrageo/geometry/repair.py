@@ -1,12 +1,7 @@
-"""Documented repairs for imperfect meshes.
-
-Policies (used by readers when ``repair=True`` and by :func:`clean_mesh`):
-
-* duplicate vertices (identical coordinates) are merged only on request — vertex order and count
-  are otherwise preserved exactly, because ground-truth pairs and animations depend on them;
-* degenerate faces (repeated index or zero area) are dropped;
-* duplicate faces (same vertex set) keep their first occurrence;
-* unreferenced vertices are removed and faces re-indexed.
+"""Documented repairs for imperfect meshes (readers with ``repair=True``, :func:`clean_mesh`):
+duplicate vertices are merged only on request (vertex order and count are kept otherwise),
+degenerate faces dropped, duplicate faces keep their first occurrence, unreferenced vertices are
+removed.
 """
 
 from __future__ import annotations
@@ -50,10 +45,8 @@ def unreferenced_vertices(F, n_vertices: int) -> np.ndarray:
 def merge_duplicate_vertices(
     V, F, *, tol: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Merge vertices closer than ``tol`` (exact duplicates by default).
-
-    Returns ``(V_new, F_new, index_map)`` where ``index_map[i]`` is the new index of old vertex ``i``;
-    the first occurrence of a group keeps its position and relative order.
+    """Merge vertices closer than ``tol``; returns ``(V_new, F_new, index_map)``, first
+    occurrences keeping their relative order.
     """
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F", allow_empty=True)
@@ -89,18 +82,8 @@ def remove_unreferenced(V, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class RepairReport:
-    """What :func:`clean_mesh` changed.
-
-    Attributes
-    ----------
-    merged_vertices : int
-        Vertices merged into others.
-    degenerate_faces : int
-        Faces dropped for zero area or repeated corners.
-    duplicate_faces : int
-        Faces dropped as repeats of another face.
-    unreferenced_vertices : int
-        Vertices dropped because no face used them.
+    """What :func:`clean_mesh` changed: counts of ``merged_vertices``, ``degenerate_faces``,
+    ``duplicate_faces`` and ``unreferenced_vertices``.
     """
 
     merged_vertices: int
@@ -130,9 +113,8 @@ def clean_mesh(
     drop_duplicate_faces: bool = True,
     drop_unreferenced: bool = True,
 ) -> tuple[Mesh, RepairReport]:
-    """Apply the repair policies above; returns the repaired mesh and a report of what changed.
-
-    Per-vertex/per-face extras are dropped when the vertex or face set changes.
+    """Apply the repair policies; returns the mesh (extras dropped when elements change) and a
+    :class:`RepairReport`.
     """
     V, F = mesh.vertices, mesh.faces
     merged = deg = dup = unref = 0
@@ -166,20 +148,8 @@ WELD_TOL = 1e-6
 
 @dataclass(frozen=True)
 class Weld:
-    """Result of :func:`weld`: the welded surface and the map back to the input vertices.
-
-    Attributes
-    ----------
-    vertices : (k, 3) float64
-        One vertex per group of coincident input vertices (the group's first vertex, in input order).
-    faces : (m', 3) int64
-        Input faces re-indexed; faces whose corners collapsed onto each other are dropped.
-    index_map : (n,) int64
-        ``index_map[i]`` is the welded vertex of input vertex ``i``.
-    face_kept : (m,) bool
-        Input faces that survive in ``faces`` (in order).
-    tol : float
-        Absolute distance used (relative tolerance times the bounding-box diagonal).
+    """Result of :func:`weld`: welded ``vertices`` (k, 3) (each group's first vertex), re-indexed
+    ``faces`` without collapsed ones, ``index_map`` (n,), ``face_kept`` (m,) and the absolute ``tol``.
     """
 
     vertices: np.ndarray
@@ -199,10 +169,7 @@ class Weld:
         return int(self.face_kept.size - np.count_nonzero(self.face_kept))
 
     def expand(self, V_welded) -> np.ndarray:
-        """Positions ``(k, 3)`` of the welded vertices back in the input's order and count ``(n, 3)``.
-
-        Every copy of a welded vertex (a seam, an STL corner) receives the same position.
-        """
+        """Welded positions (k, 3) back in the input's order and count (n, 3)."""
         V_welded = np.asarray(V_welded)
         if V_welded.shape[0] != self.vertices.shape[0]:
             from .._errors import InvalidInputError
@@ -217,22 +184,10 @@ class Weld:
 def weld(V, F, *, tol: float = WELD_TOL) -> Weld:
     """Merge vertices that coincide within ``tol`` times the bounding-box diagonal.
 
-    Used for triangle soups (STL: three corners per face), meshes with duplicated seam vertices
-    (UV or normal seams of OBJ/glTF exports) and CAD exports whose shared corners differ in the last
-    bits. Groups are the connected components of the "closer than ``tol * diag``" relation; each
-    group is represented by its first vertex (input order kept among representatives). Faces with two
-    corners in one group are dropped (``face_kept``). ``tol=0`` merges exact duplicates only.
-
-    Parameters
-    ----------
-    V : (n, 3) float
-    F : (m, 3) int
-    tol : float
-        Relative tolerance (>= 0), default :data:`WELD_TOL` = 1e-6.
-
-    Returns
-    -------
-    Weld
+    For triangle soups (STL), duplicated seam vertices and CAD corners differing in the last bits.
+    Groups are the components of the "closer than ``tol * diag``" relation, represented by their
+    first vertex; faces with two corners in a group are dropped. ``tol`` (>= 0, default
+    :data:`WELD_TOL`) of 0 merges exact duplicates only. Returns a :class:`Weld`.
     """
     from .._errors import InvalidInputError
 

@@ -1,36 +1,4 @@
-"""Topology report of a triangle mesh (used by ``spectrageo info``).
-
-:func:`mesh_topology` counts components, boundary loops, non-manifold edges and vertices, duplicate,
-unreferenced and degenerate elements, and derives the Euler characteristic and the genus. Everything
-is vectorised over faces and half-edges with numpy and :mod:`scipy.sparse.csgraph`; no Python loop
-runs over vertices, faces or edges.
-
-Definitions (all on the faces as given: degenerate and duplicate faces are counted, not dropped):
-
-* **edges** are the unordered vertex pairs of the face sides; a side whose two indices are equal
-  (a degenerate face such as ``(0, 0, 1)``) is not an edge, as in :func:`~.primitives.edges`.
-  An edge used by exactly one face is a *boundary edge*, by more than two a *non-manifold edge*.
-* a **fan** of a vertex ``v`` is a maximal set of faces around ``v`` connected through edges incident
-  to ``v`` (the components of ``v``'s link). Fans are the connected components of the graph whose
-  nodes are the (vertex, face) incidences and whose arcs join ``(v, f)`` and ``(v, g)`` when the faces
-  ``f`` and ``g`` share an edge ``{v, w}``. A vertex with more than one fan is a *non-manifold
-  vertex* (a "bowtie" or pinch vertex). A vertex lying on a non-manifold edge has a single fan there
-  and is reported through ``n_nonmanifold_edges`` only.
-* a **connected component** is a set of faces connected by sharing a vertex (not only an edge), so
-  two tetrahedra glued at one vertex form one component. Vertices used by no face are not counted as
-  components; they are reported as ``n_unreferenced_vertices``.
-* a **boundary loop** is a connected component of the boundary edges after every non-manifold vertex
-  has been split into its fans (each boundary edge joins the fans of its two endpoints in its face).
-  This is what a walk along the boundary counts when, at a vertex it passes more than once, it
-  leaves through the fan it arrived by. Thus a bowtie of two triangles sharing a vertex has two
-  loops (one per triangle) although its boundary edges form one connected figure-eight, while a strip
-  whose two ends touch at one vertex has one loop (its border) although that boundary also passes
-  twice through the pinch vertex. The count depends neither on the order of the faces nor on their
-  orientation. :func:`~.primitives.boundary_loops`, which leaves a pinch vertex by its first unused
-  boundary edge, returns one or two loops in both examples depending on the face order, so it is
-  not used here. Boundary loops meeting at a non-manifold edge (three triangles on one edge) form
-  one connected component and are counted once.
-"""
+"""Topology report of a triangle mesh (``spectrageo info``), vectorised over half-edges."""
 
 from __future__ import annotations
 
@@ -54,11 +22,7 @@ def _n_duplicate_positions(V: np.ndarray) -> int:
 
 
 def _n_duplicate_faces(F: np.ndarray, n: int) -> int:
-    """Number of faces whose vertex set equals an earlier face's.
-
-    Same count as ``repair.duplicate_faces(F).sum()``, which sorts rows with ``np.unique(axis=0)``
-    (0.85 s on 871k faces); two integer sort keys take about a tenth of that.
-    """
+    """Number of faces whose vertex set equals an earlier face's (two integer sort keys)."""
     if F.shape[0] < 2:
         return 0
     S = np.sort(F, axis=1)
@@ -74,40 +38,14 @@ def _components(n: int, i: np.ndarray, j: np.ndarray) -> tuple[int, np.ndarray]:
 
 
 def mesh_topology(V, F) -> dict:
-    """Topological summary of the triangle mesh ``(V, F)`` as plain Python values.
+    """Topological summary of the triangle mesh ``(V, F)`` as a dict of plain Python values.
 
-    See the module docstring for the exact definitions of components, fans and boundary loops.
-
-    Parameters
-    ----------
-    V : (n, 3) array_like of float
-        Vertex positions (used for duplicate vertices and zero-area faces only).
-    F : (m, 3) array_like of int
-        Triangles, indices into ``V``; int32 is accepted and upcast.
-
-    Returns
-    -------
-    dict
-        ``n_vertices``, ``n_faces``, ``n_edges`` (unique edges), and
-
-        * ``n_components``: connected components of the faces via shared vertices (isolated vertices
-          are not components);
-        * ``n_boundary_loops``: closed boundary loops (a figure-eight counts as two);
-        * ``n_boundary_edges``: edges used by exactly one face;
-        * ``n_nonmanifold_edges``: edges used by more than two faces;
-        * ``n_nonmanifold_vertices``: vertices whose incident faces form more than one fan;
-        * ``n_duplicate_vertices``: vertices whose position equals an earlier vertex's exactly;
-        * ``n_unreferenced_vertices``: vertices used by no face;
-        * ``n_degenerate_faces``: faces with a repeated index or zero area;
-        * ``n_duplicate_faces``: faces whose vertex set already appeared in an earlier face;
-        * ``euler_characteristic``: ``V - E + F`` over the referenced vertices, the unique edges and
-          all faces;
-        * ``is_closed``: at least one face and no boundary edge;
-        * ``is_manifold``: no non-manifold edge and no non-manifold vertex;
-        * ``genus``: ``(2 - chi) / 2`` when the mesh is closed, manifold, has one component and an
-          even ``chi``, else ``None``. Orientability is not checked: a closed non-orientable surface
-          of even ``chi`` (a Klein bottle) would be reported with the genus of the orientable surface
-          of that ``chi``.
+    Counts ``n_vertices``, ``n_faces``, ``n_edges``, ``n_components`` (faces joined by shared
+    vertices), ``n_boundary_loops``, ``n_boundary_edges``, ``n_nonmanifold_edges``,
+    ``n_nonmanifold_vertices``, ``n_duplicate_vertices``, ``n_unreferenced_vertices``,
+    ``n_degenerate_faces``, ``n_duplicate_faces``; derives ``euler_characteristic``, ``is_closed``,
+    ``is_manifold`` and ``genus`` (None unless closed, manifold, connected, even ``chi``). ``V`` is
+    used for duplicates and zero areas only. See docs/decisions.md#geometry-topology-definitions.
     """
     V = as_points(V, "V")
     n = V.shape[0]

@@ -12,26 +12,21 @@ from ._numba_kernels import vertex_update_kernel
 def update_vertices(V, F, target_normals, *, n_iter: int = 20, fixed=None) -> np.ndarray:
     """Move vertices so that faces become orthogonal to ``target_normals`` (Eq. 4.28-4.29).
 
-    Each iteration applies, for every vertex ``i`` with incident faces ``Psi_i``::
-
-        v_i <- v_i + (1 / |Psi_i|) sum_{j in Psi_i} n_j <n_j, c_j - v_i>
-
-    and recomputes the centroids ``c_j`` (Eq. 4.29). This is a gradient step on
-    ``sum_j sum_{i in f_j} <n_j, c_j - v_i>^2``. Compiled: one pass over the faces per iteration.
+    Each of ``n_iter`` iterations applies ``v_i <- v_i + (1 / |Psi_i|) sum_j n_j <n_j, c_j - v_i>``
+    over the incident faces and recomputes the centroids ``c_j``, a gradient step on
+    ``sum_j sum_{i in f_j} <n_j, c_j - v_i>^2``.
 
     Parameters
     ----------
-    V : (n, 3) float
-    F : (m, 3) int
-    target_normals : (m, 3) float, unit (re-normalised here; zero rows leave their face inactive)
-    n_iter : int
-        Number of iterations ``t`` (GNF uses 10-20 depending on the noise).
-    fixed : (n,) bool, optional
-        Vertices that must not move.
+    V, F : (n, 3) float, (m, 3) int
+    target_normals : (m, 3) float
+        Re-normalised; zero rows leave their face inactive.
+    n_iter, fixed : int, (n,) bool, optional
+        Iterations (GNF uses 10-20) and vertices that must not move.
 
     Returns
     -------
-    (n, 3) float64 updated positions (the input is not modified).
+    (n, 3) float64
     """
     V = as_points(V, "V", copy=True)
     n = V.shape[0]

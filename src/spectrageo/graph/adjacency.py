@@ -1,8 +1,5 @@
-"""Adjacency of mesh vertices and point clouds: connectivity matrices (Eq. 3.6, 4.2), k-rings
-(Eq. 3.7), kNN (Section 3.1.10) and radius graphs.
-
-kNN queries use :class:`scipy.spatial.cKDTree` and are chunked so that memory stays bounded for
-millions of points.
+"""Adjacency of mesh vertices and point clouds (Eq. 3.6, 3.7, 4.2): connectivity, k-rings, kNN
+and radius graphs; :func:`knn` is re-exported from :mod:`spectrageo.geometry.neighbors`.
 """
 
 from __future__ import annotations
@@ -13,9 +10,10 @@ from scipy.spatial import cKDTree
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
+from ..geometry.neighbors import knn
 from ..geometry.primitives import edges
 
-_CHUNK = 262_144
+__all__ = ["adjacency_matrix", "face_adjacency", "k_ring", "knn", "knn_graph", "radius_graph"]
 
 
 def adjacency_matrix(F, n_vertices: int) -> sp.csr_matrix:
@@ -73,8 +71,7 @@ def face_adjacency(F, *, shared: str = "edge") -> sp.csr_matrix:
 
 
 def k_ring(C: sp.spmatrix, seeds, k: int = 1, *, include_seeds: bool = True) -> np.ndarray:
-    """Vertices within ``k`` edges of ``seeds`` on adjacency ``C`` (Eq. 3.7; the k-ring contains the
-    (k-1)-ring). Returns sorted indices."""
+    """Sorted vertices within ``k`` edges of ``seeds`` on ``C`` (Eq. 3.7)."""
     check_positive(k, "k", integer=True, allow_zero=True)
     C = sp.csr_matrix(C)
     n = C.shape[0]
@@ -97,60 +94,6 @@ def k_ring(C: sp.spmatrix, seeds, k: int = 1, *, include_seeds: bool = True) -> 
     return np.flatnonzero(mask)
 
 
-def knn(
-    P,
-    k: int,
-    *,
-    query=None,
-    include_self: bool = False,
-    workers: int = -1,
-    tree: cKDTree | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """k nearest neighbours (Section 3.1.10).
-
-    Returns ``(indices, distances)`` of shape (q, k), nearest first. When ``query`` is None the
-    points query themselves and, unless ``include_self``, the point itself is excluded.
-    Queries are chunked so memory is O(q k).
-    """
-    P = as_points(P, "P")
-    check_positive(k, "k", integer=True)
-    self_query = query is None
-    Q = P if self_query else as_points(query, "query")
-    extra = 1 if (self_query and not include_self) else 0
-    if k + extra > P.shape[0]:
-        raise InvalidInputError(
-            f"`k` = {k} needs at least {k + extra} points; the cloud has {P.shape[0]}."
-        )
-    tree = tree if tree is not None else cKDTree(P)
-    kk = k + extra
-    idx = np.empty((Q.shape[0], k), dtype=np.int64)
-    dist = np.empty((Q.shape[0], k), dtype=np.float64)
-    # Self-queries run in the tree's leaf order: neighbouring queries then walk the same nodes,
-    # which is about 3x faster on unordered clouds than the input order (results are scattered back).
-    order = tree.indices if (self_query and tree.n == P.shape[0]) else None
-    for s in range(0, Q.shape[0], _CHUNK):
-        rows = (
-            order[s : s + _CHUNK]
-            if order is not None
-            else np.arange(s, min(s + _CHUNK, Q.shape[0]))
-        )
-        d, i = tree.query(Q[rows], k=kk, workers=workers)
-        d = d.reshape(len(d), kk)
-        i = i.reshape(len(i), kk)
-        if extra:
-            # drop the query point itself (it may not be first when duplicates exist)
-            is_self = i == rows[:, None]
-            has_self = is_self.any(axis=1)
-            drop = np.where(has_self, np.argmax(is_self, axis=1), kk - 1)
-            keep = np.ones_like(i, dtype=bool)
-            keep[np.arange(len(i)), drop] = False
-            i = i[keep].reshape(len(i), k)
-            d = d[keep].reshape(len(d), k)
-        idx[rows] = i
-        dist[rows] = d
-    return idx, dist
-
-
 def _symmetrize(W: sp.csr_matrix, mode: str) -> sp.csr_matrix:
     if mode == "union":
         return W.maximum(W.T).tocsr()
@@ -164,11 +107,8 @@ def _symmetrize(W: sp.csr_matrix, mode: str) -> sp.csr_matrix:
 def knn_graph(
     P, k: int = 10, *, weights: str = "binary", sigma: float | None = None, symmetric: str = "union"
 ) -> sp.csr_matrix:
-    """Sparse (n, n) kNN graph of a point cloud.
-
-    ``weights``: ``"binary"`` (1), ``"gaussian"`` (``exp(-d^2 / (2 sigma^2))``, Eq. 4.2, sigma defaults
-    to the mean kNN distance) or ``"distance"`` (``d``). ``symmetric``: ``"union"`` (i~j if either is a
-    neighbour of the other, default), ``"mutual"`` or ``"none"``.
+    """Sparse (n, n) kNN graph with ``"binary"``, ``"gaussian"`` (Eq. 4.2, ``sigma``: mean kNN
+    distance) or ``"distance"`` weights, symmetrised by ``"union"``, ``"mutual"`` or ``"none"``.
     """
     P = as_points(P, "P")
     idx, dist = knn(P, k)
@@ -192,10 +132,8 @@ def knn_graph(
 
 
 def radius_graph(P, radius: float, *, max_pairs: int = 50_000_000) -> sp.csr_matrix:
-    """Binary symmetric (n, n) graph joining points closer than ``radius``.
-
-    Raises :class:`InvalidInputError` when the graph would exceed ``max_pairs`` edges (a radius too
-    large for the cloud), instead of exhausting memory.
+    """Binary symmetric (n, n) graph of points closer than ``radius``; refuses more than
+    ``max_pairs`` edges.
     """
     P = as_points(P, "P")
     check_positive(radius, "radius")

@@ -1,8 +1,5 @@
-"""Graph Laplacians of meshes and point clouds (Section 4.1.1) and delta coordinates (Section 4.3).
-
-All Laplacians are returned as CSR float64 in the positive semi-definite form ``L = D - C``, with
-``D = diag(C 1)``; the normalized form is ``D^-1/2 L D^-1/2``. Every row of ``D - C`` sums to zero,
-so ``L 1 = 0``.
+"""Graph Laplacians ``L = D - C`` (CSR float64, positive semi-definite, ``L 1 = 0``; normalized
+``D^-1/2 L D^-1/2``) of meshes and point clouds (Section 4.1.1) and delta coordinates (Section 4.3).
 """
 
 from __future__ import annotations
@@ -19,10 +16,7 @@ KINDS = ("binary", "gaussian", "cotangent")
 
 
 def laplacian_from_adjacency(C: sp.spmatrix, *, normalized: bool = False) -> sp.csr_matrix:
-    """``L = D - C`` (Eq. 4.1) or, with ``normalized=True``, ``D^-1/2 L D^-1/2`` from a symmetric ``C``.
-
-    Isolated nodes (degree 0) get a zero row in the normalized form.
-    """
+    """``L = D - C`` (Eq. 4.1), or ``D^-1/2 L D^-1/2`` (zero rows for isolated nodes)."""
     C = sp.csr_matrix(C, dtype=np.float64)
     if C.shape[0] != C.shape[1]:
         raise InvalidInputError(f"`C` must be square; got {C.shape}.")
@@ -37,10 +31,8 @@ def laplacian_from_adjacency(C: sp.spmatrix, *, normalized: bool = False) -> sp.
 
 
 def weighted_adjacency(V, F, *, kind: str = "binary", sigma: float | None = None) -> sp.csr_matrix:
-    """Weighted vertex adjacency ``C`` of Eq. (4.2).
-
-    ``kind="binary"``: ``w = 1``; ``"gaussian"``: ``w = exp(-|vi - vj|^2 / (2 sigma^2))`` with ``sigma``
-    defaulting to the mean edge length; ``"cotangent"``: ``w = (cot a + cot b) / 2``.
+    """Vertex adjacency ``C`` of Eq. (4.2): ``"binary"`` 1, ``"gaussian"``
+    ``exp(-|vi - vj|^2 / (2 sigma^2))`` (``sigma``: mean edge length) or ``"cotangent"``.
     """
     check_choice(kind, "kind", KINDS)
     V = as_points(V, "V")
@@ -64,17 +56,8 @@ def weighted_adjacency(V, F, *, kind: str = "binary", sigma: float | None = None
 def mesh_laplacian(
     V, F, *, kind: str = "binary", normalized: bool = False, sigma: float | None = None
 ) -> sp.csr_matrix:
-    """Laplacian ``L = D - C`` of a triangle mesh (binary Eq. 4.1, Gaussian or cotangent Eq. 4.2).
-
-    Parameters
-    ----------
-    V : (n, 3) float
-    F : (m, 3) int
-    kind : {"binary", "gaussian", "cotangent"}
-    normalized : bool
-        Return ``D^-1/2 L D^-1/2`` instead.
-    sigma : float, optional
-        Gaussian width (``alpha`` in the thesis); defaults to the mean edge length.
+    """Laplacian ``L = D - C`` (n, n) of a mesh ``V`` (n, 3), ``F`` (m, 3) with the weights
+    of :func:`weighted_adjacency` (``sigma`` is the thesis's ``alpha``), optionally ``normalized``.
     """
     return laplacian_from_adjacency(
         weighted_adjacency(V, F, kind=kind, sigma=sigma), normalized=normalized
@@ -84,20 +67,15 @@ def mesh_laplacian(
 def point_cloud_laplacian(
     P, k: int = 10, *, kind: str = "binary", normalized: bool = False, sigma: float | None = None
 ) -> sp.csr_matrix:
-    """Laplacian ``L = D - C`` of the symmetrised kNN graph of a point cloud.
-
-    ``kind``: ``"binary"`` or ``"gaussian"`` (cotangent weights need faces).
-    """
+    """Laplacian ``L = D - C`` of the symmetrised binary or Gaussian kNN graph of a cloud."""
     check_choice(kind, "kind", ("binary", "gaussian"))
     C = knn_graph(P, k, weights=kind, sigma=sigma)
     return laplacian_from_adjacency(C, normalized=normalized)
 
 
 def delta_coordinates(V, F=None, *, L: sp.spmatrix | None = None) -> np.ndarray:
-    """Differential coordinates ``delta_i = v_i - (1/d_i) sum_{j in N(i)} v_j`` (Eq. 4.12), (n, 3).
-
-    Computed as ``D^-1 L V`` with the binary Laplacian of ``F`` (or with a given Laplacian ``L``);
-    Eq. (4.13) writes the unnormalised ``L V``. Isolated vertices get zero.
+    """Differential coordinates ``v_i - (1/d_i) sum_{j in N(i)} v_j`` (Eq. 4.12), (n, 3), as
+    ``D^-1 L V`` with the binary Laplacian of ``F`` or a given ``L`` (zero where isolated).
     """
     V = as_points(V, "V")
     if L is None:

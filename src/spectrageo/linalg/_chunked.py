@@ -1,18 +1,9 @@
-"""Thin SVD of tall-skinny matrices accumulated over row chunks, without ever forming a full SVD.
+"""Thin SVD ``(s, V)`` of tall-skinny matrices accumulated over row chunks, never a full SVD.
 
-For ``X`` of shape ``(m, n)`` with ``m >> n`` only the right factor matters to the solvers:
-``X = W diag(s) V^T`` with ``W = X V diag(1/s)`` orthonormal, so any product ``W f(s) V^T`` can be
-applied chunk by chunk as ``X_c @ (V diag(f(s)/s) V^T)``. ``(s, V)`` is obtained from an ``n x n``
-summary of ``X`` gathered in the same pass that produces ``X``:
-
-- preconditioned Gram matrix (default): ``G = sum_c (X_c P)^T (X_c P)`` with ``P = V' diag(1/s')``
-  built from the previous iterate's ``(s', V')`` (identity at the start). When ``X`` is close to
-  the previous iterate, ``X P`` is nearly orthonormal and ``G`` nearly the identity, so the
-  eigen-decomposition of ``G`` keeps full accuracy even when ``s_min / s_max`` of ``X`` is tiny (a
-  plain Gram matrix squares the condition number). One BLAS-3 product per chunk.
-- TSQR: the ``R`` factors of the chunks are stacked and reduced by one more QR, then ``svd(R)``.
-  Accurate whatever the conditioning, about five times slower; used when the Gram matrix is
-  found too ill-conditioned (``lambda_min / lambda_max < 1e-8``, i.e. fewer than 8 reliable digits).
+Products ``W f(s) V^T`` with ``X = W diag(s) V^T`` are applied per chunk as
+``X_c @ (V diag(f(s)/s) V^T)``. ``(s, V)`` comes from a Gram matrix preconditioned by the previous
+iterate's ``V' diag(1/s')`` (accurate when ``X`` is close to it), or from TSQR when the Gram
+matrix has fewer than 8 reliable digits.
 """
 
 from __future__ import annotations
@@ -25,15 +16,8 @@ GRAM_MIN_RATIO = 1e-8
 
 
 class CoreAccumulator:
-    """Accumulate ``(s, V)`` of a tall matrix from its row chunks (float64 throughout).
-
-    Parameters
-    ----------
-    n : int
-        Number of columns.
-    mode : {"gram", "qr"}
-    precond : (s, V), optional
-        Singular values / right vectors of a nearby matrix (Gram mode only).
+    """Accumulate ``(s, V)`` of a tall matrix with ``n`` columns from its row chunks, in
+    ``"gram"`` (optionally preconditioned by ``precond = (s, V)``) or ``"qr"`` mode.
     """
 
     def __init__(self, n: int, mode: str = "gram", precond=None) -> None:
@@ -92,9 +76,7 @@ class CoreAccumulator:
 
 
 def _svd(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(s, Vt)`` of a small square matrix: LAPACK's divide and conquer (``gesdd``), and the
-    QR-iteration driver (``gesvd``) where ``gesdd`` reports no convergence, which it does on some
-    finite, nearly rank-deficient matrices."""
+    """``(s, Vt)`` of a small square matrix by ``gesdd``, or ``gesvd`` where ``gesdd`` fails."""
     try:
         _, s, Vt = np.linalg.svd(X)
     except np.linalg.LinAlgError:

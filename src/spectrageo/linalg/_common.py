@@ -1,5 +1,6 @@
-"""Helpers shared by the low-rank / sparse solvers: input checks, thresholding operators,
-non-convergence reporting, row-chunk iteration and noise / rank estimators."""
+"""Helpers of the low-rank / sparse solvers: checks, thresholding, non-convergence, row chunks,
+noise and rank estimators.
+"""
 
 from __future__ import annotations
 
@@ -22,11 +23,7 @@ CHUNK_BYTES = 8 << 20
 def as_matrix(
     M: Any, name: str = "M", *, allow_nan: bool = False, check: bool = True
 ) -> np.ndarray:
-    """Return ``M`` as a 2-D floating array (no copy when it already is one).
-
-    Integer and boolean input is converted to float64; float32 input is kept as float32. The
-    finiteness check runs in row chunks so that it never allocates a full-size temporary.
-    """
+    """``M`` as a 2-D float array (float32 kept, ints to float64), checked finite in row chunks."""
     if hasattr(M, "toarray") and not isinstance(M, np.ndarray):
         raise InvalidInputError(f"`{name}` must be a dense array; got a sparse {type(M).__name__}.")
     try:
@@ -64,11 +61,8 @@ def check_tol_iter(tol: Any, max_iter: Any) -> None:
 
 
 def report_nonconvergence(result: Any, policy: str, what: str) -> Any:
-    """Apply the ``on_nonconvergence`` policy to a finished solver ``result``.
-
-    ``"warn"`` emits a :class:`ConvergenceWarning` and returns the result, ``"raise"`` raises
-    :class:`ConvergenceError` carrying the result as ``partial``, ``"ignore"`` returns it (its
-    ``converged`` field is still ``False``).
+    """Apply the ``on_nonconvergence`` policy to a finished ``result``: warn with
+    :class:`ConvergenceWarning`, raise :class:`ConvergenceError` (``partial``) or return it.
     """
     if result.converged or policy == "ignore":
         return result
@@ -120,12 +114,8 @@ def marchenko_pastur_median(beta: float) -> float:
 
 
 def noise_sigma_from_singular_values(s: np.ndarray, m: int, n: int) -> float:
-    """Noise standard deviation from the median singular value (Gavish & Donoho, 2014).
-
-    For an ``m x n`` matrix ``low-rank + sigma * Z`` with i.i.d. unit entries in ``Z``, the median
-    singular value is ``sqrt(max(m, n) * mu_beta) * sigma`` where ``mu_beta`` is the median of the
-    Marchenko-Pastur law of aspect ratio ``beta = min/max``; a few large (signal) singular values
-    barely move the median.
+    """Noise deviation from the median singular value and the median of the
+    Marchenko-Pastur law of aspect ratio ``min/max`` (Gavish & Donoho, 2014).
     """
     big, small = max(m, n), min(m, n)
     beta = small / big
@@ -133,10 +123,8 @@ def noise_sigma_from_singular_values(s: np.ndarray, m: int, n: int) -> float:
 
 
 def estimate_rank(s: np.ndarray, m: int, n: int) -> int:
-    """Rank by the optimal hard threshold for unknown noise (Gavish & Donoho, 2014).
-
-    Keeps the singular values above ``omega(beta) * median(s)`` with
-    ``omega(beta) ~ 0.56 beta^3 - 0.95 beta^2 + 1.82 beta + 1.43``; at least 1.
+    """Rank by the optimal hard threshold ``omega(beta) * median(s)`` for unknown noise (Gavish &
+    Donoho, 2014), at least 1.
     """
     beta = min(m, n) / max(m, n)
     omega = 0.56 * beta**3 - 0.95 * beta**2 + 1.82 * beta + 1.43
@@ -149,11 +137,7 @@ FULL_SVD_MAX = 500
 
 
 def top_svd(X: np.ndarray, k: int, rng: np.random.Generator):
-    """Leading ``k`` singular triplets ``(U, s, Vt)`` of ``X``, ``s`` descending.
-
-    A full LAPACK SVD for small matrices or large ``k``; ARPACK (``scipy.sparse.linalg.svds``)
-    otherwise.
-    """
+    """Leading ``k`` singular triplets ``(U, s, Vt)``, ``s`` descending (LAPACK or ARPACK)."""
     p = min(X.shape)
     k = max(1, min(k, p))
     if p <= FULL_SVD_MAX or k > p // 5:
@@ -167,13 +151,8 @@ def top_svd(X: np.ndarray, k: int, rng: np.random.Generator):
 
 
 def blas_threads(short_side: int, *, chunked: bool = False):
-    """Context limiting BLAS to one thread for work made of small dense products.
-
-    Used when the short side of the problem is at most :data:`FULL_SVD_MAX` or the row-chunked
-    engine runs: such products finish in microseconds to milliseconds, and a multithreaded BLAS
-    then spends more time synchronising its threads than computing -- on a loaded machine up to
-    two orders of magnitude more (a 700 x 70 QR: 125 ms with two threads, 1.7 ms with one).
-    Large dense problems keep the caller's thread settings.
+    """One BLAS thread for small problems and the chunked engine
+    (docs/decisions.md#linalg-blas-threads).
     """
     if chunked or short_side <= FULL_SVD_MAX:
         return single_thread_blas()
@@ -184,8 +163,7 @@ _CONTROLLER = None
 
 
 def single_thread_blas():
-    """Context running BLAS on one thread (a cached ``threadpoolctl`` controller: ~10 us per
-    entry instead of ~1 ms for ``threadpool_limits``, which rescans the loaded libraries)."""
+    """BLAS on one thread through a cached ``threadpoolctl`` controller."""
     global _CONTROLLER
     if _CONTROLLER is None:
         from threadpoolctl import ThreadpoolController
@@ -195,13 +173,8 @@ def single_thread_blas():
 
 
 def spd_factor(K):
-    """SuperLU factorisation of a sparse symmetric positive definite matrix ``K``.
-
-    The minimum-degree ordering of ``K + K^T`` with symmetric mode and no row pivoting (an SPD
-    matrix needs none): on the normal equations of a mesh Laplacian with anchors (20k vertices)
-    the factor has 40 % fewer entries and is computed about 50x faster than with SuperLU's
-    default partial pivoting, which abandons the symmetric ordering. Raises ``RuntimeError``
-    (from SuperLU) when ``K`` is exactly singular. Returns the ``SuperLU`` object (``.solve``).
+    """SuperLU of a sparse SPD ``K``, minimum-degree order of ``K + K^T`` without pivoting
+    (docs/decisions.md#linalg-spd-factor); ``RuntimeError`` when ``K`` is singular.
     """
     import scipy.sparse as sp
     from scipy.sparse.linalg import splu

@@ -1,9 +1,5 @@
-"""Fused element-wise kernels of the row-chunked RPCA engines (numba).
-
-Each kernel makes one pass over a chunk and writes several outputs, so that a solver iteration
-reads the input and its state once instead of through a chain of numpy temporaries. The loops
-are serial on purpose: they are memory-bound, the matrix products between them already use the
-BLAS threads, and numba parallel regions cost milliseconds per call on a loaded machine.
+"""Fused serial element-wise kernels of the row-chunked RPCA engines (numba): one memory-bound
+pass per chunk writes several outputs.
 """
 
 from __future__ import annotations
@@ -14,10 +10,8 @@ from numba import njit
 
 @njit(cache=True)
 def ialm_prepare(Mc, Rc, t, ratio, X, Ymu):  # pragma: no cover - compiled
-    """``Ymu = ratio * clip(R, -t, t)``, ``X = M - (R - clip(R)) + Ymu``.
-
-    With ``t = lam / mu_prev`` and ``ratio = mu_prev / mu``: ``S = R - clip(R)`` and
-    ``Y / mu = ratio * clip(R)``, so ``X = M - S + Y / mu`` (the argument of the SVT, Eq. 4.21).
+    """``Ymu = ratio * clip(R, -t, t)`` and the SVT argument ``X = M - S + Y / mu`` (Eq. 4.21)
+    with ``S = R - clip(R)``.
     """
     m, n = Mc.shape
     for i in range(m):
@@ -31,11 +25,7 @@ def ialm_prepare(Mc, Rc, t, ratio, X, Ymu):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def ialm_update(Mc, Ec, Ymu, t, f, R_out, E_out, Xn):  # pragma: no cover - compiled
-    """Write ``E``, ``R = M - E + Y/mu``, the next SVT argument; return ``||M - E - S||^2``.
-
-    ``S = R - clip(R, t)`` and ``Y_new / mu = clip(R, t)`` with ``t = lam / mu``; the next SVT
-    argument is ``M - S + Y_new / mu_next = E + (1 + f) clip(R) - Y/mu`` with ``f = mu / mu_next``.
-    """
+    """Write ``E``, ``R = M - E + Y/mu`` and the next SVT argument; return ``||M - E - S||^2``."""
     m, n = Mc.shape
     acc = 0.0
     for i in range(m):
@@ -102,11 +92,8 @@ def soft_inplace(R: np.ndarray, t: float) -> None:
 
 @njit(cache=True)
 def completion_update(D, mask, E, Y, mu, mu_next, X):  # pragma: no cover - compiled
-    """One pass of the completion ALM after ``E`` (Eq. 5.84 and 5.87), in place.
-
-    On observed entries: ``Z = D - E``, ``Y += mu Z``, next SVT argument ``X = D + Y / mu_next``;
-    elsewhere ``S = -E`` so ``X = D - S + Y / mu_next = E`` (``D`` and ``Y`` vanish there).
-    Returns ``||Z||_F^2``.
+    """One in-place pass of the completion ALM after ``E`` (Eq. 5.84, 5.87); returns
+    ``||D - E||_F^2`` on the observed entries.
     """
     m, n = D.shape
     res = 0.0

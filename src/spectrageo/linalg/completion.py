@@ -29,20 +29,9 @@ GRAM_THREADED_SIZE = 1_000_000
 
 @dataclass(frozen=True)
 class CompletionResult:
-    """Result of :func:`complete_matrix`.
-
-    Attributes
-    ----------
-    completed : (m, n) ndarray
-        The completed matrix (observed entries equal to the data when ``keep_observed``).
-    n_iter : int
-    converged : bool
-    residual : float
-        ``||P_omega(M - E)||_F / ||P_omega(M)||_F`` at the last iteration (the stopping rule).
-    rank : int
-        Number of singular values kept in the last low-rank estimate ``E``.
-    n_singular : int
-        The progressive singular-value count ``n_lambda`` of Eq. 5.89 at the end.
+    """Result of :func:`complete_matrix`: the ``completed`` (m, n) matrix, ``n_iter``, ``converged``,
+    ``residual`` ``||P_omega(M - E)||_F / ||P_omega(M)||_F``, the ``rank`` of the last ``E`` and
+    ``n_singular``, the count ``n_lambda`` of Eq. 5.89.
     """
 
     completed: np.ndarray = field(repr=False)
@@ -67,60 +56,24 @@ def complete_matrix(
     on_nonconvergence: str = "warn",
     rng: Any = None,
 ) -> CompletionResult:
-    r"""Fill the unobserved entries of a low-rank matrix (Eq. 5.80-5.89).
+    """Fill the unobserved entries of a low-rank matrix (Eq. 5.80-5.89).
 
-    Solves ``min ||E||_*  s.t.  E + S = D, P_omega(S) = 0`` (Eq. 5.80; ``D = P_omega(M)``, zeros at
-    the unknown entries as in Eq. 5.78) with the augmented Lagrangian of Eq. 5.81 and the updates
-
-    - ``(U, Lambda, V) = svd(D - S + Y / mu)`` and ``E = U S_{1/mu}[Lambda] V^T`` restricted to the
-      ``n_lambda`` leading singular values (Eq. 5.85-5.86);
-    - ``S = P_{omega-bar}(D - E + Y / mu) = -P_{omega-bar}(E)`` (Eq. 5.87; ``D`` and ``Y`` vanish off
-      ``omega``. Eq. 5.88 prints ``P_{omega-bar}(E) - E``, which is ``-P_omega(E)`` and contradicts
-      ``P_omega(S) = 0``: a sign/complement typo);
-    - ``Y <- Y + mu (D - E - S)``, ``mu <- rho mu`` (Eq. 5.84),
-
-    until ``||D - E - S||_F / ||D||_F < tol``. The thesis gives no values for ``mu`` and ``rho``:
-    ``mu_0 = 1 / ||D||_2`` follows Lin, Chen & Ma (2010); their growth ``rho = 1.2172 + 1.8588 p``
-    (``p`` the observed fraction) relies on their own rank prediction and, with the singular-value
-    count of Eq. 5.89, grows ``mu`` too fast and over-fits (rank 108 instead of 5 and 2.5e-2
-    relative error on a 150 x 150 rank-5 matrix with 60 % observed), so the default is the slower
-    ``rho = 1.05`` (exact recovery to ~1e-7 in 35-200 iterations on the cases tested).
-
-    Progressive scheme (Eq. 5.89): with ``k = min(m, n)``, ``n_lambda`` starts at ``floor(0.5 k)``
-    and grows by one per iteration, up to ``floor(0.75 k)``, unless
-    ``lambda_{n_lambda} / lambda_{n_lambda - 1} > 0.995`` (the trailing computed singular values
-    have flattened out). When the short side is at most 500 (the patch and animation matrices of
-    Section 5.3), the thresholded ``E`` is formed from the eigendecomposition of the small Gram
-    matrix, without an SVD of the tall matrix (:func:`_svt_gram`); otherwise only ``n_lambda``
-    singular triplets are computed by ARPACK (``scipy.sparse.linalg.svds``; set
-    ``sv_start``/``sv_max`` lower for large matrices of low rank).
+    Solves ``min ||E||_*  s.t.  E + S = D, P_omega(S) = 0`` (Eq. 5.80) by ALM: ``E`` thresholds the
+    ``n_lambda`` leading singular values of ``D - S + Y / mu`` (Eq. 5.85-5.86),
+    ``S = -P_{omega-bar}(E)`` (Eq. 5.87; Eq. 5.88 prints a complement typo), ``Y <- Y + mu (D - E - S)``,
+    ``mu <- rho mu`` (Eq. 5.84). ``n_lambda`` grows from ``floor(k/2)`` to ``floor(3k/4)`` unless the
+    trailing values flatten (Eq. 5.89). Defaults: docs/decisions.md#linalg-completion-rho.
 
     Parameters
     ----------
-    M : (m, n) array_like
-        Data; entries outside ``observed`` are ignored (they may be NaN).
-    observed : (m, n) array_like of bool
-        Mask of the known entries ``omega``.
-    tol : float
-        Relative residual on the observed entries that stops the iteration.
-    max_iter : int
-    mu : float, optional
-        Initial penalty (default ``1 / ||D||_2``).
-    rho : float
-        Growth factor of ``mu`` (``>= 1``).
-    sv_start, sv_max : int, optional
-        Initial and maximal ``n_lambda`` (defaults ``floor(0.5 k)`` and ``floor(0.75 k)``, at least 1).
-    keep_observed : bool
-        Replace the estimate by the data on the observed entries (as done for the mesh
-        reconstruction in Section 5.3.1); ``False`` returns the low-rank estimate ``E`` itself.
-    on_nonconvergence : {"warn", "raise", "ignore"}
-        See :func:`spectrageo.linalg.rpca`.
-    rng : int, Generator or None
-        Start vectors of the partial SVD.
-
-    Returns
-    -------
-    CompletionResult
+    M, observed : (m, n) array_like, (m, n) bool
+        Data (entries outside ``observed`` are ignored, may be NaN) and the mask ``omega``.
+    tol, max_iter, mu, rho
+        Stopping rule; initial penalty (default ``1 / ||D||_2``) and its growth (``>= 1``).
+    sv_start, sv_max, keep_observed
+        Bounds of ``n_lambda``; put the data back on the observed entries (Section 5.3.1).
+    on_nonconvergence, rng
+        See :func:`rpca`; start vectors of the partial SVD. Returns a :class:`CompletionResult`.
     """
     check_on_nonconvergence(on_nonconvergence)
     check_tol_iter(tol, max_iter)
@@ -181,15 +134,8 @@ def complete_matrix(
 
 
 def _svt_gram(X: np.ndarray, k: int, tau: float) -> tuple[np.ndarray, np.ndarray, int]:
-    """Eq. 5.85-5.86 for a matrix with a short side of at most :data:`FULL_SVD_MAX`.
-
-    With ``A`` the tall orientation of ``X`` and ``A^T A = V diag(lambda^2) V^T``, the
-    singular-value thresholding over the ``k`` leading values is
-    ``E = A V_r diag(1 - tau / lambda_r) V_r^T`` (``r`` values above ``tau``): one Gram matrix and
-    one small eigendecomposition instead of an SVD of the tall matrix (20x faster for 26000 x
-    96), and no left singular vectors. Singular values below ~1e-8 of the largest lose their
-    relative accuracy (squared in ``A^T A``); they weigh that little in ``E``.
-    Returns ``(E, lambda (k,), r)``.
+    """Eq. 5.85-5.86 from the Gram matrix of the tall orientation, for a short side of at
+    most :data:`FULL_SVD_MAX`; returns ``(E, lambda (k,), r)``.
     """
     tall = X.shape[0] >= X.shape[1]
     A = X if tall else X.T
@@ -206,13 +152,7 @@ def _svt_gram(X: np.ndarray, k: int, tau: float) -> tuple[np.ndarray, np.ndarray
 
 
 def _alm(D, mask, mu, rho, sv_lo, sv_hi, tol, max_iter, normD, gen):
-    """The ALM iterations of :func:`complete_matrix` (Eq. 5.84-5.89).
-
-    ``S`` is never stored: it vanishes on the observed entries and equals ``-E`` elsewhere
-    (Eq. 5.87), where ``D`` and ``Y`` vanish too, so the next SVT argument ``D - S + Y / mu`` is
-    ``D + Y / mu`` on the observed entries and ``E`` elsewhere (one fused pass,
-    :func:`._kernels.completion_update`).
-    """
+    """ALM iterations of :func:`complete_matrix`; ``S`` is never stored (``-E`` off ``omega``)."""
     Y = np.zeros_like(D)
     X = D.copy()  # S = 0, Y = 0
     E = np.zeros_like(D)

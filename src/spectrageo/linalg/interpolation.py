@@ -21,49 +21,25 @@ def laplacian_interpolation(
     *,
     weights: Any = None,
 ) -> np.ndarray:
-    r"""Fill unknown per-vertex values by minimising the Laplacian energy ``||L B||`` (Eq. 4.24-4.27).
+    """Fill unknown per-vertex values by minimising the Laplacian energy ``||L B||`` (Eq. 4.24-4.27).
 
-    With the rows of ``B`` split into known ``B_k`` and unknown ``B_u`` and the columns of ``L``
-    partitioned accordingly (Eq. 4.24), ``min ||L B||_F`` over ``B_u`` is the least-squares problem
-
-    ``[L_12; L_22] B_u = -[L_11; L_21] B_k``   (Eq. 4.26)
-
-    of ``n`` equations in ``n - n_k`` unknowns, whose solution is Eq. 4.27. It is computed from the
-    sparse normal equations ``(R^T W R) B_u = -R^T W Q B_k`` with ``R = L[:, u]``, ``Q = L[:, k]``
-    and one sparse factorisation for all columns of ``B`` (SuperLU without pivoting,
-    :func:`spectrageo.linalg._common.spd_factor`); no dense inverse is formed.
-
-    ``weights`` (one non-negative weight per equation, i.e. per row of ``L``) turns it into
-    ``min ||W^{1/2} L B||``. Giving weight 0 to the rows of the known vertices yields the classical
-    harmonic (Dirichlet) interpolation ``L_uu B_u = -L_uk B_k``, which reproduces exactly any
-    function harmonic at the unknown vertices (e.g. a linear function on a regular grid); the
-    unweighted thesis form also penalises the Laplacian at the known vertices, which only
-    constants satisfy exactly.
+    ``B_u`` solves ``[L_12; L_22] B_u = -[L_11; L_21] B_k`` (Eq. 4.26-4.27) through its sparse
+    normal equations, one SuperLU factorisation for all columns. Row ``weights`` give
+    ``min ||W^{1/2} L B||``; zero weight on the known rows is harmonic interpolation.
 
     Parameters
     ----------
-    L : (n, n) scipy sparse matrix or array_like
-        A graph Laplacian, e.g. ``L = D - C`` (binary or weighted, positive semi-definite) or the
-        weighted ``L_w`` of Eq. 5.63/5.95; any square matrix is accepted.
-    known_idx : (n_k,) array_like of int
-        Distinct indices of the vertices with known values.
-    known_values : (n_k,) or (n_k, d) array_like
-        Their values (e.g. motion vectors, ``d = 3``).
+    L : (n, n) sparse or array_like
+        A Laplacian, e.g. ``L = D - C`` or ``L_w`` of Eq. 5.63/5.95.
+    known_idx, known_values : (n_k,) int, (n_k,) or (n_k, d)
+        Distinct known vertices and their values, kept exactly in the (n,) or (n, d) result.
     weights : (n,) array_like, optional
-        Non-negative weights of the equations (rows of ``L``).
-
-    Returns
-    -------
-    (n,) or (n, d) ndarray
-        All values (same trailing shape as ``known_values``); the known rows are the input
-        values exactly.
+        Non-negative weights of the rows of ``L``.
 
     Raises
     ------
     InvalidInputError
-        Bad shapes, NaN, out-of-range or repeated indices, negative weights, or a connected
-        component of the graph of ``L`` (with positive-weight rows) that holds no known vertex,
-        where the values are undetermined.
+        Bad shapes or indices, NaN, negative weights, or a component without a known vertex.
     """
     if sp.issparse(L):
         Ls = sp.csr_matrix(L, dtype=np.float64)

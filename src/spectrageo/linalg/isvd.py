@@ -32,39 +32,25 @@ def isvd_update(
     rank: int | None = None,
     tol: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    r"""Thin SVD of ``[A, C]`` from a thin SVD ``A = U diag(s) Vt`` (Brand's method, Eq. 5.69-5.71).
+    """Thin SVD of ``[A, C]`` from a thin SVD ``A = U diag(s) Vt`` (Brand's method, Eq. 5.69-5.71).
 
-    With ``P = U^T C`` and ``QR = qr((I - U U^T) C)`` (Eq. 5.69; the projection is applied twice,
-    classical Gram-Schmidt with re-orthogonalisation, to keep ``[U, Q]`` orthonormal to working
-    precision), the small ``(r + c) x (r + c)`` matrix
-
-    ``K = [[diag(s), P], [0, R]] = U_K diag(s') V_K^T``  (Eq. 5.70)
-
-    gives ``[A, C] = ([U, Q] U_K) diag(s') ([[V, 0], [0, I]] V_K)^T`` (Eq. 5.71). The cost is
-    ``O(m (r + c)^2 + (r + c)^3)`` instead of a new SVD of the whole matrix.
+    With ``P = U^T C`` and ``QR = qr((I - U U^T) C)`` (Eq. 5.69), the SVD of the small
+    ``K = [[diag(s), P], [0, R]]`` (Eq. 5.70) updates both factors (Eq. 5.71) in
+    ``O(m (r + c)^2 + (r + c)^3)``.
 
     Parameters
     ----------
-    U : (m, r) array_like
-        Left singular vectors (orthonormal columns); ``r`` may be 0.
-    s : (r,) array_like
-        Singular values.
-    Vt : (r, N) array_like or None
-        Right singular vectors; ``None`` tracks only ``U`` and ``s`` (cheaper when ``N`` grows).
+    U, s, Vt : (m, r), (r,), (r, N) or None
+        The factorisation (``r`` may be 0; ``Vt=None`` tracks only ``U`` and ``s``).
     C : (m, c) or (m,) array_like
         Columns to append.
-    rank : int, optional
-        Keep at most this many singular triplets (the best rank-``rank`` approximation of the
-        updated factorisation; without truncation the update is exact).
-    tol : float, optional
-        Drop singular values ``<= tol * s_max`` (default ``max(m, r + c) * eps``), which removes the
-        directions added by columns already in the span of ``U``.
+    rank, tol : int, float, optional
+        Keep at most ``rank`` triplets; drop values ``<= tol * s_max``.
 
     Returns
     -------
     U_new : (m, r') ndarray
-    s_new : (r',) ndarray
-        Descending.
+    s_new : (r',) ndarray, descending
     Vt_new : (r', N + c) ndarray or None
     """
     U = _as_float_2d(U, "U")
@@ -115,16 +101,8 @@ def isvd_update(
 
 
 class IncrementalSVD:
-    """Running thin SVD of a matrix that grows by blocks of columns (Section 5.2.4).
-
-    Parameters
-    ----------
-    rank : int, optional
-        Truncation rank kept after every update (``None``: exact, up to ``tol``).
-    compute_v : bool
-        Also track the right singular vectors (memory grows with the number of columns).
-    tol : float, optional
-        Relative threshold for dropping singular values, see :func:`isvd_update`.
+    """Running thin SVD of a matrix that grows by blocks of columns (Section 5.2.4), truncated
+    to ``rank`` after each update; ``compute_v`` also tracks ``Vt``; ``tol`` as in :func:`isvd_update`.
 
     Examples
     --------

@@ -19,20 +19,9 @@ __all__ = ["LassoResult", "lasso"]
 
 @dataclass(frozen=True)
 class LassoResult:
-    """Result of :func:`lasso`.
-
-    Attributes
-    ----------
-    coef : (n_features,) or (n_features, n_targets) ndarray
-        The solution (the sparse ADMM iterate ``z``: exact zeros where the ``l1`` term is active).
-    n_iter : int
-    converged : bool
-    residual : float
-        Primal residual ``||x - z||_F`` at the last iteration.
-    dual_residual : float
-        Dual residual ``rho ||z - z_prev||_F`` at the last iteration.
-    objective : float
-        ``(1 / (2 n_samples)) ||b - A coef||^2 + alpha ||coef||_1`` (summed over targets).
+    """Result of :func:`lasso`: ``coef`` (the sparse ADMM iterate ``z``), ``n_iter``, ``converged``,
+    primal ``residual`` ``||x - z||_F``, ``dual_residual`` ``rho ||z - z_prev||_F`` and the
+    ``objective``.
     """
 
     coef: np.ndarray = field(repr=False)
@@ -54,40 +43,21 @@ def lasso(
     x0: Any = None,
     on_nonconvergence: str = "warn",
 ) -> LassoResult:
-    r"""Solve ``min_x (1 / (2 n_samples)) ||b - A x||_2^2 + alpha ||x||_1`` by ADMM.
+    """Solve ``min_x (1 / (2 n_samples)) ||b - A x||_2^2 + alpha ||x||_1`` by ADMM (Eq. 5.96).
 
-    This is the problem of Eq. 5.96, ``min_z 0.5 ||P - R z||^2 + gamma ||z||_1``, in the scaling of
-    scikit-learn's :class:`~sklearn.linear_model.Lasso` so that results are directly comparable:
-    ``gamma = alpha * n_samples`` (no intercept). ADMM (Boyd et al., 2011, Section 6.4) splits
-    ``x = z`` and iterates
-
-    - ``x = (A^T A / N + rho I)^{-1} (A^T b / N + rho (z - u))``
-    - ``z = S_{alpha / rho}(x + u)`` (soft thresholding)
-    - ``u = u + x - z``
-
-    The system matrix is factorised once and reused by every iteration (and by every column of
-    ``b``): Cholesky of ``A^T A / N + rho I`` when ``n_features <= n_samples``, otherwise of the
-    smaller ``I + A A^T / (N rho)`` through the matrix inversion lemma; a sparse LU
-    (``scipy.sparse.linalg.splu``) of ``A^T A / N + rho I`` when ``A`` is a scipy sparse matrix.
-    Stops when ``||x - z|| <= eps_pri`` and ``rho ||z - z_prev|| <= eps_dual`` with
-    ``eps_pri = tol (sqrt(p) + max(||x||, ||z||))`` and ``eps_dual = tol (sqrt(p) + rho ||u||)``
-    (``p`` the number of unknowns): Boyd's rule with absolute and relative tolerance ``tol``.
+    Eq. 5.96 in scikit-learn's scaling (``gamma = alpha * n_samples``, no intercept). ADMM (Boyd et
+    al., 2011, Section 6.4) iterates ``x = (A^T A / N + rho I)^{-1} (A^T b / N + rho (z - u))``,
+    ``z = S_{alpha / rho}(x + u)``, ``u = u + x - z`` with one factorisation (Cholesky, the inversion
+    lemma when wide, or sparse LU) for all iterations and targets, until Boyd's primal and dual
+    rules with absolute and relative tolerance ``tol`` hold.
 
     Parameters
     ----------
-    A : (n_samples, n_features) array_like or scipy sparse matrix
-    b : (n_samples,) or (n_samples, n_targets) array_like
-        Several targets are solved together, sharing the factorisation.
-    alpha : float
-        ``l1`` weight (``>= 0``), scikit-learn scaling.
-    rho : float
-        ADMM penalty (``> 0``).
-    tol : float
-    max_iter : int
-    x0 : array_like, optional
-        Initial ``z`` (warm start), shape of ``coef``.
-    on_nonconvergence : {"warn", "raise", "ignore"}
-        See :func:`spectrageo.linalg.rpca`.
+    A, b : (n_samples, n_features) array or sparse, (n_samples,) or (n_samples, n_targets)
+    alpha, rho : float
+        ``l1`` weight (``>= 0``) and ADMM penalty (``> 0``).
+    tol, max_iter, x0, on_nonconvergence
+        Stopping rule, warm start ``z`` and the policy of :func:`rpca`.
 
     Returns
     -------

@@ -1,15 +1,5 @@
-"""Robust principal component analysis: ``M = E + S`` (low-rank + sparse), optionally ``+ G`` (noise).
-
-Two solvers, both exposed through :func:`rpca`:
-
-- ``method="ialm"``: principal component pursuit (PCP, Eq. 4.18) by the augmented Lagrange
-  multiplier method of Eq. 4.19-4.22; with ``noise_aware=True`` the stable-PCP model of Eq. 4.23.
-- ``method="godec"``: the SVD-free bilateral factorisation ``E = W T`` with QR updates
-  (Eq. 5.29-5.35, Section 5.1.2), the low-rank + sparse + noise model of GoDec.
-
-Large tall-skinny matrices (e.g. the ``3n x (k+1)`` kNN patch matrix of Eq. 5.98 with ``n`` in the
-tens of millions) go through a row-chunked engine that never forms a full SVD and never holds more
-than the input plus two working arrays of its size (see :mod:`spectrageo.linalg._chunked`).
+"""Robust PCA ``M = E + S (+ G)``: inexact ALM for principal component pursuit (Eq. 4.18-4.23)
+and GoDec's bilateral factorisation (Eq. 5.29-5.35), row-chunked for tall matrices.
 """
 
 from __future__ import annotations
@@ -21,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import as_rng, check_choice, check_positive
+from .._validation import as_rng, check_choice, check_positive, options_with_legacy
 from . import _kernels as _k
 from ._chunked import CoreAccumulator, positive_part
 from ._common import (
@@ -39,7 +29,7 @@ from ._common import (
     top_svd,
 )
 
-__all__ = ["RPCAResult", "rpca"]
+__all__ = ["RPCASolverOptions", "RPCAResult", "rpca"]
 
 _METHODS = ("ialm", "godec")
 _BACKENDS = ("auto", "chunked", "dense")
@@ -49,28 +39,10 @@ CHUNKED_MAX_COLS = 256
 
 @dataclass(frozen=True)
 class RPCAResult:
-    """Result of :func:`rpca`.
-
-    Attributes
-    ----------
-    low_rank : (m, n) ndarray
-        The low-rank part ``E``.
-    sparse : (m, n) ndarray
-        The sparse part ``S``.
-    n_iter : int
-        Iterations performed.
-    converged : bool
-        Whether the stopping rule was met before ``max_iter``.
-    residual : float
-        The quantity the stopping rule compares with ``tol``: ``||M - E - S||_F / ||M||_F`` for
-        PCP (``method="ialm"``), the relative change ``||(E, S)_t - (E, S)_{t-1}||_F / ||M||_F``
-        between the last two iterates for GoDec and for the noise-aware model.
-    noise : (m, n) ndarray or None
-        The dense noise part ``G = M - E - S`` of Eq. 4.23 (only with ``noise_aware=True``).
-    rank : int
-        Rank of ``low_rank`` (singular values kept at the last iteration).
-    method : str
-        The solver used.
+    """Result of :func:`rpca`: ``low_rank`` ``E`` and ``sparse`` ``S`` (shaped like ``M``), ``noise``
+    ``G = M - E - S`` (Eq. 4.23, with ``noise_aware``), ``n_iter``, ``converged``, ``rank``, ``method``
+    and ``residual``, the stopping quantity: ``||M - E - S||_F / ||M||_F`` for PCP, the relative
+    change of ``(E, S)`` for GoDec and the noise-aware model.
     """
 
     low_rank: np.ndarray = field(repr=False)
@@ -83,6 +55,52 @@ class RPCAResult:
     method: str = "ialm"
 
 
+@dataclass(frozen=True)
+class RPCASolverOptions:
+    """Engine options of :func:`rpca`, validated on construction.
+
+    ``noise_level``: deviation of ``G`` (estimated when None). ``mu``: the IALM penalty schedule
+    (``"continuation"``, Lin, Chen & Ma 2010; ``"thesis"``, the fixed ``m n / (4 ||M||_1)`` of
+    Eq. 4.22; or ``mu_0``), grown by ``rho >= 1`` (default 1.5, 1 with ``"thesis"``); see
+    docs/decisions.md#linalg-rpca-mu. ``threshold``: GoDec's ``"soft"`` (Eq. 5.32) or ``"hard"``
+    operator. ``backend``: ``"chunked"`` (rows streamed, SVDs from the Gram matrix or a TSQR),
+    ``"dense"`` or ``"auto"`` (chunked up to :data:`CHUNKED_MAX_COLS` columns). ``dtype``: working
+    precision of the chunked engine (float32 needs ``tol >= 1e-6``).
+    """
+
+    noise_level: float | None = None
+    mu: float | str = "continuation"
+    rho: float | None = None
+    threshold: str = "soft"
+    backend: str = "auto"
+    dtype: Any = None
+
+    def __post_init__(self) -> None:
+        check_choice(self.backend, "backend", _BACKENDS)
+        check_choice(self.threshold, "threshold", ("soft", "hard"))
+        if self.noise_level is not None:
+            check_positive(self.noise_level, "noise_level")
+        if isinstance(self.mu, str):
+            check_choice(self.mu, "mu", ("continuation", "thesis"))
+        else:
+            check_positive(self.mu, "mu")
+        if self.rho is not None:
+            check_positive(self.rho, "rho")
+            if self.rho < 1:
+                raise InvalidInputError(f"`rho` must be >= 1; got {self.rho!r}.")
+        if self.dtype is not None:
+            try:
+                dt = np.dtype(self.dtype)
+            except TypeError as exc:
+                raise InvalidInputError(
+                    f"`dtype` must be 'float32' or 'float64'; got {self.dtype!r}."
+                ) from exc
+            if dt not in (np.float32, np.float64):
+                raise InvalidInputError(
+                    f"`dtype` must be 'float32' or 'float64'; got {self.dtype!r}."
+                )
+
+
 def rpca(
     M: Any,
     *,
@@ -92,115 +110,45 @@ def rpca(
     tol: float = 1e-7,
     max_iter: int | None = None,
     noise_aware: bool = False,
-    noise_level: float | None = None,
-    mu: float | str = "continuation",
-    rho: float | None = None,
-    threshold: str = "soft",
-    backend: str = "auto",
-    dtype: Any = None,
     on_nonconvergence: str = "warn",
+    options: RPCASolverOptions | None = None,
     rng: Any = None,
+    **legacy: Any,
 ) -> RPCAResult:
-    r"""Decompose ``M`` into a low-rank ``E`` and a sparse ``S`` (Eq. 4.16), optionally plus noise.
+    """Decompose ``M`` into a low-rank ``E`` and a sparse ``S`` (Eq. 4.16), optionally plus noise.
 
-    **method="ialm"** solves principal component pursuit (Eq. 4.18)
-    ``min ||E||_* + lam ||S||_1  s.t.  E + S = M`` with the augmented Lagrangian of Eq. 4.19 and the
-    alternating updates of Eq. 4.22 (singular value thresholding ``D_{1/mu}`` for ``E``, Eq. 4.21;
-    shrinkage ``Q_{lam/mu}`` for ``S``, Eq. 4.20; ``Y <- Y + mu (M - E - S)``: Eq. 4.22 prints
-    ``M - E + S``, a sign typo). It stops when ``||M - E - S||_F <= tol ||M||_F`` (thesis:
-    ``beta = 1e-7``). ``lam`` defaults to ``1 / sqrt(max(m, n))``.
-
-    The penalty ``mu``: the thesis sets ``mu = n^2 / (4 ||M||_1)``, which is the choice
-    ``m n / (4 ||M||_1)`` of Candes et al. (2011) for a square ``n x n`` matrix, kept fixed as in
-    Eq. 4.22 (``mu="thesis"``; ``m n`` is used for rectangular ``M``). With a fixed ``mu`` the
-    iteration recovers planted problems but about twice as slowly (30-36 iterations instead of
-    15-17 on 100 x 80 to 300 x 300 matrices of rank 3-10 with 5-10 % gross errors) and does not
-    reach ``tol = 1e-7`` within 3000 iterations on a ``6000 x 11`` kNN patch matrix; growing ``mu``
-    from that large start breaks recovery (relative error 2.5 on the 200 x 200 case). The default
-    ``mu="continuation"`` is the inexact ALM schedule of Lin, Chen & Ma (2010):
-    ``mu_0 = 1.25 / ||M||_2``, ``mu <- min(rho mu, 1e7 mu_0)`` with ``rho = 1.5`` (20-40
-    iterations, same solution). A number sets ``mu_0`` directly (with ``rho`` default 1.5).
-    ``rank``, if given, additionally caps the number of singular values kept by ``D_{1/mu}``.
-
-    **noise_aware=True** with ``"ialm"`` fits ``M = E + S + G`` (Eq. 4.23) as stable PCP in its
-    Lagrangian form ``min ||E||_* + lam ||S||_1 + ||M - E - S||_F^2 / (2 nu)`` by exact block
-    minimisation (``E = D_nu(M - S)``, ``S = Q_{lam nu}(M - E)``), with
-    ``nu = (sqrt(m) + sqrt(n)) sigma`` -- the spectral norm of an ``m x n`` Gaussian noise
-    matrix of entry deviation ``sigma`` -- so that pure-noise singular values are removed.
-    ``sigma = noise_level``, or, if ``None``, a robust estimate: a loose PCP solve (``tol=1e-4``)
-    gives a low-rank ``E_0``, which is truncated at the largest ratio of consecutive singular
-    values (in the leading half of its spectrum), and ``sigma = 1.4826 * MAD(M - E_0,r)`` (on at
-    most 200000 sampled rows). The median absolute deviation ignores the sparse gross errors,
-    which dominate the singular values of ``M`` itself (a median-singular-value estimate is off by
-    two orders of magnitude with 5 % of outliers). Pass ``noise_level`` when it is known (it also
-    saves the extra solve). ``G = M - E - S`` is returned as ``noise``.
-
-    **method="godec"** is the bilateral factorisation of Eq. 5.29-5.35: ``E = W T`` with
-    ``rank(W) = rank(T) <= rank`` and an ``l1``-regularised ``S`` (Eq. 5.30), updated SVD-free by
-    ``QR = qr((M - S) T^T)``, ``W = Q``, ``T = Q^T (M - S)``, ``S = D_lam(M - W T)`` (Eq. 5.33-5.35),
-    starting from a Gaussian random ``T`` (bilateral random projection). ``lam`` is the element
-    threshold of Eq. 5.32 (default ``3 * 1.4826 * median|M - M_r|`` with ``M_r`` the best rank-``r``
-    approximation of ``M``: a robust three-sigma level of the residual). ``threshold="soft"`` is
-    Eq. 5.32; ``"hard"`` keeps entries above ``lam`` unshrunk (exact recovery when there is no
-    noise). ``rank`` defaults to the Gavish-Donoho hard-threshold estimate from the singular
-    values of ``M``. The model has a noise term by construction; ``noise_aware=True`` returns it.
-    Stops when the relative change of ``(E, S)`` falls below ``tol``.
+    ``"ialm"`` solves ``min ||E||_* + lam ||S||_1  s.t.  E + S = M`` (Eq. 4.18) with the augmented
+    Lagrangian updates of Eq. 4.19-4.22 (``Y <- Y + mu (M - E - S)``; Eq. 4.22 prints ``M - E + S``)
+    until ``||M - E - S||_F <= tol ||M||_F``; ``lam`` defaults to ``1 / sqrt(max(m, n))``.
+    ``noise_aware`` fits ``M = E + S + G`` (Eq. 4.23) as stable PCP. ``"godec"`` iterates the QR
+    updates of Eq. 5.33-5.35 with ``lam`` defaulting to ``3 * 1.4826 * median|M - M_r|`` and ``rank``
+    to the Gavish-Donoho estimate.
 
     Parameters
     ----------
     M : (m, n) array_like
-        Data matrix (finite). float32 input is processed in float32 unless ``dtype`` says otherwise.
-    method : {"ialm", "godec"}
-    rank : int, optional
-        Target rank (GoDec) or cap on the rank (IALM). ``1 <= rank <= min(m, n)``.
-    lam : float, optional
-        IALM: weight of ``||S||_1``. GoDec: threshold of Eq. 5.32.
-    tol : float
-        Stopping tolerance (see ``RPCAResult.residual``).
-    max_iter : int, optional
-        Default 1000 for PCP, 500 for GoDec and the noise-aware model.
-    noise_aware : bool
-        Fit ``M = E + S + G`` and return ``G`` (Eq. 4.23).
-    noise_level : float, optional
-        Standard deviation of the entries of ``G`` (noise-aware IALM only).
-    mu : {"continuation", "thesis"} or float
-        Penalty schedule of the IALM (see above).
-    rho : float, optional
-        Growth factor of ``mu`` (``>= 1``).
-    threshold : {"soft", "hard"}
-        Sparse-part operator of GoDec.
-    backend : {"auto", "chunked", "dense"}
-        ``"chunked"``: row-chunked engine on the tall orientation of ``M``; every SVD is computed
-        from the ``n x n`` Gram matrix or a TSQR reduction of ``M - S`` (``n = min(m, n)``), memory
-        is the input plus two arrays of its size (three with ``noise_aware``) plus a few 8 MB
-        chunks. ``"dense"``: whole-matrix updates with full or partial (ARPACK, predicted rank)
-        SVDs for IALM and the literal QR updates of Eq. 5.35 for GoDec. ``"auto"``: chunked when
-        ``min(m, n) <= 256``.
-    dtype : {None, "float32", "float64"}
-        Working precision of the chunked engine (``None``: float32 for float32 input, else
-        float64). float32 halves memory; its rounding floor is a relative residual of ~1e-6, so
-        use ``tol >= 1e-6`` with it.
+        Finite data; float32 stays float32 unless ``options.dtype`` says otherwise.
+    method, rank, lam : {"ialm", "godec"}, int, float
+        Solver; target rank (GoDec) or rank cap (IALM); ``||S||_1`` weight or GoDec threshold.
+    tol, max_iter, noise_aware
+        Stopping tolerance; default 1000 iterations for PCP, 500 otherwise; fit ``G`` too.
     on_nonconvergence : {"warn", "raise", "ignore"}
-        ``"warn"``: return with ``converged=False`` and a :class:`ConvergenceWarning`; ``"raise"``:
-        raise :class:`ConvergenceError` whose ``partial`` is the result; ``"ignore"``: return it.
-    rng : int, Generator or None
-        Random initial ``T`` of GoDec and row sampling for its default threshold.
+        Policy when ``max_iter`` comes first (:class:`ConvergenceError` carries ``partial``).
+    options, rng : RPCASolverOptions, seed or Generator
+        Engine options (old keywords warn); GoDec's random start and row sampling.
 
     Returns
     -------
     RPCAResult
-        ``low_rank`` and ``sparse`` have the shape of ``M`` (float64, or float32 in float32 mode).
 
     Raises
     ------
     InvalidInputError
-        Bad shape, NaN/inf, unknown ``method``/``backend``/``threshold``, ``rank`` out of range...
-    ConvergenceError
-        With ``on_nonconvergence="raise"`` when ``max_iter`` is reached first.
+        Bad shape or values, unknown choices, ``rank`` out of range.
     """
+    o = options_with_legacy(options, legacy, RPCASolverOptions, "rpca")
+    mu, backend, dtype = o.mu, o.backend, o.dtype
     check_choice(method, "method", _METHODS)
-    check_choice(backend, "backend", _BACKENDS)
-    check_choice(threshold, "threshold", ("soft", "hard"))
     check_on_nonconvergence(on_nonconvergence)
     A0 = as_matrix(M, "M")
     m0, n0 = A0.shape
@@ -217,28 +165,11 @@ def rpca(
         rank = int(rank)
     if lam is not None:
         check_positive(lam, "lam")
-    if noise_level is not None:
-        check_positive(noise_level, "noise_level")
-    if isinstance(mu, str):
-        check_choice(mu, "mu", ("continuation", "thesis"))
-    else:
-        check_positive(mu, "mu")
-    if rho is None:
-        rho = 1.0 if mu == "thesis" else 1.5
-    check_positive(rho, "rho")
-    if rho < 1:
-        raise InvalidInputError(f"`rho` must be >= 1; got {rho!r}.")
+    rho = o.rho if o.rho is not None else (1.0 if mu == "thesis" else 1.5)
     if dtype is None:
         dt = np.dtype(np.float32) if A0.dtype == np.float32 else np.dtype(np.float64)
     else:
-        try:
-            dt = np.dtype(dtype)
-        except TypeError as exc:
-            raise InvalidInputError(
-                f"`dtype` must be 'float32' or 'float64'; got {dtype!r}."
-            ) from exc
-        if dt not in (np.float32, np.float64):
-            raise InvalidInputError(f"`dtype` must be 'float32' or 'float64'; got {dtype!r}.")
+        dt = np.dtype(dtype)
     gen = as_rng(rng)
 
     # Work on the tall orientation (rows >= columns); PCP and GoDec are transpose-symmetric.
@@ -254,7 +185,7 @@ def rpca(
             what = "RPCA (inexact ALM)"
         elif method == "ialm":
             res = _stable_pcp(
-                ctx, lam=lam, sigma=noise_level, rank=rank, tol=tol, max_iter=max_iter
+                ctx, lam=lam, sigma=o.noise_level, rank=rank, tol=tol, max_iter=max_iter
             )
             what = "RPCA (noise-aware, stable PCP)"
         else:
@@ -262,7 +193,7 @@ def rpca(
                 ctx,
                 rank=rank,
                 lam=lam,
-                threshold=threshold,
+                threshold=o.threshold,
                 tol=tol,
                 max_iter=max_iter,
                 rng=gen,
@@ -334,8 +265,7 @@ class _Context:
         return self._core0
 
     def tsqr(self, fill: Callable) -> tuple[np.ndarray, np.ndarray]:
-        """TSQR core of the matrix whose rows ``sl`` ``fill(sl, out)`` writes; switches to TSQR
-        for the rest of the solve."""
+        """TSQR core of the rows that ``fill(sl, out)`` writes (switches the solve to TSQR)."""
         self.core_mode = "qr"
         acc = CoreAccumulator(self.n, "qr")
         buf = self.buffer(np.float64)
@@ -372,13 +302,8 @@ def _svt_factors(s: np.ndarray, V: np.ndarray, tau: float, m: int, rank: int | N
 
 
 def _dense_svt(X: np.ndarray, tau: float, sv: int, rank: int | None, rng: np.random.Generator):
-    """Singular value thresholding ``D_tau(X)`` with a predicted number ``sv`` of triplets.
-
-    Returns ``(E, svp, k)``: ``svp`` singular values exceed ``tau``, ``k`` are kept (``svp`` capped
-    by ``rank``). The thresholding is exact: when all ``sv`` computed values exceed ``tau`` (so
-    more might), ``sv`` is enlarged and the partial SVD repeated (the prediction of Lin, Chen & Ma
-    only saves work, it never truncates); a short side of at most ``FULL_SVD_MAX`` always gets a
-    full SVD.
+    """Exact singular value thresholding ``D_tau(X)`` from a predicted count ``sv`` (enlarged
+    while every computed value exceeds ``tau``); returns ``(E, svp, k)``.
     """
     p = min(X.shape)
     if p <= FULL_SVD_MAX:
@@ -457,12 +382,8 @@ def _ialm_dense(ctx, lam, mu, rho, mu_max, rank, tol, max_iter, fro):
 
 
 def _ialm_chunked(ctx, lam, mu, rho, mu_max, rank, tol, max_iter, fro):
-    """Chunked IALM storing only ``R = M - E + Y/mu`` between iterations.
-
-    With ``R^{t+1} = M - E^{t+1} + Y^t / mu_t`` the updates of Eq. 4.22 give
-    ``S^{t+1} = Q_{lam/mu_t}(R^{t+1})`` and ``Y^{t+1} = mu_t clip(R^{t+1}, +-lam/mu_t)``, so one
-    array holds both ``S`` and ``Y``; a second one receives ``E``. Each iteration is one pass over
-    the rows that also accumulates the core of the next SVT argument ``M - S + Y/mu``.
+    """Chunked IALM storing ``R = M - E + Y/mu``: ``S = Q_{lam/mu}(R)`` and
+    ``Y = mu clip(R, +-lam/mu)`` share one array (Eq. 4.22); one pass per iteration.
     """
     m, n, dt = ctx.m, ctx.n, ctx.dt
     R = np.zeros((m, n), dt)  # becomes S at the end
@@ -528,10 +449,8 @@ def _alternating_chunked(
     want_noise,
     before_pass: Callable | None = None,
 ):
-    """Chunked ``E = X Pa Pb`` / ``S = threshold(M - E, tau)`` iterations with ``X = M - S``.
-
-    ``e_step(s, V)`` maps the core of ``X`` to ``(Pa, Pb, rank)``. Stops when
-    ``sqrt(||dE||^2 + ||dS||^2) <= tol ||M||_F``.
+    """Chunked ``E = X Pa Pb`` / ``S = threshold(M - E, tau)`` iterations with ``X = M - S``,
+    ``e_step(s, V) -> (Pa, Pb, rank)``; stops at ``||(dE, dS)|| <= tol ||M||_F``.
     """
     m, n, dt = ctx.m, ctx.n, ctx.dt
     fro, _ = ctx.norms()
@@ -615,10 +534,8 @@ def _stable_pcp(ctx, *, lam, sigma, rank, tol, max_iter):
 
 
 def _robust_noise_sigma(ctx: _Context, max_rows: int = 200_000) -> float:
-    """Entry deviation of the dense noise of ``M = E + S + G`` (see :func:`rpca`, noise_aware).
-
-    Loose PCP ``M = E_0 + S_0``; ``E_0`` truncated at its largest singular-value ratio; robust
-    (MAD) deviation of ``M - E_0,r`` on a deterministic sample of rows.
+    """Entry deviation of ``G``: MAD of ``M - E_0,r`` after a loose PCP
+    (docs/decisions.md#linalg-rpca-mu).
     """
     m, n = ctx.m, ctx.n
     fro, _ = ctx.norms()

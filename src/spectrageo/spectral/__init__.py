@@ -1,11 +1,12 @@
 """Spectral processing: GFT/IGFT, low-pass filtering, orthogonal iterations and submeshes."""
 
 from .gft import Eigenbasis, fix_signs, gft, igft, lowpass_whole
-from .lowpass import lowpass
+from .lowpass import LowpassOptions, LowpassResult, lowpass
 from .orthogonal import (
     DOIResult,
     OIResult,
     ShiftedFactor,
+    SubmeshOptions,
     dynamic_orthogonal_iteration,
     orthogonal_iteration,
     shifted_factor,
@@ -21,8 +22,11 @@ from .partition import (
 __all__ = [
     "DOIResult",
     "Eigenbasis",
+    "LowpassOptions",
+    "LowpassResult",
     "OIResult",
     "ShiftedFactor",
+    "SubmeshOptions",
     "Submeshes",
     "dynamic_orthogonal_iteration",
     "fix_signs",

@@ -1,6 +1,4 @@
-"""Graph Fourier transform (Section 4.1.2, Eq. 4.3-4.5) and whole-graph spectral low-pass
-(Section 4.1.3, Eq. 4.6).
-"""
+"""Graph Fourier transform (Section 4.1.2, Eq. 4.3-4.5) and whole-graph low-pass (Eq. 4.6)."""
 
 from __future__ import annotations
 
@@ -28,12 +26,8 @@ def fix_signs(U: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Eigenbasis:
-    """The ``k`` lowest eigenpairs of a symmetric Laplacian, reusable for many signals.
-
-    Attributes
-    ----------
-    eigenvalues : (k,) ascending
-    eigenvectors : (n, k) orthonormal columns ``U``, signs fixed by :func:`fix_signs`
+    """The ``k`` lowest eigenpairs of a Laplacian: ascending ``eigenvalues`` (k,) and orthonormal
+    ``eigenvectors`` (n, k) with signs fixed by :func:`fix_signs`.
     """
 
     eigenvalues: np.ndarray
@@ -51,11 +45,8 @@ class Eigenbasis:
     def from_laplacian(
         cls, L, k: int | None = None, *, method: str = "auto", tol: float = 0.0
     ) -> Eigenbasis:
-        """Compute the ``k`` lowest eigenpairs of ``L`` (all of them when ``k`` is None).
-
-        ``method``: ``"dense"`` (``numpy.linalg.eigh``, O(n^3), only for small graphs), ``"sparse"``
-        (``scipy.sparse.linalg.eigsh`` in shift-invert mode around a small negative shift) or
-        ``"auto"`` (dense when ``n <= 4000`` or ``k`` is close to ``n``).
+        """The ``k`` lowest eigenpairs of ``L`` (all when None) by ``numpy.linalg.eigh``
+        (``"dense"``), shift-invert ``eigsh`` (``"sparse"``) or dense when ``n <= 4000`` (``"auto"``).
         """
         n = L.shape[0]
         if L.shape != (n, n):
@@ -123,10 +114,8 @@ def igft(V_hat, basis: Eigenbasis) -> np.ndarray:
 
 
 def lowpass_whole(V, L, *, keep: float | int) -> np.ndarray:
-    """Whole-graph spectral low-pass of the signal ``V`` (n, d) on Laplacian ``L`` (Section 4.1.3).
-
-    ``keep``: fraction in (0, 1] of the ``n`` components, or an integer count. Uses the sparse
-    eigensolver for large graphs (the reference that the partitioned variants are compared with).
+    """Whole-graph low-pass of ``V`` (n, d) on ``L`` (Section 4.1.3), keeping a fraction or a
+    count ``keep`` of the components.
     """
     V = np.asarray(V, dtype=np.float64)
     if V.ndim == 2 and V.shape[1] == 3:

@@ -1,31 +1,69 @@
-"""Partitioned spectral low-pass filtering (Section 4.1.3, Eq. 4.6; Section 5.2.1, Eq. 5.45).
-
-The graph is split into overlapped equal-sized submeshes, each submesh signal is projected on the
-``n_l`` lowest-frequency eigenvectors of its own Laplacian, ``v~[i] = U_nl[i] U_nl[i]^T v[i]``
-(Eq. 5.45), and the overlapping copies are merged with the degree weights of Algorithm 8.
-"""
+"""Partitioned spectral low-pass filtering (Section 4.1.3, Eq. 4.6; Section 5.2.1, Eq. 5.45)."""
 
 from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from .._errors import InvalidInputError
-from .._validation import as_faces, check_choice
+from .._validation import as_faces, check_choice, options_with_legacy
+from ..graph import laplacian_from_adjacency, weighted_adjacency
 from .gft import _n_keep as _n_keep_whole
 from .gft import lowpass_whole
-from .orthogonal import DOI_EPS_HIGH, DOI_EPS_LOW, submesh_eigenbases
+from .orthogonal import (
+    DOI_EPS_HIGH,
+    DOI_EPS_LOW,
+    SubmeshOptions,
+    _check_iteration,
+    submesh_eigenbases,
+)
 from .partition import as_adjacency, overlapped_submeshes, reassemble
 
-__all__ = ["DEFAULT_KEEP", "lowpass"]
+__all__ = ["DEFAULT_KEEP", "LowpassOptions", "LowpassResult", "lowpass"]
 
-#: default fraction of components kept per submesh: 10 % (the thesis shows the shape is preserved
-#: with 90 % of the high frequencies removed, Fig. 5.22, and its OI experiments keep 10 % per
-#: submesh of about 700 vertices)
+#: default fraction of components kept per submesh: the thesis keeps 10 % per submesh of about 700
+#: vertices and shows the shape is preserved with 90 % of the high frequencies removed (Fig. 5.22)
 DEFAULT_KEEP = 0.1
 
 METHODS = ("exact", "oi", "doi", "whole")
 LAPLACIANS = ("binary", "gaussian", "cotangent", "weighted")
+
+
+@dataclass(frozen=True)
+class LowpassOptions:
+    """Options of :func:`lowpass`: ``submesh_size``, ``overlap`` (:func:`overlapped_submeshes`),
+    the OI / DOI fields of :class:`SubmeshOptions`, reassembly ``weights`` (:func:`reassemble`), and
+    ``diagnostics``, which records one result per submesh (runs the Rayleigh-Ritz step).
+    """
+
+    submesh_size: int = 700
+    overlap: float = 0.15
+    delta: float | None = None
+    zeta: int = 4
+    n_iter: int = 1
+    tol: float | None = None
+    eps_low: float = DOI_EPS_LOW
+    eps_high: float = DOI_EPS_HIGH
+    t_max: int = 100
+    weights: Any = None
+    diagnostics: bool = False
+
+    def __post_init__(self) -> None:
+        _check_iteration(self)
+
+
+@dataclass(frozen=True, eq=False)
+class LowpassResult:
+    """The low-passed ``signal`` (shaped like the input) and, with ``diagnostics``, one
+    :class:`OIResult` / :class:`DOIResult` per submesh in ``submeshes``.
+    """
+
+    signal: np.ndarray
+    submeshes: tuple = ()
 
 
 def lowpass(
@@ -33,63 +71,48 @@ def lowpass(
     F=None,
     *,
     keep: float | int = DEFAULT_KEEP,
-    submesh_size: int = 700,
-    overlap: float = 0.15,
     method: str = "oi",
     laplacian: str = "binary",
     C=None,
     points=None,
-    delta: float | None = None,
-    zeta: int = 4,
-    n_iter: int = 1,
-    tol: float | None = None,
-    eps_low: float = DOI_EPS_LOW,
-    eps_high: float = DOI_EPS_HIGH,
-    t_max: int = 100,
-    weights=None,
+    options: LowpassOptions | None = None,
     rng=None,
-    info: list | None = None,
-) -> np.ndarray:
-    """Spectral low-pass of a signal on a mesh or graph, processed in overlapped submeshes (Eq. 5.45).
+    **legacy,
+) -> LowpassResult:
+    """Spectral low-pass of a signal on a mesh or graph in overlapped submeshes (Eq. 5.45).
+
+    Each submesh signal is projected on the lowest eigenvectors of its own Laplacian,
+    ``v~[i] = U_nl[i] U_nl[i]^T v[i]``, and the copies are merged with the weights of Algorithm 8.
 
     Parameters
     ----------
-    V : (n,) or (n, d) float
-        The signal: vertex coordinates (n, 3) for mesh smoothing/compression, or any per-vertex signal.
-    F : (m, 3) int, optional
-        Triangles. Give ``F`` for a mesh, or ``F=None`` and ``C`` for a point cloud or any graph.
+    V, F : (n,) or (n, d) float, (m, 3) int or None
+        The signal, and the triangles of a mesh (or None with an adjacency ``C``).
     keep : float in (0, 1] or int
-        Components kept per submesh: a fraction of the submesh size, or a count (default 10 %).
-        For ``method="whole"`` the fraction refers to the whole graph's ``n``. For ``"doi"`` it is the
-        starting subspace size of the first submesh.
-    submesh_size, overlap : see :func:`~spectrageo.spectral.partition.overlapped_submeshes`
+        Components kept per submesh (of ``n`` for ``"whole"``; the start size for ``"doi"``).
     method : {"oi", "exact", "doi", "whole"}
-        ``"oi"``: subspace tracking with orthogonal iterations (Eq. 4.7, Algorithm 6; ``n_iter``
-        iterations of ``T^zeta``); ``"exact"``: dense eigendecomposition of every submesh;
-        ``"doi"``: dynamic OI (Algorithm 7), adapting the kept size per submesh to the residual band
-        ``[eps_low, eps_high]``; ``"whole"``: no partitioning, the ``keep * n`` lowest eigenvectors of
-        the whole Laplacian from SciPy's sparse eigensolver (the reference of Section 4.1.3; costly).
-    laplacian : {"binary", "gaussian", "cotangent", "weighted"}
-        ``"binary"`` ``L = D - C`` on the connectivity (Eq. 4.1, default, the thesis's choice for
-        compression); ``"gaussian"``/``"cotangent"`` weights (Eq. 4.2) need a mesh and coordinates
-        (``points``, or ``V`` itself when it has shape (n, 3)); ``"weighted"`` uses the values of ``C``.
-    C : sparse (n, n), optional
-        Symmetric adjacency (e.g. :func:`spectrageo.graph.knn_graph`), used when ``F`` is None.
-    points : (n, 3), optional
-        Vertex positions for the Gaussian/cotangent weights when ``V`` is not the coordinates.
-    delta, zeta, n_iter, tol : OI parameters, see :func:`~spectrageo.spectral.orthogonal.orthogonal_iteration`
-    eps_low, eps_high, t_max : DOI parameters, see
-        :func:`~spectrageo.spectral.orthogonal.dynamic_orthogonal_iteration`
-    weights : None or "uniform" or "core"
-        Reassembly weights (:func:`~spectrageo.spectral.partition.reassemble`); default: Algorithm 8.
-    rng : seed for METIS and random starts.
-    info : list, optional
-        Receives one result object per submesh (see ``submesh_eigenbases``).
+        Algorithm 6, dense per submesh, Algorithm 7, or the unpartitioned Laplacian (costly).
+    laplacian, C, points
+        Weights of ``L = D - C`` (Eq. 4.1-4.2: ``"binary"``, ``"gaussian"`` and ``"cotangent"``
+        with positions ``points`` or ``V``, or ``"weighted"``: the values of the adjacency ``C``).
+    options, rng
+        :class:`LowpassOptions` (old keywords and ``info=list`` warn); METIS and start seed.
 
     Returns
     -------
-    (n,) or (n, d) float64, the low-passed signal.
+    LowpassResult
     """
+    info = legacy.pop("info", None)
+    if info is not None:
+        warnings.warn(
+            "lowpass(): `info` is deprecated; use options=LowpassOptions(diagnostics=True) and "
+            "LowpassResult.submeshes.",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        if not isinstance(info, list):
+            raise InvalidInputError(f"`info` must be a list or None; got {type(info).__name__}.")
+    o = options_with_legacy(options, legacy, LowpassOptions, "lowpass")
     check_choice(method, "method", METHODS)
     check_choice(laplacian, "laplacian", LAPLACIANS)
     X = np.asarray(V, dtype=np.float64)
@@ -102,42 +125,44 @@ def lowpass(
     kind = "binary" if laplacian == "binary" else "weighted"
 
     if method == "whole":
-        from ..graph import laplacian_from_adjacency
-
         Wk = W.copy()
         if kind == "binary":
             Wk.data[:] = 1.0
         _n_keep_whole(keep, n)
         L = laplacian_from_adjacency(Wk)
         out = lowpass_whole(X.reshape(n, -1), L, keep=keep)
-        return out.reshape(X.shape)
+        return LowpassResult(out.reshape(X.shape))
 
     # the partition only uses the sparsity pattern (cotangent weights may be negative)
-    subs = overlapped_submeshes(abs(W), submesh_size=submesh_size, overlap=overlap, rng=rng)
+    subs = overlapped_submeshes(abs(W), submesh_size=o.submesh_size, overlap=o.overlap, rng=rng)
     Xm = X.reshape(n, -1)
     values = [None] * len(subs.parts)
+    record = info if info is not None else ([] if o.diagnostics else None)
+    sub_opts = SubmeshOptions(
+        delta=o.delta,
+        zeta=o.zeta,
+        n_iter=o.n_iter,
+        tol=o.tol,
+        eps_low=o.eps_low,
+        eps_high=o.eps_high,
+        t_max=o.t_max,
+        ritz=False,
+    )
     for i, _w, U in submesh_eigenbases(
         W,
         subs,
         keep,
         method=method,
-        delta=delta,
-        zeta=zeta,
-        n_iter=n_iter,
-        tol=tol,
-        signal=Xm if method == "doi" else None,
-        eps_low=eps_low,
-        eps_high=eps_high,
-        t_max=t_max,
         laplacian=kind,
-        ritz=False,
+        signal=Xm if method == "doi" else None,
+        options=sub_opts,
         rng=rng,
-        info=info,
+        info=record,
     ):
         xi = Xm[subs.parts[i]]
         values[i] = U @ (U.T @ xi)
-    out = reassemble(values, subs, weights=weights)
-    return out.reshape(X.shape)
+    out = reassemble(values, subs, weights=o.weights)
+    return LowpassResult(out.reshape(X.shape), tuple(record) if record is not None else ())
 
 
 def _adjacency(X, F, C, points, laplacian: str, n: int) -> sp.csr_matrix:
@@ -159,8 +184,6 @@ def _adjacency(X, F, C, points, laplacian: str, n: int) -> sp.csr_matrix:
         raise InvalidInputError("`laplacian`='weighted' uses the values of `C`; pass `C`, not `F`.")
     if laplacian == "binary":
         return _binary_adjacency(Fa, n)
-    from ..graph import weighted_adjacency
-
     P = X if points is None else np.asarray(points, dtype=np.float64)
     if P.shape != (n, 3):
         raise InvalidInputError(

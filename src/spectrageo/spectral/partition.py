@@ -1,13 +1,4 @@
-"""Overlapped, equal-sized submeshes (Sections 5.1.1 and 5.2.1) and their degree-weighted
-reassembly (Algorithm 8).
-
-A large mesh (or kNN graph) is split into ``n_parts`` parts with METIS; each part (its *core*) is
-then grown by the rings of neighbouring vertices until it holds exactly ``submesh_size`` vertices,
-so that consecutive submeshes have Laplacians of the same size (a requirement of the orthogonal
-iterations of Eq. 4.7 / Algorithm 6) and neighbouring submeshes overlap (about ``overlap`` of their
-vertices), which removes the "edge effect" of Fig. 5.48 once the per-submesh results are averaged
-with the degree weights of Algorithm 8 (:func:`reassemble`).
-"""
+"""Overlapped, equal-sized submeshes (Sections 5.1.1, 5.2.1) and their reassembly (Algorithm 8)."""
 
 from __future__ import annotations
 
@@ -35,11 +26,7 @@ __all__ = [
 
 
 def as_adjacency(C, name: str = "C", *, allow_negative: bool = False) -> sp.csr_matrix:
-    """Validate a symmetric sparse adjacency and return it as CSR float64 without self-loops.
-
-    Negative weights (e.g. cotangent weights of obtuse triangles) are refused unless
-    ``allow_negative``.
-    """
+    """Symmetric sparse adjacency as CSR float64 without self-loops (validated)."""
     if not sp.issparse(C):
         raise InvalidInputError(
             f"`{name}` must be a scipy.sparse adjacency matrix; got {type(C).__name__}."
@@ -67,20 +54,9 @@ def as_adjacency(C, name: str = "C", *, allow_negative: bool = False) -> sp.csr_
 
 @dataclass(frozen=True, eq=False)
 class Submeshes:
-    """Overlapped submeshes of a graph with ``n_vertices`` vertices.
-
-    Attributes
-    ----------
-    parts : list of (n_i,) int64 arrays
-        Sorted global vertex indices of each grown submesh; ``n_i == submesh_size`` for every part when
-        the graph has at least ``submesh_size`` vertices.
-    cores : list of (c_i,) int64 arrays
-        Sorted global indices of the METIS part that each submesh was grown from; the cores partition
-        ``0..n_vertices-1`` and ``cores[i]`` is a subset of ``parts[i]``.
-    n_vertices : int
-    degrees : list of (n_i,) int64 arrays, optional
-        Degree of each vertex of ``parts[i]`` inside the induced subgraph of that submesh (the number of
-        its neighbours that are also in the submesh): the weights of Algorithm 8.
+    """Overlapped submeshes of a graph with ``n_vertices`` vertices: sorted global indices
+    ``parts[i]`` (n_i,), the METIS ``cores[i]`` they grew from (a partition of the vertices) and the
+    in-submesh ``degrees[i]`` (n_i,), the weights of Algorithm 8.
     """
 
     parts: list[np.ndarray]
@@ -137,23 +113,11 @@ def induced_subgraph(C: sp.csr_matrix, part: np.ndarray) -> sp.csr_matrix:
 def submesh_laplacian(
     graph, part, *, kind: str = "binary", normalized: bool = False, sigma: float | None = None
 ) -> sp.csr_matrix:
-    """Laplacian ``L = D - C_part`` of the subgraph induced by ``part`` (Eq. 4.1), CSR (n_i, n_i).
+    """Laplacian ``L = D - C_part`` (n_i, n_i) of the subgraph induced by ``part`` (Eq. 4.1).
 
-    Parameters
-    ----------
-    graph : sparse (n, n) adjacency ``C``, or a tuple ``(V, F)`` of a mesh
-        With ``C``: ``kind="binary"`` uses its sparsity pattern (``w = 1``), ``kind="weighted"`` its
-        values. With ``(V, F)``: ``kind`` is ``"binary"``, ``"gaussian"`` or ``"cotangent"`` (Eq. 4.2);
-        the weights are those of the whole mesh restricted to the submesh.
-    part : (n_i,) int
-        Global vertex indices of the submesh (rows/columns of the result follow this order).
-    normalized : bool
-        Return ``D^-1/2 L D^-1/2`` instead (isolated vertices get a zero row).
-
-    Returns
-    -------
-    (n_i, n_i) csr_matrix
-        The Laplacian: positive semi-definite, ``L 1 = 0`` when not normalized.
+    ``graph`` is an adjacency (``kind`` ``"binary"``: its pattern; ``"weighted"``: its values) or a
+    mesh ``(V, F)`` (``"binary"``, ``"gaussian"``, ``"cotangent"``, Eq. 4.2). Rows follow ``part``;
+    ``normalized`` returns ``D^-1/2 L D^-1/2``.
     """
     from ..graph import laplacian_from_adjacency, weighted_adjacency
 
@@ -197,40 +161,17 @@ def overlapped_submeshes(
 ) -> Submeshes:
     """Split a graph into overlapped submeshes of exactly ``submesh_size`` vertices (Section 5.2.1).
 
-    1. METIS (``pymetis``) splits the graph into ``n_parts = ceil(n / (submesh_size * (1 - overlap)))``
-       parts (the cores), so that every core has about ``(1 - overlap) * submesh_size`` vertices; if a
-       core comes out larger than ``submesh_size`` (possible with ``overlap`` close to 0 because METIS
-       allows a small imbalance), METIS is run again with proportionally more parts.
-    2. Each core is grown breadth first by whole rings of neighbouring vertices ("extending each
-       submesh using also neighboring vertices of the boundary nodes of adjacent submeshes until
-       fulfilling a predefined number of n_d vertices"). The last ring is truncated deterministically:
-       vertices with more neighbours already in the submesh first, then by lower index, which keeps the
-       submesh compact.
-    3. If the connected component of a core is exhausted before ``submesh_size`` vertices are reached
-       (graphs with several connected components), growth restarts from the vertex outside the submesh
-       whose index is closest to the core's smallest index (ties: lower index), and so on. The submesh
-       then holds several components, which the spectral methods handle (one zero eigenvalue each).
-
-    Graphs with ``n <= submesh_size`` vertices give a single submesh that is the whole graph. The thesis
-    recommends 500-800 vertices per submesh and an overlap of 15 % (Section 5.2.1, Tables 5.8-5.11).
+    METIS cuts ``ceil(n / (submesh_size (1 - overlap)))`` cores; each grows breadth first by whole
+    rings (the last one truncated: more in-submesh neighbours, then lower index), across components
+    when needed. The thesis recommends 500-800 vertices and 15 % overlap (Tables 5.8-5.11).
 
     Parameters
     ----------
     C : sparse (n, n)
-        Symmetric adjacency (e.g. :func:`spectrageo.graph.adjacency_matrix` or a kNN graph); only its
-        sparsity pattern is used.
-    submesh_size : int
-        Number of vertices ``n_d`` of every submesh (>= 2).
-    overlap : float in [0, 1)
-        Target fraction of each submesh made of vertices grown from neighbouring parts.
-    rng : int, Generator or None
-        Seeds METIS (its result is deterministic for a given seed).
-
-    Returns
-    -------
-    Submeshes
-        ``parts`` sorted global indices, ``cores`` the METIS parts (a partition of the vertices) and
-        ``degrees`` the in-submesh degree of every vertex of every part (weights of Algorithm 8).
+        Symmetric adjacency; only its pattern is used.
+    submesh_size, overlap, rng
+        Vertices of every submesh (>= 2), fraction in [0, 1) grown from neighbouring parts, METIS
+        seed. Returns :class:`Submeshes`.
     """
     C = as_adjacency(C)
     check_positive(submesh_size, "submesh_size", integer=True)
@@ -262,8 +203,7 @@ def overlapped_submeshes(
 
 
 def metis_cores(pattern: sp.csr_matrix, size: int, overlap: float, seed: int) -> list[np.ndarray]:
-    """METIS parts of at most ``size`` vertices, as many as the overlap leaves room for (the
-    cores of :func:`overlapped_submeshes`; the count grows until the largest part fits)."""
+    """METIS parts of at most ``size`` vertices: the cores of :func:`overlapped_submeshes`."""
     n = pattern.shape[0]
     n_parts = max(2, math.ceil(n / (size * (1.0 - float(overlap)))))
     for _ in range(8):
@@ -279,10 +219,7 @@ def metis_cores(pattern: sp.csr_matrix, size: int, overlap: float, seed: int) ->
 
 @contextlib.contextmanager
 def _quiet_c_stdout():
-    """File descriptor 1 sent to the null device for the duration (METIS prints notes such as
-    "***You are trying to partition a graph into too many parts!" from C, straight to the
-    process's standard output, where they would mix with a command's own output, e.g. JSON; the
-    parts it returns are valid, and empty parts are dropped by :func:`_split`)."""
+    """Silence file descriptor 1 (METIS prints notes from C into JSON output)."""
     try:
         if sys.stdout is not None:
             sys.stdout.flush()
@@ -371,31 +308,19 @@ def reassemble(
     *,
     weights: str | Sequence[np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Weighted average of per-submesh results back onto the whole graph (Algorithm 8).
+    """Weighted average of per-submesh results onto the whole graph (Algorithm 8).
 
-    For every vertex ``i`` that appears in the submeshes ``q_i``, the result is
-    ``sum_j w_ij v_ij / sum_j w_ij`` (Algorithm 8, lines 6-11), with ``w_ij`` the degree of vertex
-    ``i`` inside submesh ``j`` (its number of neighbours that also belong to the submesh, Figs. 5.4,
-    5.49-5.50): a vertex on the rim of a submesh, whose neighbourhood is cut, gets a small weight there
-    and a large one in the submesh where it lies inside. The sum is evaluated as
-    ``v_ref + sum_j w_ij (v_ij - v_ref) / sum_j w_ij`` with ``v_ref`` the value from the submesh whose
-    core holds the vertex, which is the same average but reproduces the input bit for bit when all the
-    submeshes agree (identity processing). A vertex whose weights are all zero (isolated in every
-    submesh that holds it) gets the plain average.
+    Vertex ``i`` gets ``sum_j w_ij v_ij / sum_j w_ij``, ``w_ij`` its degree in submesh ``j``
+    (Figs. 5.49-5.50), taken relative to its core's value so that agreeing submeshes reproduce the
+    input bit for bit.
 
     Parameters
     ----------
     values : list of (n_i,) or (n_i, d) arrays
-        ``values[j]`` holds one row per vertex of ``subs.parts[j]``, in that order.
+        One row per vertex of ``subs.parts[j]``; the result is (n,) or (n, d).
     subs : Submeshes
     weights : None, "degree", "uniform", "core" or list of (n_i,) arrays
-        ``None``/``"degree"``: Algorithm 8; ``"uniform"``: simple average of the overlapping copies (the
-        "overlapping case" of Fig. 5.51); ``"core"``: each vertex taken from the submesh whose core holds
-        it (no overlap averaging, the "non-overlapping case"); or explicit non-negative weights.
-
-    Returns
-    -------
-    (n,) or (n, d) float64
+        Algorithm 8 (default), plain average, the core's value, or explicit weights.
     """
     if not isinstance(subs, Submeshes):
         raise InvalidInputError(f"`subs` must be a Submeshes; got {type(subs).__name__}.")
