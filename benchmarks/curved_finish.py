@@ -27,7 +27,7 @@ from planar_rule import TRIMESH, TRIMESH_TUNING, synthetic  # noqa: E402
 from spectrageo import io  # noqa: E402
 from spectrageo.datasets.splits import cases as registry_cases  # noqa: E402
 from spectrageo.denoise import denoise  # noqa: E402
-from spectrageo.denoise.tsgsp import CURVED_FINISH  # noqa: E402
+from spectrageo.denoise.tsgsp import CURVED_FINISH, FineOptions  # noqa: E402
 from spectrageo.evaluate.denoise import TUNING_MESHES, TUNING_PAIRS  # noqa: E402
 from spectrageo.metrics import theta_deg  # noqa: E402
 from spectrageo.noise.generator import GENERATOR_KINDS, generate  # noqa: E402
@@ -91,7 +91,7 @@ def main() -> None:
         inp = np.array([theta_deg(Vn, V, F) for _, V, F, Vn in cases])
         th = np.array(
             [
-                [theta_deg(denoise(Vn, F, method="tsgsp", curved_finish=p), V, F) for p in PAIRS]
+                [theta_deg(denoise(Vn, F, fine=FineOptions(curved_finish=p)), V, F) for p in PAIRS]
                 for _, V, F, Vn in cases
             ]
         )

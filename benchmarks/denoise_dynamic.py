@@ -36,7 +36,7 @@ RESULT = dict(seconds=time.perf_counter() - t0, n=int(A.shape[1]), T=int(A.shape
 def exact_vs_partitioned(data: Path, n_frames: int) -> str:
     import numpy as np
 
-    from spectrageo.denoise.dynamic import gft_rpca
+    from spectrageo.denoise.dynamic import GFTRPCAOptions, gft_rpca
     from spectrageo.io import read_animation
     from spectrageo.metrics import theta_per_frame
     from spectrageo.noise import animation_noise
@@ -59,7 +59,7 @@ def exact_vs_partitioned(data: Path, n_frames: int) -> str:
         ("partitioned, 400-vertex submeshes", {"submesh_size": 400}),
     ):
         t0 = time.perf_counter()
-        res = gft_rpca(An, F, **kw)
+        res = gft_rpca(An, F, options=GFTRPCAOptions(**kw))
         sec = time.perf_counter() - t0
         th = float(np.mean(theta_per_frame(res.frames, A, F)))
         lines.append(f"| {label} | {res.n_submeshes} | {th:.2f} | {sec:.1f} |")

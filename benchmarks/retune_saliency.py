@@ -60,7 +60,7 @@ def measure(folder: Path, split: str, models, norms) -> list[dict]:
     from scipy.stats import pearsonr, spearmanr
 
     from spectrageo import io
-    from spectrageo.saliency import saliency
+    from spectrageo.saliency import SaliencyOptions, saliency
 
     rows = []
     for name in models:
@@ -69,10 +69,10 @@ def measure(folder: Path, split: str, models, norms) -> list[dict]:
         gt = np.loadtxt(folder / f"{name}_saliencyValues_of_centroids.csv").ravel()
         for norm in norms:
             for method in SCORED + REPORTED:
-                opts = {"method": "combined", "fast": True} if method == "fast" else {}
-                opts = opts or {"method": method}
+                fast = method == "fast"
+                opts = SaliencyOptions(fast=fast, sparse_norm=norm)
                 t0 = time.perf_counter()
-                s = saliency(V, F, per="face", sparse_norm=norm, **opts)
+                s = saliency(V, F, opts, per="face", method="combined" if fast else method)
                 dt = time.perf_counter() - t0
                 rows.append(
                     {

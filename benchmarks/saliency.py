@@ -22,7 +22,7 @@ LARGE = """
 import time
 import numpy as np
 from spectrageo.io import read_mesh
-from spectrageo.saliency import saliency, simplify
+from spectrageo.saliency import SaliencyOptions, saliency, simplify
 m = read_mesh({path!r})
 d = simplify(m.vertices, m.faces, ratio=0.5, saliency=np.zeros(m.n_vertices), n_classes=1, rng=0)
 V, F = d.vertices, d.faces
@@ -30,7 +30,7 @@ saliency(V[:2000], F[np.all(F < 2000, axis=1)], method={method!r})  # warm the j
 best, cpu = np.inf, np.inf
 for _ in range(2):
     t, c = time.perf_counter(), time.process_time()
-    s = saliency(V, F, method={method!r}, fast={fast!r})
+    s = saliency(V, F, SaliencyOptions(fast={fast!r}), method={method!r})
     best, cpu = min(best, time.perf_counter() - t), min(cpu, time.process_time() - c)
 RESULT = {{"n": int(len(V)), "m": int(len(F)), "time_s": best, "cpu_s": cpu}}
 """

@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _util import data_out_args, machine_line, write_section  # noqa: E402
 from fold_rule import cases  # noqa: E402
 from spectrageo.denoise import _guard  # noqa: E402
-from spectrageo.denoise.tsgsp import tsgsp  # noqa: E402
+from spectrageo.denoise.tsgsp import GateMeasures, tsgsp  # noqa: E402
 from spectrageo.evaluate.denoise import _load_clean, protocol_cases  # noqa: E402
 from spectrageo.metrics import theta_deg  # noqa: E402
 from spectrageo.noise.generator import generate  # noqa: E402
@@ -36,7 +36,8 @@ MAX_VERTICES = 30000
 def _row(split: str, name: str, V0, F, Vn) -> dict:
     U, fs = _guard.unfold(Vn, F, return_share=True)
     a = theta_deg(U, V0, F)
-    b = theta_deg(tsgsp(Vn, F, folded=True), V0, F)  # the shipped folded path (unfold_fine)
+    # the shipped folded path (unfold_fine)
+    b = theta_deg(tsgsp(Vn, F, measured=GateMeasures(folded=True)), V0, F)
     return {"split": split, "case": name, "input": theta_deg(Vn, V0, F), "unfold": a, "new": b,
             "fold_share": fs}  # fmt: skip
 

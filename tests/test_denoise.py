@@ -6,9 +6,10 @@ import pytest
 
 from spectrageo import denoise, io, metrics, noise
 from spectrageo._errors import InvalidInputError
-from spectrageo.denoise import _normals, bilateral, gnf, smoothing, tsgsp
+from spectrageo.denoise import _normals, _tsgsp_kernels, bilateral, gnf, smoothing, tsgsp
 from spectrageo.geometry import face_normals
 from spectrageo.geometry._numba_kernels import patch_bimodality, patch_moments, sym3_eigenvalues
+from spectrageo.saliency import tsgsp_saliency
 
 from conftest import cube, grid, icosphere
 
@@ -77,7 +78,7 @@ def test_tsgsp_deterministic_for_a_seed(noisy_cube):
 
 def test_pre_coarse_runs_coarse_first(noisy_cube):
     V, F, Vn = noisy_cube
-    expected = smoothing.taubin(tsgsp.coarse(Vn, F, rng=0), F)
+    expected = smoothing.taubin(tsgsp.coarse(Vn, F, rng=0).vertices, F)
     out = denoise.denoise(Vn, F, method="taubin", pre="coarse")
     np.testing.assert_allclose(out, expected)
     assert metrics.theta_deg(out, V, F) < metrics.theta_deg(Vn, V, F)
@@ -132,7 +133,7 @@ def test_patch_min_variance_matches_numpy_eigh():
 
 def test_coarse_result_fields(noisy_cube):
     V, F, Vn = noisy_cube
-    r = tsgsp.coarse(Vn, F, full_output=True, submesh_size=500)
+    r = tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(submesh_size=500))
     assert r.vertices.shape == V.shape
     assert r.n_submeshes == r.subspace_sizes.shape[0] >= 3
     assert (r.subspace_sizes >= 1).all() and (r.subspace_sizes <= 250).all()
@@ -145,8 +146,8 @@ def test_coarse_result_fields(noisy_cube):
 
 def test_coarse_exact_and_oi_agree_roughly(noisy_cube):
     V, F, Vn = noisy_cube
-    a = tsgsp.coarse(Vn, F, method="oi", submesh_size=500)
-    b = tsgsp.coarse(Vn, F, method="exact", submesh_size=500)
+    a = tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(method="oi", submesh_size=500)).vertices
+    b = tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(method="exact", submesh_size=500)).vertices
     assert abs(metrics.theta_deg(a, V, F) - metrics.theta_deg(b, V, F)) < 3.0
 
 
@@ -208,12 +209,12 @@ def test_tsgsp_saliency_lowers_theta_and_is_deterministic(noisy_sphere):
     np.testing.assert_array_equal(a, b)
     assert metrics.theta_deg(a, V, F) < 0.7 * metrics.theta_deg(Vn, V, F)
     with pytest.raises(InvalidInputError, match="`pre` must be None"):
-        tsgsp.tsgsp_saliency(Vn, F, pre="x")
+        tsgsp_saliency(Vn, F, pre="x")
 
 
 def test_fine_returns_features(noisy_cube):
     V, F, Vn = noisy_cube
-    Xc = tsgsp.coarse(Vn, F)
+    Xc = tsgsp.coarse(Vn, F).vertices
     out, feat = tsgsp.fine(Xc, F, return_features=True)
     assert feat.shape == (F.shape[0],) and feat.dtype == bool
     # cube faces touching two sides are (mostly) features
@@ -235,17 +236,19 @@ def test_fine_returns_features(noisy_cube):
 def test_curved_gate_stops_on_a_sphere(noisy_sphere):
     # sphere: the flat-face l1 keeps its curvature part after round 1 -> single round
     _, Fs, Vs = noisy_sphere
-    Xc = tsgsp.coarse(Vs, Fs)
-    gated = tsgsp.fine(Xc, Fs, n_outer=3, curved_finish=0)
-    one = tsgsp.fine(Xc, Fs, n_outer=1, curved_gate=None)
+    Xc = tsgsp.coarse(Vs, Fs).vertices
+    gated = tsgsp.fine(Xc, Fs, options=tsgsp.FineOptions(n_outer=3, curved_finish=0))
+    one = tsgsp.fine(Xc, Fs, options=tsgsp.FineOptions(n_outer=1, curved_gate=None))
     np.testing.assert_allclose(gated, one, atol=1e-5)
-    assert not np.array_equal(gated, tsgsp.fine(Xc, Fs, n_outer=3, curved_gate=None))
+    assert not np.array_equal(
+        gated, tsgsp.fine(Xc, Fs, options=tsgsp.FineOptions(n_outer=3, curved_gate=None))
+    )
     # reading choice (g): the stopped round is finished by Taubin's low-pass
-    finished = tsgsp.fine(Xc, Fs, n_outer=3)
+    finished = tsgsp.fine(Xc, Fs, options=tsgsp.FineOptions(n_outer=3))
     ref = smoothing.taubin(one, Fs, lam=0.33, mu=-0.34, n_iter=tsgsp.CURVED_FINISH)
     np.testing.assert_allclose(finished, ref, atol=1e-5)
     # a single round (n_outer=1) never reaches the gate, so nothing is finished there
-    np.testing.assert_array_equal(tsgsp.fine(Xc, Fs, n_outer=1), one)
+    np.testing.assert_array_equal(tsgsp.fine(Xc, Fs, options=tsgsp.FineOptions(n_outer=1)), one)
     # (on the noisy cube fixture the gate also stops after round 1 since the coarse step
     # follows Algorithm 1's residual rule; the shared pairs' theta is unchanged by it)
 
@@ -281,14 +284,18 @@ def test_tsgsp_keeps_curved_regions_out_of_the_features():
     across the edge)."""
     V, F = icosphere(4)
     Vn = noise.apply(V, F, kind="gaussian", level=0.3, rng=1)
-    lit, f_lit = tsgsp.fine(Vn, F, bimodality=None, n_outer=1, return_features=True)
-    new, f_new = tsgsp.fine(Vn, F, n_outer=1, return_features=True)
+    lit, f_lit = tsgsp.fine(
+        Vn, F, return_features=True, options=tsgsp.FineOptions(bimodality=None, n_outer=1)
+    )
+    new, f_new = tsgsp.fine(Vn, F, return_features=True, options=tsgsp.FineOptions(n_outer=1))
     assert f_lit.mean() > 0.2 and f_new.mean() < 0.5 * f_lit.mean()
     assert metrics.theta_deg(new, V, F) < metrics.theta_deg(lit, V, F)
     Vc, Fc = cube(4)
     Vcn = noise.apply(Vc, Fc, kind="gaussian", level=0.2, rng=1)
-    _, fc_lit = tsgsp.fine(Vcn, Fc, bimodality=None, n_outer=1, return_features=True)
-    _, fc = tsgsp.fine(Vcn, Fc, n_outer=1, return_features=True)
+    _, fc_lit = tsgsp.fine(
+        Vcn, Fc, return_features=True, options=tsgsp.FineOptions(bimodality=None, n_outer=1)
+    )
+    _, fc = tsgsp.fine(Vcn, Fc, return_features=True, options=tsgsp.FineOptions(n_outer=1))
     on_edge = _faces_near_cube_edges(Vc, Fc)
     assert fc[on_edge].mean() > 0.9 * fc_lit[on_edge].mean()  # 0.68 of 0.73 here
 
@@ -308,16 +315,18 @@ def test_tsgsp_input_weight_recovers_acute_ridges():
     U, F = icosphere(3)
     V = U / (np.abs(U[:, 2]) + 0.4 * np.linalg.norm(U[:, :2], axis=1))[:, None]
     Vn = noise.apply(V, F, kind="gaussian", level=0.3, rng=0)
-    Vc = tsgsp.coarse(Vn, F)
+    Vc = tsgsp.coarse(Vn, F).vertices
     # the curved-surface finish (reading choice (g)) is held off: it smooths both results
     # alike and would hide what the blend itself does
-    off = {"curved_finish": 0}
-    literal = tsgsp.tsgsp(Vn, F, input_weight=0, trust=None, **off)
-    np.testing.assert_array_equal(literal, tsgsp.fine(Vc, F, **off))
+    off = tsgsp.FineOptions(curved_finish=0)
+    literal = tsgsp.tsgsp(Vn, F, input_weight=0, trust=None, fine=off)
+    np.testing.assert_array_equal(literal, tsgsp.fine(Vc, F, options=off))
     # the source equal to the guidance mesh is the plain fine step
-    np.testing.assert_array_equal(tsgsp.fine(Vc, F, source=Vc, **off), literal)
-    blended = tsgsp.tsgsp(Vn, F, trust=None, **off)  # input_weight=0.7 is the default
-    np.testing.assert_array_equal(blended, tsgsp.fine(Vc, F, source=Vc + 0.7 * (Vn - Vc), **off))
+    np.testing.assert_array_equal(tsgsp.fine(Vc, F, source=Vc, options=off), literal)
+    blended = tsgsp.tsgsp(Vn, F, trust=None, fine=off)  # input_weight=0.7 is the default
+    np.testing.assert_array_equal(
+        blended, tsgsp.fine(Vc, F, source=Vc + 0.7 * (Vn - Vc), options=off)
+    )
     t_lit = metrics.theta_deg(literal, V, F)
     t_new = metrics.theta_deg(blended, V, F)
     assert t_lit < 0.5 * metrics.theta_deg(Vn, V, F)
@@ -332,29 +341,29 @@ def test_tsgsp_validation(noisy_cube):
     with pytest.raises(InvalidInputError, match="`preset`"):
         tsgsp.tsgsp(Vn, F, preset="x")
     with pytest.raises(InvalidInputError, match="`submesh_size` must be >= 8"):
-        tsgsp.coarse(Vn, F, submesh_size=4)
+        tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(submesh_size=4))
     with pytest.raises(InvalidInputError, match="`max_keep` must be in"):
-        tsgsp.coarse(Vn, F, max_keep=1.5)
+        tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(max_keep=1.5))
     with pytest.raises(InvalidInputError, match="`method`"):
-        tsgsp.coarse(Vn, F, method="svd")
+        tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(method="svd"))
     with pytest.raises(InvalidInputError, match="`noise_var`"):
-        tsgsp.coarse(Vn, F, noise_var=-1.0)
+        tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(noise_var=-1.0))
     with pytest.raises(InvalidInputError, match="at least 8 vertices"):
         tsgsp.coarse(Vn[:6], np.array([[0, 1, 2], [3, 4, 5]]))
     with pytest.raises(InvalidInputError, match="`patch` must be an integer >= 3"):
-        tsgsp.fine(Vn, F, patch=2)
+        tsgsp.fine(Vn, F, options=tsgsp.FineOptions(patch=2))
     with pytest.raises(InvalidInputError, match="exceeds the number of faces"):
-        tsgsp.fine(Vn, F, patch=10**6)
+        tsgsp.fine(Vn, F, options=tsgsp.FineOptions(patch=10**6))
     with pytest.raises(InvalidInputError, match="`range_guide`"):
-        tsgsp.fine(Vn, F, range_guide="x")
+        tsgsp.fine(Vn, F, options=tsgsp.FineOptions(range_guide="x"))
     with pytest.raises(InvalidInputError, match="`sigma_c`"):
-        tsgsp.fine(Vn, F, sigma_c=0.0)
+        tsgsp.fine(Vn, F, options=tsgsp.FineOptions(sigma_c=0.0))
     with pytest.raises(InvalidInputError, match="`min_feature`"):
-        tsgsp.fine(Vn, F, min_feature=-1.0)
+        tsgsp.fine(Vn, F, options=tsgsp.FineOptions(min_feature=-1.0))
     with pytest.raises(InvalidInputError, match="`curved_gate` must be > 0"):
-        tsgsp.fine(Vn, F, curved_gate=0.0)
+        tsgsp.fine(Vn, F, options=tsgsp.FineOptions(curved_gate=0.0))
     with pytest.raises(InvalidInputError, match="`area_weights` must be True or False"):
-        tsgsp.fine(Vn, F, area_weights="yes")
+        tsgsp.fine(Vn, F, options=tsgsp.FineOptions(area_weights="yes"))
     with pytest.raises(InvalidInputError, match="`source` must have the shape of `V`"):
         tsgsp.fine(Vn, F, source=Vn[:-1])
     with pytest.raises(InvalidInputError, match=r"`input_weight` must be in \[0, 1\]"):
@@ -507,12 +516,12 @@ def test_fine_round_kernels_match_sparse_formulation(noisy_cube):
     ev = patch_eigenvalues(N, nb)
     S = patch_moments(N, np.sort(nb, axis=1))
     np.testing.assert_allclose(sym3_eigenvalues(S), ev, atol=1e-12)
-    indptr, cand = tsgsp._inverse_patches(nb)
+    indptr, cand = _tsgsp_kernels._inverse_patches(nb)
     order = np.argsort(nb.ravel(), kind="stable")
     np.testing.assert_array_equal(cand, order // k)
     np.testing.assert_array_equal(np.diff(indptr), np.bincount(nb.ravel(), minlength=m))
     feature = np.random.default_rng(1).random(m) < 0.4
-    best = tsgsp._select(N, nb, feature, ev, indptr, cand)
+    best = _tsgsp_kernels._select(N, nb, feature, ev, indptr, cand)
     np.testing.assert_array_equal(best, tsgsp.select_neighborhoods(N, nb, feature))
     den_c, den_s, zeta = 0.05, 0.08, 4
     active = np.linalg.norm(N, axis=1) > 0
@@ -533,7 +542,9 @@ def test_fine_round_kernels_match_sparse_formulation(noisy_cube):
         ref = _normalize_rows(ref)
         empty = ~ref.any(axis=1)
         ref[empty] = N[empty]
-        got = tsgsp._filter_kernel(N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide, wa, N)
+        got = _tsgsp_kernels._filter_kernel(
+            N, Cc, nb, best, active, den_c, den_s, zeta, patch_guide, wa, N
+        )
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
 
 
@@ -544,15 +555,15 @@ def test_area_weights_matter_only_when_face_areas_differ(noisy_cube):
     V[:, 2] = 0.6 * np.abs(V[:, 0] - 0.5) + np.random.default_rng(4).normal(0, 1e-3, 441)
     A = 0.5 * np.linalg.norm(face_normals(V, F, unit=False), axis=1)
     assert A.std() / A.mean() < 0.02
-    plain = tsgsp.fine(V, F, area_weights=False, curved_gate=None)
+    plain = tsgsp.fine(V, F, options=tsgsp.FineOptions(area_weights=False, curved_gate=None))
     moved = np.abs(plain - V).max()
     assert moved > 2e-4
-    diff = np.abs(tsgsp.fine(V, F, curved_gate=None) - plain).max()
+    diff = np.abs(tsgsp.fine(V, F, options=tsgsp.FineOptions(curved_gate=None)) - plain).max()
     assert diff < 0.05 * moved
     # uneven areas (noisy coarse cube): the weights change the result
     V, F, Vn = noisy_cube
-    Xc = tsgsp.coarse(Vn, F)
-    plain = tsgsp.fine(Xc, F, area_weights=False)
+    Xc = tsgsp.coarse(Vn, F).vertices
+    plain = tsgsp.fine(Xc, F, options=tsgsp.FineOptions(area_weights=False))
     weighted = tsgsp.fine(Xc, F)  # area weights are the default
     assert not np.array_equal(plain, weighted)
     # the weighted filter denoises well and is not worse than the plain one by more than a
@@ -593,9 +604,9 @@ def test_tsgsp_drops_tangential_noise_from_its_blend(shared_data):
     V, F = m.vertices, m.faces
     theta_deg = metrics.theta_deg
     Vn = noise.generate(V, F, kind="gaussian-random", level=0.3, rng=0).vertices
-    off = {"curved_finish": 0}
-    plain = theta_deg(denoise.denoise(Vn, F, method="tsgsp", input_tangent=1.0, **off), V, F)
-    auto = theta_deg(denoise.denoise(Vn, F, method="tsgsp", **off), V, F)
+    off = tsgsp.FineOptions(curved_finish=0)
+    plain = theta_deg(denoise.denoise(Vn, F, method="tsgsp", input_tangent=1.0, fine=off), V, F)
+    auto = theta_deg(denoise.denoise(Vn, F, method="tsgsp", fine=off), V, F)
     assert auto < 0.8 * plain, (plain, auto)
     assert theta_deg(denoise.denoise(Vn, F, method="tsgsp"), V, F) < 0.8 * auto
     with pytest.raises(InvalidInputError, match="input_tangent"):
@@ -622,11 +633,11 @@ def test_coarse_scale_weights_follow_the_local_edge_length():
     V2 = np.vstack([V, [[5.0, 5.0, 5.0]]])
     assert tsgsp.scale_weights(V2, adjacency_matrix(F, V2.shape[0])).nnz == W.nnz
     Vn = V + np.random.default_rng(0).normal(0, 0.01, V.shape)
-    a = tsgsp.coarse(Vn, F, weights="scale")
-    b = tsgsp.coarse(Vn, F, weights="binary")
+    a = tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(weights="scale")).vertices
+    b = tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(weights="binary")).vertices
     assert not np.allclose(a, b)
     with pytest.raises(InvalidInputError):
-        tsgsp.coarse(Vn, F, weights="cotangent")
+        tsgsp.coarse(Vn, F, options=tsgsp.CoarseOptions(weights="cotangent"))
 
 
 @pytest.mark.parametrize("name", ["box.STL", "idler_riser.STL"])
@@ -643,9 +654,10 @@ def test_scale_weights_help_on_cad_tessellations(name):
     V, F = m.vertices, m.faces
     Vn = noise.generate(V, F, kind="gaussian-normal", level=0.1, rng=0).vertices
     th = lambda X: metrics.theta_deg(X, V, F)  # noqa: E731
-    assert th(tsgsp.coarse(Vn, F)) < th(tsgsp.coarse(Vn, F, weights="binary"))
+    binary = tsgsp.CoarseOptions(weights="binary")
+    assert th(tsgsp.coarse(Vn, F).vertices) < th(tsgsp.coarse(Vn, F, options=binary).vertices)
     out = th(tsgsp.tsgsp(Vn, F))
     if name == "box.STL":
-        assert out < th(tsgsp.tsgsp(Vn, F, coarse_options={"weights": "binary"}))
+        assert out < th(tsgsp.tsgsp(Vn, F, coarse=binary))
     else:
         assert out < th(Vn)

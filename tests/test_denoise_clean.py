@@ -27,7 +27,7 @@ from spectrageo.denoise._guard import (
     noise_sigma,
     planar_share,
 )
-from spectrageo.denoise.tsgsp import coarse
+from spectrageo.denoise.tsgsp import CoarseOptions, coarse
 from spectrageo.metrics import theta_deg
 
 from conftest import cube, grid
@@ -169,12 +169,12 @@ def test_learned_subspace_sizes_settle_inside_the_band(shared_data):
     """Algorithm 1 as written (residual rule): on Fandisk0.3 most sizes lie strictly between 1
     and the bound; with the EM-variance rule of earlier versions most sit at the bound."""
     m = _read(shared_data, "denoise/Fandisk0.3/Noisy.obj")
-    r = coarse(m.vertices, m.faces, full_output=True)
+    r = coarse(m.vertices, m.faces)
     at_bound = r.subspace_sizes == r.max_sizes[:, None]
     inside = (r.subspace_sizes > 1) & ~at_bound
     assert inside.mean() > 0.6 and at_bound.mean() < 0.4
     assert np.median(r.subspace_sizes / r.max_sizes[:, None]) < 0.95
-    em = coarse(m.vertices, m.faces, full_output=True, rule="em")
+    em = coarse(m.vertices, m.faces, options=CoarseOptions(rule="em"))
     assert (em.subspace_sizes == em.max_sizes[:, None]).mean() > 0.6
 
 

@@ -3,6 +3,7 @@ the evaluation harness and the known spatial-mask limitation (Section 5.1.2)."""
 
 from __future__ import annotations
 
+import dataclasses
 import tracemalloc
 
 import numpy as np
@@ -73,7 +74,7 @@ def test_dynamic_methods_listed():
 def test_energy_one_is_identity_exact_and_partitioned():
     A, F = waving_grid()
     for basis, kw in (("exact", {}), ("partitioned", {"submesh_size": 60})):
-        res = dyn.gft_rpca(A, F, energy=1.0, basis=basis, **kw)
+        res = dyn.gft_rpca(A, F, options=dyn.GFTRPCAOptions(energy=1.0, basis=basis, **kw))
         assert np.abs(res.frames - A).max() < 1e-10
         assert (res.n_high == 0).all()
     # several overlapped submeshes were used and reassembled without changing anything
@@ -84,7 +85,7 @@ def test_identical_frames_are_kept():
     """A static animation makes every coherent matrix rank one: the low-rank estimate is exact."""
     A, F = waving_grid(T=8)
     A = np.repeat(A[:1], 8, axis=0)
-    out = dyn.gft_rpca(A, F, basis="exact").frames
+    out = dyn.gft_rpca(A, F, options=dyn.GFTRPCAOptions(basis="exact")).frames
     assert np.abs(out - A).max() < 1e-8
 
 
@@ -125,9 +126,10 @@ def test_exact_basis_matches_independent_reference():
     An = noise.animation_noise(A, F, kind="gaussian", level=0.3, rng=3)
     ref, nh = _reference_algorithm3(An, F, energy=0.999, rank=2)
     # a huge threshold switches the sparse part off: GoDec reduces to the rank-2 truncation
-    res = dyn.gft_rpca(
-        An, F, basis="exact", energy=0.999, rank=2, lam=1e12, max_iter=2000, tol=1e-14
+    opts = dyn.GFTRPCAOptions(
+        basis="exact", energy=0.999, rank=2, lam=1e12, max_iter=2000, tol=1e-14
     )
+    res = dyn.gft_rpca(An, F, options=opts)
     assert res.n_high[0, 0] == nh > 0
     assert np.abs(res.frames - ref).max() < 1e-7 * np.abs(A).max()
 
@@ -136,8 +138,10 @@ def test_partitioned_with_one_submesh_equals_exact():
     A, F = waving_grid(T=10, n=12)
     An = noise.animation_noise(A, F, kind="gaussian", level=0.3, rng=4)
     kw = dict(energy=0.999, rank=2, lam=1e12, max_iter=2000, tol=1e-14)
-    ex = dyn.gft_rpca(An, F, basis="exact", **kw)
-    pa = dyn.gft_rpca(An, F, basis="partitioned", submesh_size=500, **kw)
+    ex = dyn.gft_rpca(An, F, options=dyn.GFTRPCAOptions(basis="exact", **kw))
+    pa = dyn.gft_rpca(
+        An, F, options=dyn.GFTRPCAOptions(basis="partitioned", submesh_size=500, **kw)
+    )
     assert pa.n_submeshes == 1
     assert np.abs(pa.frames - ex.frames).max() < 1e-7 * np.abs(A).max()
 
@@ -146,12 +150,17 @@ def test_block_mode_equals_separate_runs():
     A, F = waving_grid(T=12, n=12)
     An = noise.animation_noise(A, F, kind="gaussian", level=0.3, rng=5)
     kw = dict(basis="exact", rank=2, lam=1e12, max_iter=2000, tol=1e-14)
-    whole = dyn.gft_rpca(An, F, **kw)
-    same = dyn.gft_rpca(An, F, block_size=12, **kw)
+    whole = dyn.gft_rpca(An, F, options=dyn.GFTRPCAOptions(**kw))
+    same = dyn.gft_rpca(An, F, block_size=12, options=dyn.GFTRPCAOptions(**kw))
     assert np.abs(whole.frames - same.frames).max() < 1e-9
-    blocks = dyn.gft_rpca(An, F, block_size=5, **kw)
+    blocks = dyn.gft_rpca(An, F, block_size=5, options=dyn.GFTRPCAOptions(**kw))
     assert blocks.n_high.shape == (1, 3)
-    sep = np.concatenate([dyn.gft_rpca(An[s : s + 5], F, **kw).frames for s in (0, 5, 10)])
+    sep = np.concatenate(
+        [
+            dyn.gft_rpca(An[s : s + 5], F, options=dyn.GFTRPCAOptions(**kw)).frames
+            for s in (0, 5, 10)
+        ]
+    )
     assert np.abs(blocks.frames - sep).max() < 1e-7 * np.abs(A).max()
 
 
@@ -176,7 +185,7 @@ def test_gaussian_noise_removed_and_beats_per_frame_bnf(anim):
     bnf = mean_theta(dyn.denoise_frames(An[sub], F, method="bnf"), A[sub], F)
     assert mean_theta(res.frames[sub], A[sub], F) < bnf
     # the exact basis gives nearly the same result on a single-submesh mesh
-    ex = mean_theta(dyn.gft_rpca(An, F, basis="exact").frames, A, F)
+    ex = mean_theta(dyn.gft_rpca(An, F, options=dyn.GFTRPCAOptions(basis="exact")).frames, A, F)
     assert abs(ex - got) < 0.1 * got
 
 
@@ -215,10 +224,12 @@ def test_memory_is_bounded_for_partitioned_basis():
     """Peak memory is a small multiple of the animation itself (no n x n matrices)."""
     A, F = waving_grid(T=40, n=45, seed=2)  # 2025 vertices: a dense basis alone would be 33 MB
     An = noise.animation_noise(A, F, kind="gaussian", level=0.2, rng=0)
-    dyn.gft_rpca(An[:2], F, submesh_size=300)  # warm up imports / caches
+    dyn.gft_rpca(
+        An[:2], F, options=dyn.GFTRPCAOptions(submesh_size=300)
+    )  # warm up imports / caches
     tracemalloc.start()
     try:
-        dyn.gft_rpca(An, F, submesh_size=300)
+        dyn.gft_rpca(An, F, options=dyn.GFTRPCAOptions(submesh_size=300))
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
@@ -308,8 +319,11 @@ def test_cli_denoise_animation(tmp_path):
 )
 def test_gft_rpca_validation(kwargs, match):
     A, F = waving_grid(T=3, n=5)
+    fields = {f.name for f in dataclasses.fields(dyn.GFTRPCAOptions)}
+    rest = {k: v for k, v in kwargs.items() if k not in fields}
     with pytest.raises(InvalidInputError, match=match):
-        dyn.gft_rpca(A, F, **kwargs)
+        opts = dyn.GFTRPCAOptions(**{k: v for k, v in kwargs.items() if k in fields})
+        dyn.gft_rpca(A, F, options=opts, **rest)
 
 
 def test_frames_and_faces_validation(monkeypatch):
@@ -330,7 +344,7 @@ def test_frames_and_faces_validation(monkeypatch):
         dyn.gft_rpca(A, F[:, :2])
     monkeypatch.setattr(dyn, "EXACT_LIMIT", 10)
     with pytest.raises(InvalidInputError, match="limited to 10 vertices"):
-        dyn.gft_rpca(A, F, basis="exact")
+        dyn.gft_rpca(A, F, options=dyn.GFTRPCAOptions(basis="exact"))
 
 
 def test_normals_rpca_and_dispatch_validation():

@@ -8,7 +8,7 @@ import pytest
 from spectrageo import InvalidInputError, io
 from spectrageo.denoise import denoise
 from spectrageo.denoise._guard import FOLD_SHARE, FOLD_STOP, fold_share, unfold
-from spectrageo.denoise.tsgsp import fine, tsgsp
+from spectrageo.denoise.tsgsp import GateMeasures, fine, tsgsp
 from spectrageo.metrics import theta_deg
 from spectrageo.noise.generator import generate
 
@@ -70,7 +70,7 @@ def test_folds_left_after_unfolding_skip_the_fine_step():
     Vn = generate(V, F, kind="gaussian-normal", level=0.3, rng=1).vertices
     X = unfold(Vn, F)
     assert fold_share(X, F) >= FOLD_STOP
-    assert np.array_equal(tsgsp(Vn, F, folded=True), X)
+    assert np.array_equal(tsgsp(Vn, F, measured=GateMeasures(folded=True)), X)
 
 
 def test_fine_step_after_unfolding_an_organic_mesh(shared_data):
@@ -140,7 +140,7 @@ def test_the_gate_decision_reaches_tsgsp_once(monkeypatch):
     # unfolded mesh (unfold_fine uses the share unfold measured after its last block)
     assert in_denoise == in_unfold + 1
     calls.clear()
-    tsgsp(Vn, F, folded=False)
+    tsgsp(Vn, F, measured=GateMeasures(folded=False))
     assert not calls  # the given decision is used as it is
     with pytest.raises(InvalidInputError, match="folded"):
-        tsgsp(Vn, F, folded="no")
+        tsgsp(Vn, F, measured=GateMeasures(folded="no"))

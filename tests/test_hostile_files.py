@@ -472,7 +472,7 @@ def test_denoise_tsgsp_rejects_a_1e300_vertex(tmp_path):
 
 def test_kernel_and_validation_guards():
     from spectrageo._validation import as_points
-    from spectrageo.denoise import tsgsp
+    from spectrageo.denoise import _tsgsp_kernels as tsgsp
 
     with pytest.raises(InvalidInputError, match=r"`V` has coordinates of magnitude above 1e\+150"):
         as_points(np.array([[1e300, 0, 0], [0, 0, 0]]))

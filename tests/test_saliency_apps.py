@@ -8,6 +8,7 @@ from scipy.stats import pearsonr
 
 from spectrageo._errors import InvalidInputError
 from spectrageo.saliency import (
+    SaliencyOptions,
     animation_saliency,
     calinski_harabasz_1d,
     class_keep_fractions,
@@ -157,7 +158,7 @@ def test_class_keep_fractions_meet_total():
 
 def test_simplify_keeps_salient_vertices_and_gives_valid_mesh():
     V, F = cube(5)
-    s = saliency(V, F, method="spectral", k=15)
+    s = saliency(V, F, SaliencyOptions(k=15), method="spectral")
     res = simplify(V, F, ratio=0.8, saliency=s, n_classes=4, rng=0)
     _check_valid(res.vertices, res.faces)
     np.testing.assert_array_equal(res.vertices, V[res.kept])
@@ -205,14 +206,14 @@ def test_simplify_validation():
 def test_inspect_scaled_copy_is_clean_and_dent_is_found():
     V, F = cube(5)
     V = V + 0.002 * np.random.default_rng(1).standard_normal(V.shape)  # break kNN ties
-    ins = inspect(V, F, 2.5 * V + 7.0, F, method="spectral", k=15)
+    ins = inspect(V, F, 2.5 * V + 7.0, F, method="spectral", options=SaliencyOptions(k=15))
     np.testing.assert_allclose(ins.deviation, 0.0, atol=1e-9)
     np.testing.assert_allclose(ins.distance, 0.0, atol=1e-12)
     Vd = V.copy()
     centre = np.array([0.0, 0.0, 1.0])
     dent = np.linalg.norm(V - centre, axis=1) < 0.35
     Vd[dent, 2] -= 0.15 * (1 - np.linalg.norm(V[dent] - centre, axis=1) / 0.35)
-    ins = inspect(V, F, 1.7 * Vd, F, method="spectral", k=15)
+    ins = inspect(V, F, 1.7 * Vd, F, method="spectral", options=SaliencyOptions(k=15))
     assert ins.heat[dent].mean() > 5 * ins.heat[~dent].mean()
     with pytest.raises(InvalidInputError, match="`saliency_ref` must have shape"):
         inspect(V, F, V, F, saliency_ref=np.zeros(2), saliency_copy=np.zeros(len(V)))
@@ -260,12 +261,12 @@ def test_animation_reuse_static_and_rigid_frames():
     V, F = cube(4)
     V = V + 0.01 * np.random.default_rng(0).standard_normal(V.shape)
     frames = np.stack([V, V, V @ _rotation(5).T])
-    res = animation_saliency(frames, F, k=12)
-    np.testing.assert_allclose(res.values[0], saliency(V, F, k=12))
+    res = animation_saliency(frames, F, SaliencyOptions(k=12))
+    np.testing.assert_allclose(res.values[0], saliency(V, F, SaliencyOptions(k=12)))
     assert res.recomputed[0].all() and not res.recomputed[1:].any()
     np.testing.assert_array_equal(res.values[1], res.values[0])
     # threshold 0 recomputes every vertex; a rigid motion leaves the map unchanged (Eq. 6.16)
-    full = animation_saliency(frames, F, k=12, threshold=0.0)
+    full = animation_saliency(frames, F, SaliencyOptions(k=12), threshold=0.0)
     assert full.recomputed.all()
     np.testing.assert_allclose(full.values[2], full.values[0], atol=1e-6)
 
@@ -275,7 +276,7 @@ def test_animation_recomputes_only_deformed_area():
     W = V.copy()
     moved = V[:, 2] > 0.9
     W[moved, 2] += 0.3 * (1 - V[moved, 0] ** 2)  # bulge the top face
-    res = animation_saliency(np.stack([V, W]), F, method="spectral", k=12)
+    res = animation_saliency(np.stack([V, W]), F, SaliencyOptions(k=12), method="spectral")
     rec = res.recomputed[1]
     assert rec.any() and rec.mean() < 0.5
     assert (V[rec, 2] > 0.5).all()
@@ -308,7 +309,7 @@ def test_saliency_denoise_reduces_normal_error():
 
     V, F = cube(5)
     Vn = add_noise(V, F, kind="gaussian", level=0.2, rng=0)
-    Vd = saliency_denoise(Vn, F, method="spectral", k=15)
+    Vd = saliency_denoise(Vn, F, method="spectral", options=SaliencyOptions(k=15))
     t0 = theta_deg(Vn, V, F)
     t1 = theta_deg(Vd, V, F)
     assert t1 < 0.5 * t0
@@ -338,7 +339,9 @@ def test_cli_commands(tmp_path):
     assert (
         main(["saliency", str(path), "--out", str(out), "--method", "spectral", "--k", "12"]) == 0
     )
-    np.testing.assert_allclose(np.load(out), saliency(V, F, method="spectral", k=12))
+    np.testing.assert_allclose(
+        np.load(out), saliency(V, F, SaliencyOptions(k=12), method="spectral")
+    )
     assert main(["saliency", str(path), "--out", str(tmp_path / "s.ply"), "--per", "face"]) == 0
     m = io.read(tmp_path / "s.ply")
     assert "saliency" in m.face_attributes and m.vertex_colors is not None
@@ -432,7 +435,7 @@ def test_simplify_refuses_a_mesh_whose_faces_all_collapse():
     Fd = np.c_[F[:, 0], F[:, 0], F[:, 1]]
     # refused before the saliency map (which has no surface to measure), one clear error
     with pytest.raises(InvalidInputError, match="every face of the mesh is degenerate"):
-        simplify(V, Fd, ratio=0.5, method="geometric", k=10, rng=0)
+        simplify(V, Fd, ratio=0.5, method="geometric", options=SaliencyOptions(k=10), rng=0)
 
 
 def test_inspect_refuses_a_copy_without_surface():

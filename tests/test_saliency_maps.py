@@ -6,6 +6,7 @@ from scipy.stats import pearsonr
 
 from spectrageo._errors import InvalidInputError
 from spectrageo.saliency import (
+    SaliencyOptions,
     coherence_matrix,
     face_patches,
     fast_mask,
@@ -71,7 +72,7 @@ def test_face_patches_start_with_the_face_and_are_nearest():
 @pytest.mark.parametrize("method", ["spectral", "geometric", "combined"])
 def test_cube_edges_are_more_salient_than_face_centres(method):
     V, F = cube(5)
-    s = saliency(V, F, method=method, per="face", k=15)
+    s = saliency(V, F, SaliencyOptions(k=15), method=method, per="face")
     assert s.min() >= 0.0 and s.max() <= 1.0 + 1e-12
     if method != "combined":
         assert s.max() == pytest.approx(1.0)
@@ -98,8 +99,8 @@ def test_map_is_invariant_to_rotation_scale_translation(method):
 
 def test_vertex_map_is_first_ring_mean_of_face_map():
     V, F = cube(3)
-    sf = saliency(V, F, per="face", method="spectral", k=8)
-    sv = saliency(V, F, per="vertex", method="spectral", k=8)
+    sf = saliency(V, F, SaliencyOptions(k=8), per="face", method="spectral")
+    sv = saliency(V, F, SaliencyOptions(k=8), per="vertex", method="spectral")
     for i in (0, 7, len(V) - 1):
         ring = np.flatnonzero((F == i).any(axis=1))
         assert sv[i] == pytest.approx(sf[ring].mean())  # Eq. 6.14
@@ -107,7 +108,7 @@ def test_vertex_map_is_first_ring_mean_of_face_map():
 
 def test_combined_is_weighted_mean_of_normalised_parts():
     V, F = cube(4)
-    c = saliency_components(V, F, k=12, weights=(1.0, 3.0))
+    c = saliency_components(V, F, SaliencyOptions(k=12, weights=(1.0, 3.0)))
     np.testing.assert_allclose(c.combined, (c.geometric + 3.0 * c.spectral) / 4.0)
     for x in (c.spectral, c.geometric):
         assert x.min() == pytest.approx(0.0) and x.max() == pytest.approx(1.0)  # Eq. 6.12
@@ -206,7 +207,7 @@ def test_fast_mask_drops_lowest_of_64_classes():
 def test_fast_variant_analyses_fewer_rows_and_matches_original(shared_data):
     V, F, _ = _fandisk(shared_data)
     full = saliency_components(V, F)
-    fast = saliency_components(V, F, fast=True)
+    fast = saliency_components(V, F, SaliencyOptions(fast=True))
     assert 0.2 < fast.analysed.mean() < 0.9
     assert full.analysed.all()
     assert (fast.geometric_raw[~fast.analysed] == 0).all()
@@ -227,23 +228,23 @@ def test_validation_errors():
     with pytest.raises(InvalidInputError, match="`per` must be one of"):
         saliency(V, F, per="edge")
     with pytest.raises(InvalidInputError, match="needs at least"):
-        saliency(V, F, k=len(F))
+        saliency(V, F, SaliencyOptions(k=len(F)))
     with pytest.raises(InvalidInputError, match="`k` must be >= 2"):
-        saliency(V, F, k=1)
+        SaliencyOptions(k=1)
     with pytest.raises(InvalidInputError, match="`k` must be an integer"):
-        saliency(V, F, k=2.5)
+        SaliencyOptions(k=2.5)
     with pytest.raises(InvalidInputError, match="`weights` must be non-negative"):
-        saliency(V, F, weights=(0, 0))
+        SaliencyOptions(weights=(0, 0))
     with pytest.raises(InvalidInputError, match="`weights` must be two"):
-        saliency(V, F, weights=(1,))
+        SaliencyOptions(weights=(1,))
     with pytest.raises(InvalidInputError, match="`fast` must be True or False"):
-        saliency(V, F, fast="yes")
+        SaliencyOptions(fast="yes")
     with pytest.raises(InvalidInputError, match="`normals` must have shape"):
-        saliency(V, F, normals=np.zeros((3, 3)))
+        saliency(V, F, SaliencyOptions(normals=np.zeros((3, 3))))
     with pytest.raises(InvalidInputError, match="`normals` contains NaN"):
-        saliency(V, F, normals=np.full(F.shape, np.nan))
+        SaliencyOptions(normals=np.full(F.shape, np.nan))
     with pytest.raises(InvalidInputError, match="`normals` must be one of"):
-        saliency(V, F, normals="vertex")
+        SaliencyOptions(normals="vertex")
     with pytest.raises(InvalidInputError, match="supports only shrinkage"):
         geometric_saliency(V, F, k=5, solver="ialm")
     with pytest.raises(InvalidInputError, match="`sparse_norm` must be one of"):
@@ -252,3 +253,23 @@ def test_validation_errors():
         geometric_saliency(V, F, k=5, max_iter=0)
     with pytest.raises(InvalidInputError, match="`F` must have shape"):
         saliency(V, F[:, :2])
+
+
+def test_options_object_and_deprecated_keywords_agree():
+    V, F = cube(3)
+    opts = SaliencyOptions(k=8, fast=True, weights=(1, 2))
+    new = saliency(V, F, opts, per="face")
+    with pytest.warns(DeprecationWarning, match="SaliencyOptions"):
+        old = saliency(V, F, per="face", k=8, fast=True, weights=(1, 2))
+    np.testing.assert_array_equal(new, old)
+    with pytest.warns(DeprecationWarning, match="k="):
+        comp = saliency_components(V, F, k=8)
+    np.testing.assert_array_equal(
+        comp.combined, saliency_components(V, F, SaliencyOptions(k=8)).combined
+    )
+    with pytest.raises(TypeError, match="unexpected keyword argument 'nope'"):
+        saliency(V, F, nope=1)
+    with pytest.raises(InvalidInputError, match="`options` must be a SaliencyOptions"):
+        saliency(V, F, {"k": 8})
+    with pytest.raises(InvalidInputError, match="supports only shrinkage"):
+        SaliencyOptions(solver="godec")

@@ -1,4 +1,4 @@
-"""Input checks shared by the completion functions (known sets, positions with unknown rows)."""
+"""Input checks shared by the completion functions."""
 
 from __future__ import annotations
 
@@ -13,12 +13,7 @@ from .._validation import MAX_COORDINATE, _shape_str, coordinate_array
 
 
 def as_known(known: Any, n: int, name: str = "known") -> np.ndarray:
-    """Return the known set as a boolean mask of length ``n``.
-
-    A boolean array of shape ``(n,)`` is a mask; an integer array is a list of distinct vertex
-    indices (so ``[0, 1]`` means "vertices 0 and 1", never a 0/1 mask). At least one vertex must be
-    known.
-    """
+    """A (n,) bool mask, or distinct integer indices, as a mask with at least one known vertex."""
     arr = np.asarray(known)
     if arr.dtype == bool:
         if arr.shape != (n,):
@@ -47,8 +42,7 @@ def as_known(known: Any, n: int, name: str = "known") -> np.ndarray:
 
 
 def as_partial_points(V: Any, known: np.ndarray | None = None, name: str = "V") -> np.ndarray:
-    """``V`` as float64 (n, 3); the rows in ``known`` (all rows when None) must be finite, the
-    others may hold anything (NaN included) and are ignored."""
+    """``V`` as float64 (n, 3) whose ``known`` rows (default all) are finite."""
     arr = coordinate_array(V, name, copy=True)
     if known is not None:
         rows = arr[known]
@@ -65,8 +59,7 @@ def as_partial_points(V: Any, known: np.ndarray | None = None, name: str = "V") 
 
 
 def check_components(C: sp.spmatrix, known: np.ndarray, what: str = "mesh") -> None:
-    """Every connected component of the graph ``C`` must hold a known vertex (else its positions
-    are undetermined: an error, never a silent NaN or zero)."""
+    """Refuse a component of ``C`` without known vertex (its positions are undetermined)."""
     n_comp, labels = connected_components(C, directed=False)
     has = np.zeros(n_comp, dtype=bool)
     has[labels[known]] = True

@@ -1,12 +1,6 @@
 """Completion of mesh animations and point-cloud sequences (thesis Sections 5.3.2-5.3.3).
 
-Online methods (frame ``t`` uses frames ``<= t`` only): ``"motion"`` (Algorithm 12, anchors and
-satellites, followed by filtering sweeps), ``"wrli"`` (Algorithm 13, weighted regularised Laplacian interpolation of the motion),
-and the baselines ``"li"`` (static Laplacian interpolation frame by frame) and ``"lia"``
-(Laplacian interpolation of the motion vectors, the thesis's LIA). Offline baseline: ``"mc"``,
-matrix completion of the whole animation matrix (Eq. 5.90, MC of the thesis's [359]), and
-``"gmc"``, the same completion with the spatial graph of the geometry as a regulariser (GMC of
-[359]).
+Readings and policies: docs/decisions.md#complete-motion-readings.
 """
 
 from __future__ import annotations
@@ -28,12 +22,11 @@ __all__ = ["ANIMATION_METHODS", "SEQUENCE_METHODS", "complete_animation", "compl
 ANIMATION_METHODS = ("motion", "li", "lia", "mc", "gmc")
 SEQUENCE_METHODS = ("wrli", "li", "lia", "mc", "gmc")
 #: GMC (graph-regularised matrix completion): final singular-value threshold, i.e. the weight
-#: of the nuclear norm against the graph term (``lambda / (gamma lambda_max(L))``), chosen on the
-#: tuning animation (horse-gallop, 25 frames, 30 % known, seed 1: NMSVE 2.666e-4 / 2.671e-4 /
-#: 2.672e-4 at 1e-2 / 1e-3 / 1e-4, the first the fastest)
+#: of the nuclear norm against the graph term (``lambda / (gamma lambda_max(L))``).
+#: Chosen on the tuning split; see docs/decisions.md#complete-gmc-tau.
 GMC_TAU = 1e-2
-#: filtering sweeps of ``"motion"`` after the satellite generations of Algorithm 12 (chosen on
-#: the tuning animation, see :func:`complete_animation`)
+#: filtering sweeps of ``"motion"`` after the satellite generations of Algorithm 12.
+#: Chosen on the tuning split; see docs/decisions.md#complete-sweeps.
 MOTION_SWEEPS = 20
 #: per-frame switch of ``"motion"``: below this leave-one-out ratio (:func:`_loo_ratio`) the
 #: motion step is kept without testing static interpolation.
@@ -54,7 +47,7 @@ def _as_partial_frames(frames: Any, name: str = "frames") -> np.ndarray:
 
 
 def _as_known_frames(known: Any, T: int, n: int) -> np.ndarray:
-    """``known`` as a (T, n) bool mask: a (n,) mask / index list applies to every frame."""
+    """``known`` as a (T, n) bool mask; a per-vertex mask applies to every frame."""
     arr = np.asarray(known)
     if arr.dtype == bool and arr.ndim == 2:
         if arr.shape != (T, n):
@@ -85,12 +78,7 @@ def _satellites(
     known: np.ndarray,
     sweeps: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Anchors-and-satellites propagation of the motion vectors (Eq. 5.91-5.92).
-
-    Returns the motion of every vertex and the mask of vertices reached (a component without an
-    anchor is not reached). ``sweeps > 0`` then repeats the weighted filtering of Eq. 5.92 over
-    every reached non-anchor vertex (see :func:`_refine`).
-    """
+    """Anchor-and-satellite motion (Eq. 5.91-5.92) and the reached mask, then ``sweeps``."""
     n = C.shape[0]
     Cc = C.tocoo()
     d2 = np.sum((prev[Cc.row] - prev[Cc.col]) ** 2, axis=1)
@@ -120,16 +108,7 @@ def _satellites(
 
 
 def _loo_ratio(C: sp.csr_matrix, prev: np.ndarray, cur: np.ndarray, known: np.ndarray) -> float:
-    """Cheap screen of the per-frame switch of ``complete_animation(method="motion")``.
-
-    Leave-one-out at the anchors of frame ``t``, from their known neighbours only, with the
-    weights ``w_d`` of Eq. 5.92: RMS error of predicting an anchor's motion from its neighbours'
-    motions, divided by the RMS error of predicting its position from its neighbours'
-    positions. The second overstates what Laplacian interpolation does (with few known
-    neighbours the mean position is off along the surface), so a small ratio says "motion" for
-    sure while a ratio near 1 only says "test both". ``inf`` when too few anchors have a known
-    neighbour.
-    """
+    """Leave-one-out error ratio motion / position at the anchors (inf if too few)."""
     Cc = C.tocoo()
     d2 = np.sum((prev[Cc.row] - prev[Cc.col]) ** 2, axis=1)
     pos = d2[d2 > 0]
@@ -148,20 +127,11 @@ def _loo_ratio(C: sp.csr_matrix, prev: np.ndarray, cur: np.ndarray, known: np.nd
 
 
 def _with_static_switch(step, C: sp.csr_matrix, L: sp.csr_matrix):
-    r"""Wrap an online step ``step(prev, cur, known_t)`` with the per-frame blend with static
-    Laplacian interpolation (``static_switch`` of :func:`complete_animation`).
+    """Wrap ``step(prev, cur, known_t)`` with the blend with static LI (``static_switch``).
 
-    The screen :func:`_loo_ratio` keeps ``step`` alone below :data:`SWITCH_SCREEN`. Otherwise
-    the frame is completed both ways with held-out anchors: for each fold ``f`` of
-    :data:`SWITCH_FOLDS` (every :data:`SWITCH_STRIDE`-th anchor from offset ``f``) the held-out
-    anchors ``H_f`` are predicted by the step (``m``) and by interpolation (``s``) from the other
-    anchors, and the blend weight is the least-squares fit over all folds,
-
-        (S1)  a = clip( sum_f sum_{i in H_f} <v_i - s_i, m_i - s_i>
-                        / sum_f sum_{i in H_f} ||m_i - s_i||^2 , 0, 1 ),
-
-    after which the frame is ``a * step + (1 - a) * interpolation``, both from all anchors (anchors
-    are returned exactly by both, so by the blend). ``a = 1`` or ``0`` runs one way only.
+    Below :data:`SWITCH_SCREEN` the step runs alone; otherwise the held-out folds fit
+    ``a = clip(sum <v - s, m - s> / sum ||m - s||^2, 0, 1)`` (Eq. S1) and the frame is
+    ``a * step + (1 - a) * interpolation``.
     """
 
     def static(cur, kt):
@@ -210,15 +180,7 @@ def _refine(
     reached: np.ndarray,
     sweeps: int,
 ) -> np.ndarray:
-    """Repeated weighted filtering of Eq. 5.92 after the generations of Algorithm 12.
-
-    Algorithm 12 estimates every satellite once, from the neighbours known when its generation
-    is reached (a first-generation satellite sees only its anchors). Here every reached
-    non-anchor vertex is then re-estimated ``sweeps`` times (Jacobi sweeps) from all its
-    neighbours with the same weights ``w_d w_p`` (anchors keep their measured motion and weigh
-    most); the sweeps converge towards the ``w_d w_p``-weighted harmonic interpolation of the
-    anchors' motion.
-    """
+    """``sweeps`` Jacobi sweeps of Eq. 5.92 over the reached non-anchor vertices."""
     free = np.flatnonzero(reached & ~known)
     if free.size == 0:
         return m
@@ -238,8 +200,7 @@ def _lia_motion(L: sp.csr_matrix, motion: np.ndarray, known: np.ndarray) -> np.n
 
 
 def _mc_offline(A: np.ndarray, K: np.ndarray, *, tol: float, max_iter: int, rng: Any) -> np.ndarray:
-    """Matrix completion of the (3n, T) animation matrix (Eq. 5.90); rows centred on the mean of
-    their known entries, scaled by the bounding-box diagonal of the known data."""
+    """Matrix completion of the centred, scaled (3n, T) animation matrix (Eq. 5.90)."""
     T, n, _ = A.shape
     M = A.transpose(1, 2, 0).reshape(3 * n, T)
     obs = np.repeat(K.T, 3, axis=0)
@@ -257,19 +218,7 @@ def _mc_offline(A: np.ndarray, K: np.ndarray, *, tol: float, max_iter: int, rng:
 def _gmc_offline(
     A: np.ndarray, K: np.ndarray, C: sp.csr_matrix, *, tol: float, max_iter: int
 ) -> np.ndarray:
-    r"""Graph-regularised matrix completion of the animation matrix (GMC of the thesis's [359],
-    Section 5.3.3's offline baseline; the thesis gives no equations for it).
-
-    Reading: ``min_X lambda ||X||_* + (gamma / 2) tr(X^T (L (x) I_3) X)  s.t.  P_omega(X) =
-    P_omega(M)`` on the (3n, T) animation matrix (rows: the coordinates of the vertices, ``L =
-    D - C`` the binary Laplacian of the mesh or kNN graph), centred and scaled as for ``"mc"``,
-    solved by proximal gradient in soft-impute form: a gradient step of length
-    ``1 / (gamma lambda_max)`` on the graph term (``X - L X / lambda_max``, ``lambda_max``
-    bounded by Gershgorin), singular-value thresholding (Eq. 4.21) at
-    ``tau = lambda / (gamma lambda_max)`` and the known entries put back, with ``tau``
-    decreasing geometrically from ``||X||_2 / 10`` to :data:`GMC_TAU` (continuation), until
-    the relative change of the iterate is below ``tol``.
-    """
+    """Graph-regularised completion (GMC): docs/decisions.md#complete-motion-readings."""
     T, n, _ = A.shape
     M = A.transpose(1, 2, 0).reshape(3 * n, T)
     obs = np.repeat(K.T, 3, axis=0)
@@ -301,9 +250,7 @@ def _gmc_offline(
 
 
 def _svt_thin(Y: np.ndarray, tau: float) -> np.ndarray:
-    """Singular-value thresholding ``U S_tau[Lambda] V^T`` (Eq. 4.21) of a tall or wide matrix
-    through the eigendecomposition of its small Gram matrix (an animation matrix has few
-    columns; LAPACK's SVD of a 30000 x 25 matrix is ~40 times slower)."""
+    """Singular-value thresholding (Eq. 4.21) through the small Gram matrix."""
     wide = Y.shape[1] > Y.shape[0]
     Z = Y.T if wide else Y
     w, V = np.linalg.eigh(Z.T @ Z)
@@ -317,8 +264,7 @@ def _svt_thin(Y: np.ndarray, tau: float) -> np.ndarray:
 
 
 def _first_frame(A0, K0, C, F, name):
-    """Frame 0 must be complete for the online methods (the thesis assumes it); a partial frame 0
-    is completed statically (Laplacian interpolation)."""
+    """Frame 0, a partial one completed by Laplacian interpolation."""
     if K0.all():
         return A0.copy()
     if not K0.any():
@@ -331,7 +277,7 @@ def _first_frame(A0, K0, C, F, name):
 
 
 def _run_online(A, K, C, method, step):
-    """Shared frame loop: ``step(prev, cur, known_t) -> frame``; frame 0 completed statically."""
+    """Frame loop ``step(prev, cur, known_t) -> frame`` after :func:`_first_frame`."""
     T = A.shape[0]
     out = np.empty_like(A)
     out[0] = _first_frame(A[0], K[0], C, None, "frames")
@@ -358,72 +304,27 @@ def complete_animation(
     static_switch: bool = True,
     rng: Any = None,
 ) -> np.ndarray:
-    r"""Recover missing vertices of a mesh animation with fixed connectivity (Sec. 5.3.2).
+    """Recover missing vertices of a mesh animation with fixed connectivity (Section 5.3.2).
 
-    ``method="motion"`` (Algorithm 12, online: frame ``t`` uses frames ``<= t`` only): the known
-    vertices of frame ``t`` are anchors with motion ``m_j = v_t,j - v_t-1,j``; the unknown vertices
-    in the first ring of an anchor are first-generation satellites, those in the first ring of a
-    satellite the next generation, and so on; a satellite moves by the weighted mean of the
-    motions of its already known neighbours (Eq. 5.91-5.92),
-    ``m_i = sum_j w_dij w_pj m_j / sum_j |w_dij w_pj|``, ``v_t,i = v_t-1,i + m_i``, with
-    ``w_dij = 1 / ||v_i - v_j||^2`` on the previous (complete) frame and the prioritisation weight
-    ``w_p`` (1 for a new satellite, +1 per iteration for every known vertex, so anchors weigh
-    most). Reading: Eq. 5.92 prints ``w_{p_i}`` (of the satellite itself), which would cancel out
-    of the ratio; the weight of the neighbour ``j`` is used, as the text describes ("more emphasis
-    on the anchor points instead of the satellites"). Second reading: Algorithm 12 estimates a
-    satellite once, from the neighbours known when its generation is reached, so a
-    first-generation satellite follows its one or two anchors only; the text calls the step "a
-    weighted filtering approach". After the generations, the same filter (Eq. 5.92, weights
-    ``w_d w_p``, anchors fixed) is applied ``sweeps`` more times to every non-anchor vertex, now
-    with all its neighbours. ``sweeps=0`` is Algorithm 12 as printed. The default,
-    :data:`MOTION_SWEEPS` = 20, was chosen on the tuning animation (horse-gallop, 25 frames,
-    30 % known, seed 1; mean NMSVE over frames 1-24): 0 sweeps 1.08e-5, 10 sweeps 1.08e-6, 20
-    1.01e-6, 50 0.99e-6 at 1.4x the time of 20; LIA 1.68e-6. On pose sets, whose frames are
-    unrelated poses (the shared cat-poses and lion-poses), every motion step is less accurate
-    than ``"li"`` frame by frame; ``static_switch`` (default on) lets the anchors of each frame
-    choose a blend of the two (see the parameter).
-
-    Baselines: ``"li"`` Laplacian interpolation of every frame on its own (binary ``L = D - C``,
-    Eq. 4.24-4.27), ``"lia"`` Laplacian interpolation of the motion vectors from the previous
-    completed frame (online), ``"mc"`` matrix completion of the whole ``(3n, T)`` animation matrix
-    (Eq. 5.90 with the ALM of Eq. 5.80-5.89; offline, every frame is used) and ``"gmc"`` the same
-    with the mesh Laplacian as a regulariser (:func:`_gmc_offline`; offline).
-
-    Policies: frame 0 is assumed complete (the thesis); a partly known frame 0 is completed by
-    Laplacian interpolation first. A frame without any known vertex repeats the previous
-    completed frame (zero motion); a connected component without anchor in frame ``t`` keeps its
-    previous positions (``"motion"``, ``"lia"``) -- never NaN. ``"li"`` and ``"mc"`` raise
-    :class:`~spectrageo.InvalidInputError` where their problem is undetermined.
+    ``"motion"`` (Algorithm 12, online) moves satellites by
+    ``m_i = sum_j w_dij w_pj m_j / sum_j |w_dij w_pj|`` over known neighbours (Eq. 5.91-5.92),
+    generation by generation from the anchors, then ``sweeps`` more filter passes
+    (docs/decisions.md#complete-sweeps; 0 is Algorithm 12 as printed). ``static_switch`` blends each
+    frame with static Laplacian interpolation (docs/decisions.md#complete-pose-sets). Baselines:
+    ``"li"`` per frame, ``"lia"`` (LI of the motion), offline ``"mc"`` (Eq. 5.90) and ``"gmc"``.
 
     Parameters
     ----------
     frames : (T, n, 3) array_like or MeshAnimation
-        Unknown entries may hold anything (NaN included).
     F : (m, 3) array_like of int
-    known : (n,) or (T, n) bool array, or (n_k,) int array
-        Known vertices, the same in every frame or per frame.
+    known : (n,) or (T, n) bool, or (n_k,) int
     method : {"motion", "li", "lia", "mc", "gmc"}
-    tol, max_iter : float, int
-        Stopping rule of ``"mc"`` (ALM) and ``"gmc"`` (relative change of the iterate).
-    sweeps : int
-        Filtering sweeps of ``"motion"`` after the satellite generations (see above; 0 =
-        Algorithm 12 as printed).
-    static_switch : bool
-        ``"motion"`` only, not in the thesis; it serves pose sets, whose frames are unrelated
-        poses. Per frame, a cheap leave-one-out screen at the anchors (:func:`_loo_ratio`)
-        keeps the motion step when it is clearly better (ratio below :data:`SWITCH_SCREEN`);
-        otherwise the folds of held-out anchors (every :data:`SWITCH_STRIDE`-th anchor from each
-        offset of :data:`SWITCH_FOLDS`) are held out in turn, the frame is
-        completed both by the motion step and by static Laplacian interpolation, and the blend
-        ``a * motion + (1 - a) * interpolation`` whose weight fits the held-out anchors best
-        (least squares, clipped to [0, 1]; Eq. S1 of ``_with_static_switch``) completes the
-        frame from all anchors. Online still. False: every frame by the motion step.
-    rng : int, Generator or None
+    tol, max_iter, sweeps, static_switch, rng
+        Settings of the methods above.
 
     Returns
     -------
-    (T, n, 3) float64 ndarray
-        Known entries exactly the input ones, vertex order kept.
+    (T, n, 3) float64 ndarray, known entries exactly the input ones.
     """
     check_choice(method, "method", ANIMATION_METHODS)
     if isinstance(sweeps, bool) or not isinstance(sweeps, (int, np.integer)) or sweeps < 0:
@@ -503,7 +404,7 @@ def _complete_frames(
 
 # ------------------------------------------------------------------- Algorithm 13 (WRLI)
 def _wrli_step(C: sp.csr_matrix, sigma: float, gamma: float, max_iter: int):
-    """One frame of Algorithm 13 (Eq. 5.94-5.97) as a closure over the fixed graph ``C``."""
+    """One frame of Algorithm 13 (Eq. 5.94-5.97) over the fixed graph ``C``."""
     Cc = C.tocoo()
     n = C.shape[0]
 
@@ -552,8 +453,7 @@ def _wrli_step(C: sp.csr_matrix, sigma: float, gamma: float, max_iter: int):
 
 
 def _satellites_mean(C: sp.csr_matrix, motion: np.ndarray, known: np.ndarray):
-    """``B-hat``: unweighted first-ring mean motion, generation by generation from the known
-    points (the ``sum_{Psi_1} d`` of Eq. 5.96)."""
+    """``B-hat`` of Eq. 5.96: first-ring mean motion, generation by generation."""
     m = np.where(known[:, None], motion, 0.0)
     cur = known.copy()
     while not cur.all():
@@ -580,45 +480,13 @@ def complete_sequence(
     static_switch: bool = True,
     rng: Any = None,
 ) -> np.ndarray:
-    r"""Recover missing points of a point-cloud sequence with point correspondence (Sec. 5.3.3).
+    """Recover missing points of a point-cloud sequence with correspondence (Section 5.3.3).
 
-    ``method="wrli"`` (Algorithm 13, online): the binary kNN graph ``C`` (Eq. 5.93,
-    ``n_neighbors``, symmetrised) is built once on frame 0 and kept for every frame. For frame
-    ``t``: prioritisation ``w_p`` (``N`` for known points, ``N - 1`` for their neighbours, ..., 1
-    for the most remote), Gaussian weights on the previous frame ``C_w,ij = w_p,i
-    exp(-||v_i - v_j||^2 / (2 sigma^2)) c_ij`` (Eq. 5.94; reading: the thesis's kernel has no
-    width, ``sigma`` is the mean graph edge length of frame 0 so that it is scale-free),
-    ``L_w = D - C_w`` (Eq. 5.95), the known motions ``B_k``, the first-ring mean motion
-    ``B-hat`` (propagated generation by generation from the known points), then the LASSO of
-    Eq. 5.96 ``min_z 0.5 ||P - R z||^2 + gamma' ||z||_1`` with ``R = L_w[:, u]``,
-    ``P = -L_w[:, k] B_k - R B-hat_u`` (:func:`spectrageo.linalg.lasso`, ADMM), and
-    ``v_u(t) = v_u(t-1) + B-hat_u + z`` (Eq. 5.97 with the corrected motion). ``gamma`` is
-    relative: ``gamma' = gamma * alpha_max`` where ``alpha_max = ||R^T P||_inf / n`` is the
-    smallest weight giving ``z = 0`` (so ``gamma >= 1`` returns ``B-hat`` and ``gamma = 0``
-    plain weighted Laplacian interpolation of the motion).
-
-    Baselines as in :func:`complete_animation` (``"li"``, ``"lia"``, ``"mc"``, ``"gmc"``), on the
-    kNN graph. Same policies for frame 0, empty frames and unreached components.
-
-    Parameters
-    ----------
-    clouds : (T, n, 3) array_like or a list of T (n, 3) arrays
-        The same ``n`` in every frame (point ``i`` is the same point over time).
-    known : (n,) or (T, n) bool array, or (n_k,) int array
-    method : {"wrli", "li", "lia", "mc", "gmc"}
-    n_neighbors : int
-    gamma : float
-        Relative LASSO weight (see above).
-    max_iter, tol : int, float
-        ADMM iterations of ``"wrli"``; ``tol`` and ``max_iter`` also drive ``"mc"`` and ``"gmc"``.
-    static_switch : bool
-        ``"wrli"`` only, not in the thesis: the per-frame screen and blend with static Laplacian
-        interpolation of :func:`complete_animation` (for sequences of unrelated shapes).
-    rng : int, Generator or None
-
-    Returns
-    -------
-    (T, n, 3) float64 ndarray
+    ``"wrli"`` (Algorithm 13, online): on the kNN graph of frame 0 (Eq. 5.93), the weighted
+    Laplacian ``L_w`` (Eq. 5.94-5.95) and the LASSO ``min_z 0.5 ||P - R z||^2 + gamma' ||z||_1``
+    (Eq. 5.96) correct the mean motion, ``v_u(t) = v_u(t-1) + B-hat_u + z`` (Eq. 5.97); ``gamma`` is
+    relative to the smallest weight giving ``z = 0``. Baselines and ``static_switch`` as in
+    :func:`complete_animation`. ``clouds`` (T, n, 3); ``known`` as there. Returns (T, n, 3) float64.
     """
     check_choice(method, "method", SEQUENCE_METHODS)
     check_positive(n_neighbors, "n_neighbors", integer=True)

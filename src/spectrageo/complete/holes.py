@@ -1,10 +1,4 @@
-"""Hole filling with unknown connectivity (thesis Section 5.3.1, last scenario).
-
-"Firstly, we need to implant a set of points ... inside the hole, and then to use a triangulation
-algorithm ... before using our method for the final refinement." Every boundary loop is closed by
-a patch with implanted interior points, then the positions of the implanted points are completed
-by :func:`spectrageo.complete.inpaint` with every original vertex known.
-"""
+"""Hole filling with unknown connectivity (thesis Section 5.3.1, last scenario)."""
 
 from __future__ import annotations
 
@@ -35,8 +29,7 @@ MAX_IMPLANTED = 2_000_000
 
 
 def _lattice_count(P: np.ndarray, h: float) -> float:
-    """Points of a hexagonal lattice of spacing ``h`` inside the loop ``P`` (L, 3), from the area
-    of its projection on its best-fitting plane (shoelace formula)."""
+    """Hexagonal lattice points of spacing ``h`` inside the projected loop ``P``."""
     if not h > 0:
         return 0.0
     Q = P - P.mean(axis=0)
@@ -48,9 +41,7 @@ def _lattice_count(P: np.ndarray, h: float) -> float:
 
 # ------------------------------------------------------------------ planar patch (scipy Delaunay)
 def _segments_cross(Q: np.ndarray) -> bool:
-    """True when the closed polygon ``Q`` (L, 2) has two non-adjacent edges that intersect
-    (cross, or touch: an end on the other edge; collinear edges that do not overlap, as along a
-    straight side, do not count)."""
+    """Whether two non-adjacent edges of the closed polygon ``Q`` (L, 2) cross or touch."""
     L = Q.shape[0]
     a, b = Q, np.roll(Q, -1, axis=0)
     i, j = np.triu_indices(L, 2)
@@ -91,7 +82,7 @@ def _inside(Q: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 
 def _seg_dist(Q: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Distance of ``pts`` to the closed polygon ``Q`` (minimum over its edges)."""
+    """Distance of ``pts`` to the closed polygon ``Q``."""
     a, b = Q, np.roll(Q, -1, axis=0)
     ab = b - a
     t = np.clip(
@@ -104,13 +95,7 @@ def _seg_dist(Q: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 
 def _planar_patch(P: np.ndarray, h: float):
-    """Triangulate a boundary loop ``P`` (L, 3) projected on its best-fit plane with implanted
-    lattice points (spacing ``h``) by :class:`scipy.spatial.Delaunay`.
-
-    Returns ``(tri, new_points)`` with ``tri`` (t, 3) indices into ``[loop | new_points]``, or None
-    when the projection is not a simple polygon or the Delaunay triangulation misses a loop edge
-    (the caller then falls back to :func:`_dp_patch`).
-    """
+    """``(tri, new_points)`` by Delaunay of the projected loop and lattice, or None."""
     L = P.shape[0]
     c = P.mean(axis=0)
     _, _, Vt = np.linalg.svd(P - c, full_matrices=False)
@@ -165,17 +150,8 @@ def _dp_patch(
     max_splits: int = 6,
     border_normals: np.ndarray | None = None,
 ):
-    """Minimum-weight triangulation of the loop (dynamic programming over chords, Barequet &
-    Sharir 1995) with Liepa's (2003) weight: the largest dihedral angle of the patch first (between
-    adjacent patch triangles and, across the loop edges, against the mesh faces on them), its
-    total area second; then implanted centroids: every triangle larger than twice the
-    equilateral triangle of side ``h`` is split 1-to-3 (``max_splits`` rounds).
-
-    ``border_normals`` (L, 3): unit normal of the mesh face on loop edge ``k -> k+1``, oriented
-    as the patch triangles ``(i, m, j)`` (``i < m < j`` in loop order) measure theirs,
-    ``(P_j - P_i) x (P_m - P_i)``; rows of NaN (or None) where unknown, which then add no
-    angle. ``forbid`` (L, L) bool marks chords that are mesh edges already; returns None when no
-    triangulation avoids them.
+    """Liepa's minimum-weight triangulation of the loop, then centroid splits; None if ``forbid``
+    rules out every triangulation.
     """
     L = P.shape[0]
     nb = np.full((L, 3), np.nan) if border_normals is None else border_normals
@@ -233,9 +209,7 @@ def _dp_patch(
 
 
 def _refine(P: np.ndarray, tri: np.ndarray, h: float, max_splits: int):
-    """Split every patch triangle larger than twice the equilateral triangle of side ``h`` 1-to-3
-    at its centroid, ``max_splits`` rounds; ``tri`` indexes ``[P | new points]``. Returns
-    ``(tri, new points)``."""
+    """Split triangles above twice the equilateral of side ``h`` 1-to-3, ``max_splits`` rounds."""
     L = P.shape[0]
     pts = [p for p in P]
     target = np.sqrt(3.0) / 4.0 * h * h
@@ -260,8 +234,7 @@ def _refine(P: np.ndarray, tri: np.ndarray, h: float, max_splits: int):
 
 
 def _directed_faces(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The three rotations of every face, ``(3m, 3)``, sorted by the key ``first * n + second``
-    of their leading directed edge; returns ``(rotations, sorted keys)``."""
+    """Rotations (3m, 3) of every face sorted by their leading directed edge, and the keys."""
     T = np.concatenate([F[:, [0, 1, 2]], F[:, [1, 2, 0]], F[:, [2, 0, 1]]])
     key = T[:, 0] * n + T[:, 1]
     order = np.argsort(key, kind="stable")
@@ -269,9 +242,7 @@ def _directed_faces(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _border_normals(V: np.ndarray, faces: tuple, loop: np.ndarray, n: int) -> np.ndarray:
-    """Unit normals of the mesh faces on the loop edges ``loop[k] -> loop[k+1]``, oriented for
-    :func:`_dp_patch` (NaN rows for an edge no face holds); ``faces`` from
-    :func:`_directed_faces`."""
+    """Unit normals of the mesh faces on the loop edges, oriented for :func:`_dp_patch`."""
     T, ks = faces
     a, b = loop, np.roll(loop, -1)
     out = np.full((loop.size, 3), np.nan)
@@ -287,7 +258,7 @@ def _border_normals(V: np.ndarray, faces: tuple, loop: np.ndarray, n: int) -> np
 
 
 def _simple_loops(loop: np.ndarray) -> list[np.ndarray]:
-    """Split a boundary loop that passes a vertex twice (a pinch) into simple cycles."""
+    """Split a boundary loop that passes a vertex twice into simple cycles."""
     out, stack, pos = [], [], {}
     for v in loop.tolist():
         if v in pos:
@@ -307,8 +278,7 @@ def _simple_loops(loop: np.ndarray) -> list[np.ndarray]:
 
 
 def _in_sorted(q: np.ndarray, keys: np.ndarray) -> np.ndarray:
-    """``np.isin(q, keys)`` for sorted ``keys``, by binary search (the mesh's edge keys are
-    millions on a large scan; each patch asks about a few hundred)."""
+    """``np.isin(q, keys)`` for sorted ``keys`` by binary search."""
     if keys.size == 0:
         return np.zeros(np.shape(q), dtype=bool)
     pos = np.minimum(np.searchsorted(keys, q), keys.size - 1)
@@ -316,8 +286,7 @@ def _in_sorted(q: np.ndarray, keys: np.ndarray) -> np.ndarray:
 
 
 def _chords_ok(tri: np.ndarray, loop: np.ndarray, edge_keys: np.ndarray, n: int) -> bool:
-    """No patch edge between two loop vertices may be an edge of the mesh already (it would be
-    shared by three faces): loop edges themselves excepted."""
+    """No patch chord between loop vertices may already be a mesh edge."""
     L = loop.size
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
     e = e[(e < L).all(axis=1)]
@@ -330,15 +299,14 @@ def _chords_ok(tri: np.ndarray, loop: np.ndarray, edge_keys: np.ndarray, n: int)
 
 
 def _fan_patch(P: np.ndarray):
-    """Last resort: a fan around the loop's centroid (always a manifold disc)."""
+    """Last resort: a fan around the loop's centroid."""
     L = P.shape[0]
     i = np.arange(L)
     return np.column_stack([i, (i + 1) % L, np.full(L, L)]), P.mean(axis=0)[None]
 
 
 class _Context:
-    """What the patch of a loop needs from the mesh: positions, faces (their directed rotations
-    built once, when a loop first needs them), the vertex count and the sorted edge keys."""
+    """Mesh data a loop patch needs (faces' directed rotations built on first use)."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray, n: int, edge_keys: np.ndarray):
         self.V, self.F, self.n, self.edge_keys = V, F, n, edge_keys
@@ -352,10 +320,7 @@ class _Context:
 
 
 def _orient_local(tri: np.ndarray) -> np.ndarray:
-    """Flip a patch of a loop (local indices, loop vertices first) so that it traverses the loop
-    edge ``0 -> 1`` backwards: the mesh's boundary edges run forwards in their faces (see
-    :func:`spectrageo.geometry.boundary_loops`), and a consistently oriented patch must traverse
-    them the other way."""
+    """Orient a local patch to traverse the loop edge ``0 -> 1`` backwards."""
     for f in tri:
         for s in range(3):
             if f[s] == 0 and f[(s + 1) % 3] == 1:
@@ -366,9 +331,7 @@ def _orient_local(tri: np.ndarray) -> np.ndarray:
 
 
 def _loop_patch(loop: np.ndarray, P: np.ndarray, h: float, ctx: _Context):
-    """Patch ``(tri, new points)`` of one loop, ``tri`` indexing ``[P | new points]`` and
-    oriented against the loop; ``loop`` holds the mesh index of each loop vertex, -1 for the
-    points implanted on a splitting chord (:func:`_split_patch`)."""
+    """Oriented patch ``(tri, new points)`` of one loop."""
     L = P.shape[0]
     n = ctx.n
     if L == 3:
@@ -390,9 +353,7 @@ def _loop_patch(loop: np.ndarray, P: np.ndarray, h: float, ctx: _Context):
 
 
 def _split_patch(loop: np.ndarray, P: np.ndarray, h: float, ctx: _Context):
-    """Patch of a loop of more than :data:`DP_MAX_LOOP` edges: cut it in two by the shortest
-    chord between vertices half the loop apart, with points implanted along the chord at the
-    loop's spacing (at most a quarter of the loop), and patch both halves (recursively)."""
+    """Patch of a loop of more than :data:`DP_MAX_LOOP` edges, cut by its shortest chord."""
     L = P.shape[0]
     half = L // 2
     i = np.arange(L)
@@ -429,69 +390,29 @@ def fill_holes(
     density: float = 1.0,
     rng: Any = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Close every hole (boundary loop) of a mesh: implant points, triangulate, complete positions.
+    """Close every boundary loop of a mesh: implant points, triangulate, complete (Section 5.3.1).
 
-    For each loop of :func:`spectrageo.geometry.boundary_loops`:
-
-    1. the loop is projected on its best-fit plane; if that is a simple polygon, points on a
-       hexagonal lattice of spacing ``h / density`` (``h`` the loop's mean edge length) are
-       implanted inside it, away from its edges, and the loop and the points are triangulated by
-       :class:`scipy.spatial.Delaunay` (Qhull), keeping the triangles inside the polygon; the
-       patch is accepted when it contains every loop edge exactly once;
-    2. otherwise (a curved loop whose projection folds, or a loop edge Delaunay misses) the loop is
-       triangulated by Liepa's (2003) minimum-weight dynamic programming (the largest dihedral
-       angle first, against the mesh faces around the loop too, then the area), and triangles
-       larger than the target size are split at their centroids; a loop of more than
-       :data:`DP_MAX_LOOP` edges is first cut in two by its shortest chord between vertices half
-       the loop apart (points implanted along the chord), recursively, and each piece is
-       patched by steps 1-2;
-    3. the patch is oriented against the loop (consistent with the mesh), and the implanted
-       points are completed by :func:`spectrageo.complete.inpaint` with every original vertex
-       known (Sec. 5.3.1: "triangulation ... before using our method for the final
-       refinement").
-
-    Choices, made on the tuning split of ``spectrageo evaluate complete`` (the holes of
-    ``holes/elephant-with-holes.off`` against the clean elephant, and six holes cut into each of
-    the 15 meshes of :data:`spectrageo.evaluate.completion.HOLE_TUNING`; symmetric Hausdorff
-    distance sampled over the surfaces): ``method="lsm"`` (least-squares meshes, the default)
-    stays within the hull of the data; the thesis form of Laplacian interpolation (``"li"``,
-    ``min ||L V||`` over every row, Eq. 4.26) extrapolates the curvature of the rim and overshoots
-    on CAD parts (up to 0.83 of the diagonal on a hole cut into ``abc_00000050.stl``), and
-    ``"mc"`` has no known vertex in the patches inside a hole. Liepa's weight replaced the minimum
-    area, which folds patches across curved holes (elephant: 7.6e-3 -> 6.9e-3 of the diagonal).
+    Patches: docs/decisions.md#complete-holes-details; the default method:
+    docs/decisions.md#complete-fill-holes.
 
     Parameters
     ----------
-    V : (n, 3) array_like
-    F : (m, 3) array_like of int
+    V, F : (n, 3) array_like, (m, 3) array_like of int
     method : {"lsm", "li", "mc"}
-        Completion of the implanted points (see above), on the :data:`FAIR_RINGS` rings of
-        original vertices around them.
+        Completion of the implanted points on :data:`FAIR_RINGS` rings around them.
     max_hole : int, optional
-        Leave loops with more than ``max_hole`` edges open (e.g. the open border of a scan).
-        Default: close every loop.
+        Leave loops with more edges open (e.g. a scan's border).
     weld_seams : bool
-        Coincident border vertices (within :data:`spectrageo.geometry.WELD_TOL` of the diagonal)
-        are one vertex for the faces (their duplicate rows stay in ``V``, unreferenced), so that a
-        seam of duplicated vertices is not mistaken for a hole; coincident vertices inside the
-        surface (parts that touch) are left apart. False: take ``F`` as it is.
-    density : float
-        Implanted points per loop edge length (1: spacing equal to the mean loop edge). The
-        points grow with the hole's area: the 4,000-edge border of a 1000 x 1000 grid takes
-        1.13M points and 11.8 GB at 1, 70k points and 1.3 GB at 0.25. A call whose holes would
-        take more than :data:`MAX_IMPLANTED` points (estimated from their areas before any is
-        filled) is refused with :class:`InvalidInputError`.
-    rng : int, Generator or None
-        Passed to :func:`inpaint`.
+        Treat coincident border vertices as one, so that seams are not holes.
+    density, rng
+        Implanted points per loop edge length (refused above :data:`MAX_IMPLANTED`); seed.
 
     Returns
     -------
     V_out : (n + p, 3) ndarray
-        The input rows unchanged and in order, then the ``p`` implanted points.
+        The input rows, then the implanted points.
     F_out : (m' + q, 3) int64 ndarray
-        The input faces (re-indexed to the first copy of welded border vertices, faces collapsed
-        by welding dropped, when ``weld_seams``), then the ``q`` new faces. Loops of fewer than
-        three edges (at non-manifold edges) are left open.
+        The input faces (re-indexed when welded), then the new faces.
     """
     V = as_points(V, "V")
     n = V.shape[0]
@@ -569,9 +490,7 @@ FAIR_RINGS = {"li": 2, "lsm": 4, "mc": 8}
 def _complete_near(
     V: np.ndarray, F: np.ndarray, unknown: np.ndarray, method: str, rng
 ) -> np.ndarray:
-    """Positions of the ``unknown`` rows by :func:`inpaint` on the submesh within
-    :data:`FAIR_RINGS` rings of them (a hole in a scan of millions of vertices costs what its
-    neighbourhood costs)."""
+    """Complete the ``unknown`` rows on the submesh within :data:`FAIR_RINGS` rings."""
     from ..graph import adjacency_matrix, k_ring
 
     N = V.shape[0]

@@ -1,15 +1,4 @@
-"""Inpainting of static meshes with known connectivity (thesis Section 5.3.1).
-
-Three methods fill the positions of the unknown vertices of a mesh whose connectivity is known:
-
-- ``"mc"``: the thesis method, k-ring patch matrices (Eq. 5.77-5.78) completed by ALM with the
-  progressive singular-value scheme (Eq. 5.80-5.89, :func:`spectrageo.linalg.complete_matrix`);
-- ``"li"``: Laplacian interpolation, ``min ||L V||_F`` over the unknown rows with the binary
-  ``L = D - C`` (Eq. 4.24-4.27, :func:`spectrageo.linalg.laplacian_interpolation`), the thesis's
-  baseline [25];
-- ``"lsm"``: least-squares meshes (Sorkine & Cohen-Or 2004, the thesis's baseline [24]): the
-  uniform Laplacian ``I - D^-1 C`` with the known vertices as soft constraints.
-"""
+"""Inpainting of static meshes with known connectivity (thesis Section 5.3.1)."""
 
 from __future__ import annotations
 
@@ -31,23 +20,8 @@ INPAINT_METHODS = ("mc", "li", "lsm")
 
 
 def patch_indices(C: sp.spmatrix, k: int, *, max_ring: int = 64) -> np.ndarray:
-    """The index matrix ``A`` of Eq. 5.77: row ``i`` holds ``i`` and ``k - 1`` ring neighbours.
-
-    Neighbours are gathered ring by ring (first ring, then second, ...) until ``k - 1`` are found;
-    inside a ring they are taken in increasing index order (the thesis: "the order ... is
-    arbitrary"). A vertex whose component has fewer than ``k`` vertices repeats itself in the
-    remaining columns.
-
-    Parameters
-    ----------
-    C : (n, n) sparse
-        Symmetric adjacency (binary or weighted; only the pattern is used).
-    k : int
-        Columns of ``A`` (the vertex itself plus ``k - 1`` neighbours).
-
-    Returns
-    -------
-    (n, k) int64 ndarray, ``A[:, 0] == arange(n)``.
+    """Index matrix ``A`` (n, k) of Eq. (5.77): each vertex, then ``k - 1`` neighbours gathered
+    ring by ring in increasing index order (repeating itself in a small component).
     """
     check_positive(k, "k", integer=True)
     C = sp.csr_matrix(C, dtype=np.float64)
@@ -86,9 +60,7 @@ def patch_indices(C: sp.spmatrix, k: int, *, max_ring: int = 64) -> np.ndarray:
 
 
 def _auto_k(C: sp.csr_matrix, known: np.ndarray, k_min: int = 8, k_max: int = 64) -> int:
-    """Smallest ``k`` (from ``k_min``, doubling) whose patches all hold a known vertex (Sec. 5.3.1:
-    "the bigger the missing areas, the bigger k ... so that each row of M has at least one
-    non-zero element"); ``k_max`` at most."""
+    """Smallest ``k`` of ``k_min, 2 k_min, ... <= k_max`` whose patches all hold a known vertex."""
     k = k_min
     while True:
         A = patch_indices(C, k)
@@ -109,7 +81,7 @@ def _mc(
     max_passes: int,
     rng: Any,
 ) -> np.ndarray:
-    """Eq. 5.77-5.89 on centred coordinates; see :func:`inpaint` for the reading choices."""
+    """Eq. 5.77-5.89 on centred, scaled coordinates, repeated inwards, LI for the rest."""
     out = V.copy()
     cur = known.copy()
     k_used = _auto_k(C, cur) if k is None else k
@@ -142,8 +114,7 @@ def _mc(
 
 
 def _lsm(V: np.ndarray, known: np.ndarray, C: sp.csr_matrix, weight: float) -> np.ndarray:
-    """Least-squares meshes: ``min ||(I - D^-1 C) V||^2 + w^2 ||V_k - V~_k||^2`` (normal equations,
-    sparse LU)."""
+    """Least-squares meshes ``min ||(I - D^-1 C) V||^2 + w^2 ||V_k - V~_k||^2``."""
     n = V.shape[0]
     d = np.asarray(C.sum(axis=1)).ravel()
     inv = np.zeros(n)
@@ -173,73 +144,32 @@ def inpaint(
     lsm_weight: float = 1.0,
     rng: Any = None,
 ) -> np.ndarray:
-    r"""Recover the positions of unknown vertices of a mesh with known connectivity (Sec. 5.3.1).
+    """Recover the unknown vertices of a mesh with known connectivity (Section 5.3.1).
 
-    Default ``method="li"``: on the tuning split of ``spectrageo evaluate complete`` (fandisk,
-    30-70 % of the vertices unknown) Laplacian interpolation was 2.5-3.5x more accurate than the
-    thesis's matrix completion (``"mc"``) and orders of magnitude faster on large missing
-    regions, so it is the default; ``"mc"`` is kept as written for comparison.
-
-    ``method="mc"`` (the thesis method):
-
-    1. ``A`` (n, k) holds, per vertex, itself and ``k - 1`` neighbours gathered ring by ring
-       (Eq. 5.77, :func:`patch_indices`);
-    2. ``M`` holds their coordinates with zeros at unknown vertices (Eq. 5.78); the three
-       coordinates are stacked side by side, ``M = [X_A | Y_A | Z_A]`` (n, 3k), so that one
-       completion couples them;
-    3. ``M`` is completed by ALM with the progressive singular-value count (Eq. 5.80-5.89,
-       :func:`spectrageo.linalg.complete_matrix`, stopping at ``||P_w(M - E)|| / ||M|| < tol``);
-    4. the first column of every block, ``E_1i``, is the estimate of vertex ``i``; observed
-       entries are replaced by the data (end of Sec. 5.3.1).
-
-    Reading choices (the thesis leaves them open): coordinates are centred on the mean of the
-    known vertices and divided by their bounding-box diagonal before step 2 (zeros then mean "at
-    the centroid", and ``tol`` is scale-free); ``k`` defaults to the smallest of 8, 16, 32, 64
-    whose patches all contain a known vertex (the thesis: "the bigger the missing areas, the
-    bigger k ... so that each row of M has at least one non-zero element"). A vertex whose patch
-    holds no known vertex even then (a large contiguous region) gets no estimate from ``E``; the
-    completion is repeated with the estimated vertices treated as observed (at most
-    ``max_passes`` passes, growing inwards), and what is still unreached is filled by Laplacian
-    interpolation.
-
-    ``method="li"``: ``min ||L V||_F`` over the unknown rows with the binary ``L = D - C``
-    (Eq. 4.24-4.27). ``method="lsm"``: least-squares meshes, ``min ||(I - D^{-1} C) V||^2 +
-    w^2 ||V_known - V~_known||^2`` (known vertices are soft constraints there; they are then reset
-    to their input values like for every method).
+    ``"li"`` (default, docs/decisions.md#complete-inpaint-li) minimises ``||L V||_F`` over the
+    unknown rows with ``L = D - C`` (Eq. 4.24-4.27); ``"mc"`` completes the k-ring patch matrix
+    ``[X_A | Y_A | Z_A]`` (Eq. 5.77-5.78) by ALM (Eq. 5.80-5.89) and reads vertex ``i`` from column
+    0 of each block (readings: docs/decisions.md#complete-mc-readings); ``"lsm"`` is least-squares
+    meshes (Sorkine & Cohen-Or 2004) with soft constraints of weight ``lsm_weight``.
 
     Parameters
     ----------
     V : (n, 3) array_like
-        Positions; rows of unknown vertices are ignored and may hold anything, NaN included.
+        Positions; unknown rows may hold anything, NaN included.
     F : (m, 3) array_like of int
-        Faces (the connectivity is known, also over the unknown region).
-    known : (n,) bool array or (n_k,) int array
-        Mask or indices of the known vertices.
-    method : {"mc", "li", "lsm"}
-    k : int, optional
-        Patch size of Eq. 5.77 for ``"mc"`` (default: automatic, see above).
-    tol, max_iter, rho : float, int, float
-        Stopping rule and ``mu`` growth of the ALM completion. The thesis runs it to a
-        reconstruction error below 1e-5 (Table 5.18); on the shared meshes the vertex error stops
-        improving long before (fandisk, 50 % known, k = 16: RMS error / diagonal 7.1e-3 after 30
-        iterations, 7.1e-3 after 300 at five times the cost), hence the looser defaults.
-    max_passes : int
-        Passes of the ``"mc"`` completion (see above).
-    lsm_weight : float
-        Weight ``w`` of the soft constraints of ``"lsm"``.
-    rng : int, Generator or None
-        Start vectors of partial SVDs (``"mc"``).
+    known : (n,) bool or (n_k,) int
+    method : {"li", "mc", "lsm"}
+    k, tol, max_iter, rho, max_passes, rng
+        Patch size (default automatic) and ALM settings of ``"mc"``.
 
     Returns
     -------
-    (n, 3) float64 ndarray
-        Vertex order kept; known rows are exactly the input rows.
+    (n, 3) float64 ndarray, known rows exactly the input rows.
 
     Raises
     ------
     InvalidInputError
-        Bad shapes, ``known`` of the wrong length, empty or out of range, NaN at known rows, or a
-        connected component (isolated vertices included) without any known vertex.
+        Bad shapes or ``known``, NaN at known rows, a component without known vertex.
     """
     check_choice(method, "method", INPAINT_METHODS)
     try:

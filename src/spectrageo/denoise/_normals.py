@@ -1,25 +1,8 @@
-"""Building blocks of face-normal filtering denoisers (thesis Section 4.2 and 4.7).
-
-Shared by the bilateral normal filter (:func:`spectrageo.denoise.bilateral.bnf`), guided mesh normal
-filtering (:func:`spectrageo.denoise.gnf.gnf`) and the fine step of TSGSP. Everything works on the
-faces of a triangle mesh and is vectorised with sparse matrices:
-
-* face neighbourhoods: :func:`face_neighbors` (faces sharing an edge or a vertex),
-  :func:`face_radius_neighbors` (faces whose centroids lie within a radius),
-  :func:`edge_face_pairs`, :func:`mean_centroid_distance` (the usual unit of the spatial kernel
-  width);
-* candidate patches and ideal-patch selection (Section 4.2.1, Eq. 4.8-4.10): :func:`patch_matrix`,
-  :class:`PatchSet` (patches plus reusable topology), :func:`candidate_scores`,
-  :func:`select_patches`;
-* guided normals (Section 4.2.2, Eq. 4.11): :func:`patch_mean_normals`, :func:`guided_normals`;
-* (joint) bilateral filtering of face normals: :func:`spatial_weights`,
-  :func:`joint_bilateral_normals`.
-
-Conventions: a *patch matrix* ``P`` is a binary CSR (m, m) matrix with ``P[j, l] = 1`` when face
-``l`` belongs to the patch ``P_j`` centred at face ``j``; the candidate patches of face ``i`` are the
-patches that contain it, i.e. the non-zeros of column ``i``. Normals are (m, 3) arrays; rows of
-degenerate faces may be zero and then carry no weight.
-"""
+"""Building blocks of the face-normal filters (thesis Sections 4.2 and 4.7), shared by
+``bnf``, ``gnf`` and TSGSP's fine step. A *patch matrix* ``P`` is a binary (m, m) CSR matrix with
+``P[j, l] = 1`` when face ``l`` belongs to the patch centred at face ``j``; the candidate patches
+of face ``i`` are the non-zeros of column ``i``. Zero normal rows (degenerate faces) carry no
+weight."""
 
 from __future__ import annotations
 
@@ -42,18 +25,7 @@ MEASURES = ("thesis", "zhang2015")
 
 # --------------------------------------------------------------------------- neighbourhoods
 def face_neighbors(F, *, shared: str = "vertex", include_self: bool = True) -> sp.csr_matrix:
-    """Binary (m, m) CSR matrix of topological face neighbours.
-
-    Parameters
-    ----------
-    F : (m, 3) int
-    shared : {"vertex", "edge"}
-        ``"vertex"``: faces sharing at least one vertex (this includes the edge neighbours; the
-        1-ring face patch of Zhang et al. 2015 and the neighbourhood of Zheng et al. 2011).
-        ``"edge"``: faces sharing an edge.
-    include_self : bool
-        Put ones on the diagonal (each face is its own neighbour).
-    """
+    """Binary (m, m) CSR matrix of faces sharing a vertex (``shared="vertex"``) or an edge."""
     check_choice(shared, "shared", ("vertex", "edge"))
     A = face_adjacency(F, shared=shared).tocsr()
     if include_self:
@@ -70,23 +42,8 @@ def face_radius_neighbors(
     adjacency: sp.spmatrix | None = None,
     include_self: bool = True,
 ) -> sp.csr_matrix:
-    """Binary (m, m) CSR matrix joining faces whose centroids are closer than ``radius``.
-
-    This is the geometric neighbourhood of guided mesh normal filtering (Zhang et al. 2015).
-
-    Parameters
-    ----------
-    centroids : (m, 3) float
-        Face centroids.
-    radius : float
-        Ball radius (inclusive).
-    adjacency : (m, m) sparse, optional
-        Face adjacency (e.g. :func:`face_neighbors`). When given, the neighbourhood of face ``i`` is
-        restricted to the faces reachable from ``i`` through adjacent faces that all lie inside the
-        ball, so that faces of a nearby but disconnected sheet (thin parts) are not mixed in.
-    include_self : bool
-        Keep each face in its own neighbourhood.
-    """
+    """Binary (m, m) CSR matrix of faces whose centroids lie within ``radius``; with ``adjacency``,
+    only faces reachable through adjacent faces inside the ball."""
     C = np.asarray(centroids, dtype=np.float64)
     check_positive(radius, "radius")
     m = C.shape[0]
@@ -117,7 +74,6 @@ def face_radius_neighbors(
 
 
 def edge_face_pairs(F) -> np.ndarray:
-    """Pairs ``(a, b)``, ``a < b``, of faces sharing an edge, shape (e, 2), sorted."""
     A = sp.triu(face_adjacency(F, shared="edge"), k=1).tocoo()
     order = np.lexsort((A.col, A.row))
     return np.c_[A.row[order], A.col[order]].astype(np.int64)
@@ -126,13 +82,7 @@ def edge_face_pairs(F) -> np.ndarray:
 def mean_centroid_distance(
     V: np.ndarray, F: np.ndarray, *, pairs: np.ndarray | None = None
 ) -> float:
-    """Mean distance between the centroids of edge-adjacent faces.
-
-    The default spatial kernel width ``sigma_s`` of the bilateral normal filter (Zheng et al. 2011)
-    and of guided normal filtering, and the unit of the neighbourhood radius of the latter (Zhang et
-    al. 2015). ``pairs`` (from :func:`edge_face_pairs`) avoids recomputing the face adjacency.
-    Returns 0.0 for a mesh without adjacent faces.
-    """
+    """Mean distance between the centroids of edge-adjacent faces (0.0 without any)."""
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     pairs = edge_face_pairs(F) if pairs is None else pairs
@@ -144,21 +94,12 @@ def mean_centroid_distance(
 
 # --------------------------------------------------------------------------- patches
 def patch_matrix(F) -> sp.csr_matrix:
-    """Binary (m, m) patch matrix of the 1-ring face patches.
-
-    ``P[j, l] = 1`` when face ``l`` shares a vertex with face ``j`` (``l = j`` included): the patch
-    centred at ``f_j``. Since this relation is symmetric, the candidate patches of face ``f_i``
-    (those containing it, Section 4.2.1) are the patches centred at the faces of its own 1-ring.
-    """
+    """Patch matrix of the 1-ring face patches (Section 4.2.1)."""
     return face_neighbors(F, shared="vertex", include_self=True)
 
 
 def padded_patches(P: sp.csr_matrix) -> np.ndarray:
-    """Patch members as a dense (m, k_max) index array, short rows padded with their first member.
-
-    Padding repeats an existing member, so maxima and minima over a row are unchanged.
-    Every patch must be non-empty.
-    """
+    """Patch members as an (m, k_max) array, short rows padded with their first member."""
     P = sp.csr_matrix(P)
     counts = np.diff(P.indptr)
     if counts.size and counts.min() == 0:
@@ -174,27 +115,7 @@ def padded_patches(P: sp.csr_matrix) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PatchSet:
-    """Candidate patches of a mesh with the topology-only data that patch selection reuses.
-
-    Build it once per mesh with :meth:`from_faces` (1-ring patches) or :meth:`from_matrix` (any
-    patch matrix); the scores then only depend on the current normals.
-
-    Attributes
-    ----------
-    P : (m, m) CSR binary
-        Patch matrix, ``P[j, l] = 1`` when face ``l`` belongs to the patch centred at ``j``.
-    members : (m, k_max) int64
-        Padded member lists (:func:`padded_patches`).
-    faces, centers : (q,) int64
-        Candidate pairs, sorted by face: patch ``centers[t]`` contains face ``faces[t]``.
-    starts : (m + 1,) int64
-        ``faces[starts[i]:starts[i + 1]] == i``.
-    edge_pairs : (e, 2) int64 or None
-        Edge-adjacent face pairs (:func:`edge_face_pairs`), when the faces are known.
-    inner_edges : (m, e) CSR binary or None
-        ``inner_edges[j, t] = 1`` when both faces of edge pair ``t`` belong to patch ``j`` (the
-        interior edges used by the consistency of Zhang et al. 2015).
-    """
+    """Candidate patches with the topology that patch selection reuses."""
 
     P: sp.csr_matrix
     members: np.ndarray
@@ -210,7 +131,6 @@ class PatchSet:
 
     @classmethod
     def from_matrix(cls, P: sp.spmatrix, F=None) -> PatchSet:
-        """Patch set of an arbitrary binary (m, m) patch matrix (``F`` enables ``"zhang2015"``)."""
         P = sp.csr_matrix(P, dtype=np.float64)
         if P.shape[0] != P.shape[1]:
             raise InvalidInputError(f"`P` must be square (m, m); got {P.shape}.")
@@ -242,7 +162,6 @@ class PatchSet:
 
     @classmethod
     def from_faces(cls, F) -> PatchSet:
-        """1-ring patches of :func:`patch_matrix` (the candidate patches of Section 4.2.1)."""
         return cls.from_matrix(patch_matrix(F), F)
 
 
@@ -253,7 +172,6 @@ def _as_patch_set(patches, F=None) -> PatchSet:
 
 
 def _row_reduce(values: np.ndarray, indptr: np.ndarray, ufunc, empty: float) -> np.ndarray:
-    """``ufunc.reduceat`` over CSR rows, with ``empty`` for rows without entries."""
     n = indptr.size - 1
     out = np.full(n, empty)
     nonempty = np.diff(indptr) > 0
@@ -263,7 +181,7 @@ def _row_reduce(values: np.ndarray, indptr: np.ndarray, ufunc, empty: float) -> 
 
 
 def _thesis_patch_term(N: np.ndarray, P: sp.csr_matrix) -> np.ndarray:
-    """``a_j = |lambda_j1 - lambda_j2|`` of Eq. (4.9) for every patch, shape (m,)."""
+    """``a_j = |lambda_j1 - lambda_j2|`` of Eq. (4.9) for every patch."""
     from ..geometry._numba_kernels import sym3_eigenvalues
 
     i, j = (0, 1, 2, 0, 0, 1), (0, 1, 2, 1, 2, 2)  # [xx, yy, zz, xy, xz, yz]
@@ -304,16 +222,12 @@ def _patch_diameter_kernel(N, members):  # pragma: no cover - jitted
 def _max_distance_to_patch(
     N: np.ndarray, rows: np.ndarray, cols: np.ndarray, members: np.ndarray
 ) -> np.ndarray:
-    """``b_ij = max_{l in P_j} ||n_i - n_l||`` (Eq. 4.10) for the pairs ``(rows[t], cols[t])``."""
+    """``b_ij = max_{l in P_j} ||n_i - n_l||`` (Eq. 4.10) for the pairs ``(rows, cols)``."""
     return _max_distance_kernel(np.ascontiguousarray(N), rows, cols, np.ascontiguousarray(members))
 
 
 def _zhang_patch_scores(N: np.ndarray, ps: PatchSet) -> np.ndarray:
-    """Patch consistency ``H(P) = Phi(P) R(P)`` of Zhang et al. 2015, shape (m,).
-
-    ``Phi`` is the largest normal difference between two faces of the patch, ``R`` the ratio of the
-    largest to the summed (plus 1e-9) normal differences across the patch's interior edges.
-    """
+    """Patch consistency ``Phi(P) R(P)`` of Zhang et al. 2015."""
     phi = _patch_diameter_kernel(np.ascontiguousarray(N), ps.members)
     a, b = ps.edge_pairs[:, 0], ps.edge_pairs[:, 1]
     sal = np.linalg.norm(N[a] - N[b], axis=1)  # edge saliency
@@ -326,32 +240,9 @@ def _zhang_patch_scores(N: np.ndarray, ps: PatchSet) -> np.ndarray:
 def candidate_scores(
     N: np.ndarray, patches, *, measure: str = "thesis", F=None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Consistency scores of every (face, candidate patch) pair; lower is more consistent.
-
-    Parameters
-    ----------
-    N : (m, 3) float
-        Current face normals (unit; zero rows allowed for degenerate faces).
-    patches : PatchSet or (m, m) sparse binary patch matrix
-        Candidate patches (:class:`PatchSet`, or a matrix from :func:`patch_matrix`).
-    measure : {"thesis", "zhang2015"}
-        ``"thesis"``: Eq. (4.8)-(4.10), ``a_j * b_ij`` with ``a_j = |lambda_j1 - lambda_j2|`` the
-        difference of the two *smallest* eigenvalues of ``R_j = N_j^T N_j`` (the first two returned by
-        a symmetric eigen-solver in ascending order: both vanish on a flat patch, while a patch that
-        crosses a sharp edge spreads its normals in one direction, which makes one of the two
-        large) and ``b_ij = max_{l in P_j} ||n_i - n_l||`` the largest distance between the face's
-        normal and the normals of the patch. ``"zhang2015"``: the patch-only consistency
-        ``Phi(P) R(P)`` of the original paper (needs the faces: a :class:`PatchSet` built from them,
-        or ``F``).
-    F : (m, 3) int, optional
-        Faces, when ``patches`` is a bare matrix and ``measure="zhang2015"``.
-
-    Returns
-    -------
-    faces, patches, scores : (q,) arrays
-        Pair ``t`` scores the patch centred at ``patches[t]`` as the patch of face ``faces[t]``;
-        sorted by face.
-    """
+    """Consistency scores ``(faces, patches, scores)`` of every (face, candidate patch) pair, sorted
+    by face, lower is more consistent: Eqs. (4.8)-(4.10) ``a_j b_ij`` (``measure="thesis"``) or
+    Zhang et al.'s ``Phi(P) R(P)`` (needs the faces)."""
     check_choice(measure, "measure", MEASURES)
     ps = _as_patch_set(patches, F)
     N = np.asarray(N, dtype=np.float64)
@@ -369,11 +260,8 @@ def candidate_scores(
 
 
 def select_patches(N: np.ndarray, patches, *, measure: str = "thesis", F=None) -> np.ndarray:
-    """Ideal patch of every face (Eq. 4.8): the candidate with the lowest consistency score.
-
-    Ties go to the candidate with the lowest centre index (deterministic). Returns the centre face
-    index of the chosen patch for each face, shape (m,). A face in no patch keeps itself.
-    """
+    """Ideal patch of every face (Eq. 4.8): the centre of its lowest-scoring candidate (ties: the
+    lowest centre)."""
     ps = _as_patch_set(patches, F)
     faces, centers, scores = candidate_scores(N, ps, measure=measure)
     best = np.arange(ps.n_faces, dtype=np.int64)
@@ -387,7 +275,7 @@ def select_patches(N: np.ndarray, patches, *, measure: str = "thesis", F=None) -
 
 
 def patch_mean_normals(N: np.ndarray, areas: np.ndarray, P: sp.spmatrix) -> np.ndarray:
-    """Area-weighted mean unit normal of every patch (Eq. 4.11), shape (m, 3); zero if degenerate."""
+    """Area-weighted mean unit normal of every patch (Eq. 4.11)."""
     if isinstance(P, PatchSet):
         P = P.P
     return _normalize_rows(np.asarray(sp.csr_matrix(P) @ (np.asarray(areas)[:, None] * N)))
@@ -402,24 +290,8 @@ def guided_normals(
     F=None,
     return_patches: bool = False,
 ):
-    """Guided normals (Section 4.2): the area-weighted mean normal of each face's ideal patch.
-
-    Eq. (4.8)-(4.10) select the patch (:func:`select_patches`), Eq. (4.11) averages it.
-
-    Parameters
-    ----------
-    N : (m, 3) float, current unit face normals
-    areas : (m,) float, face areas
-    patches : PatchSet or (m, m) sparse binary patch matrix (:func:`patch_matrix`)
-    measure : {"thesis", "zhang2015"}, see :func:`candidate_scores`
-    F : (m, 3) int, needed by ``measure="zhang2015"`` when ``patches`` is a bare matrix
-    return_patches : bool
-        Also return the (m,) centre index of each chosen patch.
-
-    Returns
-    -------
-    g : (m, 3) unit guided normals, or ``(g, best)`` with ``return_patches=True``.
-    """
+    """Guided normals (Section 4.2): the mean normal (Eq. 4.11) of each face's ideal patch
+    (Eqs. 4.8-4.10); with ``return_patches``, also the chosen centres."""
     ps = _as_patch_set(patches, F)
     best = select_patches(N, ps, measure=measure)
     g = patch_mean_normals(N, areas, ps.P)[best]
@@ -430,10 +302,7 @@ def guided_normals(
 def spatial_weights(
     centroids: np.ndarray, areas: np.ndarray, nbr: sp.csr_matrix, sigma_s: float
 ) -> sp.csr_matrix:
-    """Sparse (m, m) spatial part of the (joint) bilateral normal filter.
-
-    ``W[i, j] = A_j exp(-||c_i - c_j||^2 / (2 sigma_s^2))`` on the non-zeros of ``nbr``.
-    """
+    """``W[i, j] = A_j exp(-||c_i - c_j||^2 / (2 sigma_s^2))`` on the non-zeros of ``nbr``."""
     check_positive(sigma_s, "sigma_s")
     nbr = sp.csr_matrix(nbr)
     rows = np.repeat(np.arange(nbr.shape[0]), np.diff(nbr.indptr))
@@ -446,13 +315,7 @@ def spatial_weights(
 def joint_bilateral_normals(
     N: np.ndarray, guide: np.ndarray, W: sp.csr_matrix, sigma_r: float
 ) -> np.ndarray:
-    """One (joint) bilateral filtering pass over face normals.
-
-    ``n_i <- normalize( sum_j W_ij exp(-||g_i - g_j||^2 / (2 sigma_r^2)) n_j )`` with ``W`` from
-    :func:`spatial_weights`. ``guide = N`` gives the bilateral normal filter of Zheng et al. (2011);
-    guided normals give the joint filter of Zhang et al. (2015). A face whose weighted sum vanishes
-    keeps its input normal.
-    """
+    """One (joint) bilateral pass over the normals, weights ``W`` times the range kernel on ``guide``."""
     check_positive(sigma_r, "sigma_r")
     rows = np.repeat(np.arange(W.shape[0]), np.diff(W.indptr))
     cols = W.indices
@@ -467,17 +330,7 @@ def joint_bilateral_normals(
 
 # --------------------------------------------------------------------------- vertex update
 def fast_update_vertices(V: np.ndarray, F: np.ndarray, N: np.ndarray, n_iter: int) -> np.ndarray:
-    """Compiled equivalent of :func:`spectrageo.geometry.update_vertices` (Eq. 4.28-4.29).
-
-    ``v_i <- v_i + (1 / |Psi_i|) sum_{j in Psi_i} n_j <n_j, c_j - v_i>`` for ``n_iter`` iterations,
-    one pass over the faces per iteration (no (3m, 3) temporaries). Same results up to float
-    rounding. Inputs are trusted (internal use): ``V`` (n, 3) float64, ``F`` (m, 3) int64 valid
-    indices, ``N`` (m, 3) finite target normals (re-normalised here; zero rows inactive).
-
-    Returns
-    -------
-    (n, 3) float64 new positions (``V`` is not modified).
-    """
+    """Compiled vertex update of Eqs. (4.28)-(4.29), ``n_iter`` passes (inputs trusted)."""
     V = np.array(V, dtype=np.float64, order="C")
     F = np.ascontiguousarray(F, dtype=np.int64)
     N = _normalize_rows(np.asarray(N, dtype=np.float64))

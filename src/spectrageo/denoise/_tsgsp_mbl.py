@@ -1,50 +1,12 @@
-"""Model-based Bayesian learning (MBL) of the spectral subspace size and the noise variance
-(thesis Section 5.1.1, Proposition 1, Eq. 5.4-5.10, Algorithm 1, Appendix B).
+"""Model-based Bayesian learning of the spectral subspace size and the noise variance
+(thesis Section 5.1.1, Proposition 1, Eqs. 5.4-5.10, Algorithm 1, Appendix B).
 
-One coordinate ``v`` (k,) of a submesh is modelled as ``v = U h + z`` (Eq. 5.2-5.3) with ``U`` (k, n_l)
-the ``n_l`` lowest-frequency Laplacian eigenvectors, a Gaussian prior ``h ~ N(0, gamma Sigma)``
-(Eq. 5.4) whose ``Sigma`` is constrained to the symmetric Toeplitz (AR(1)) form
-``Sigma_qw = r^|q-w|`` (Eq. 5.10), and white noise ``z ~ N(0, sigma I)``.
-
-Because the columns of ``U`` are orthonormal, every quantity of Eq. (5.5)-(5.9)/(B.17)-(B.18) can be
-computed on the spectral coefficients ``c = U^T v`` alone, and the inverse of an AR(1) Toeplitz
-matrix is tridiagonal, so that the posterior precision ``Pi^-1 = I / sigma + Sigma^-1 / gamma`` is
-tridiagonal too. One EM iteration therefore costs O(n_l) instead of O(k^3):
-
-* posterior mean ``H = Pi c / sigma`` (Eq. 5.5 / B.17) by a tridiagonal solve,
-* the diagonal and first off-diagonal of ``Pi`` (Eq. 5.6 / B.18) by the Takahashi recursion on the
-  ``L D L^T`` factors,
-* ``sigma <- (||v - U H||^2 + Tr(Pi)) / k`` (Eq. 5.7; ``sigma (n_l - Tr(Pi Pi0^-1)) = Tr(Pi)``),
-* ``B = Pi + H H^T``; ``r = sign(q1/q0) min(|q1/q0|, 0.99)`` from the mean diagonal ``q0`` and mean
-  first sub-diagonal ``q1`` of ``B`` (Eq. 5.9-5.10), ``Sigma = Toeplitz(r^|q-w|)``,
-* ``gamma = Tr(Sigma^-1 B) / n_l`` (Eq. 5.8), using the tridiagonal ``Sigma^-1``.
-
-Subspace size (Algorithm 1). For a fixed ``n_l`` EM runs ``n_em`` iterations from a fixed start
-(``sigma = sigma_ref``, ``r = 0``, ``gamma`` from the mean squared coefficient; no warm start
-between sizes, so that the statistic below depends on ``n_l`` alone and is monotone in it). The
-statistic compared with the reference noise level ``sigma_ref`` of Eq. (5.15) is, as written in
-the thesis, the residual ``||v - U H||^2 / n_m`` (``rule="residual"``): Algorithm 1 grows
-``n_l`` while it is above the band and shrinks it while it is below. Because the residual
-decreases with ``n_l``, the unit-step walk of Algorithm 1 ends at the boundary size, the smallest
-``n_l`` whose residual is at most ``sigma_ref (1 + tol)``; it is found here by galloping from the
-initial size and bisection, which visits O(log n) sizes instead of O(n) and returns the same
-size. With ``tol = 0`` (the default of :func:`spectrageo.denoise.tsgsp.coarse`) the band's
-half-width ``epsilon`` is the residual change of one size step.
-
-Why not the EM noise variance. Eq. (5.7) at its fixed point is the residual corrected for the
-fitted degrees of freedom, ``(||v - U H||^2 + Tr(Pi)) / k``. With that statistic
-(``rule="em"``, the behaviour of earlier versions) the high-frequency energy of sharp features
-keeps it above the band up to the largest size on most submeshes (fandisk0.3: median size at the
-``max_keep`` bound, ``converged=False`` everywhere), so the coarse step was a fixed low-pass. With
-the residual rule the median learned size on Fandisk0.3 is 121 of at most 150, on Block0.4 100,
-on TrimStar0.5 133 (Bunny0.2, an organic scan, still reaches the bound on most submeshes), and
-the mean theta of the eight shared pairs is 4.998 degrees (5.014 with the EM rule).
-
-Eq. (5.11) divides the initial size by the noise estimate ``sigma_z^(0)``; that makes the size
-depend on the model's units (a mesh scaled by 1000 would start 1000 times smaller), so the
-initial fraction ``exp(-|e~|)`` is used without it (:func:`spectrageo.denoise.tsgsp.coarse`). The
-start only decides where the gallop begins, not the size it ends at.
-"""
+One coordinate ``v = U h + z`` of a submesh (Eqs. 5.2-5.3), prior ``h ~ N(0, gamma Sigma)`` with
+Toeplitz ``Sigma_qw = r^|q-w|`` (Eq. 5.10). ``U`` is orthonormal and ``Sigma^-1`` tridiagonal,
+so one EM iteration (Eqs. 5.5-5.9, B.17-B.18) costs O(n_l) on ``c = U^T v``. The walk over
+``n_l`` ends at the smallest size whose residual ``||v - U H||^2 / n_m`` reaches the reference
+(Algorithm 1; found by galloping and bisection, the same size as unit steps).
+Notes: docs/decisions.md#denoise-mbl-notes."""
 
 from __future__ import annotations
 
@@ -63,11 +25,7 @@ _TINY = 1e-300
 
 @numba.njit(cache=True)
 def _em_fit(c, n_l, rperp2, k, sigma, gamma, r, n_em, H, pdiag, poff, D, lsub, y):
-    """``n_em`` EM iterations at subspace size ``n_l``. Returns (sigma, gamma, r, resid2, trPi).
-
-    ``H``, ``pdiag``, ``poff``, ``D``, ``lsub``, ``y`` are work arrays of length >= n_l.
-    ``rperp2`` = ||v - U U^T v||^2 for this ``n_l``.
-    """  # pragma: no cover - jitted
+    """``n_em`` EM iterations at size ``n_l``: ``(sigma, gamma, r, resid2, trPi)``."""  # pragma: no cover - jitted
     resid2 = 0.0
     trpi = 0.0
     for _ in range(n_em):
@@ -145,11 +103,7 @@ def _em_fit(c, n_l, rperp2, k, sigma, gamma, r, n_em, H, pdiag, poff, D, lsub, y
 
 @numba.njit(cache=True)
 def _fit_size(c, csum, vnorm2, k, n_l, sigma_ref, n_em, H, pdiag, poff, D, lsub, y, stat):
-    """EM at size ``n_l`` from the standard start (sigma = sigma_ref, r = 0, gamma from the data).
-
-    Returns ``(s, gamma, r, resid2, trPi)`` with ``s`` the statistic the walk compares with the
-    reference: ``resid2 / k`` for ``stat == 1`` (Algorithm 1), the EM noise variance otherwise.
-    """  # pragma: no cover
+    """EM at size ``n_l`` from the standard start: ``(statistic, gamma, r, resid2, trPi)``."""  # pragma: no cover
     sigma = max(sigma_ref, _TINY)
     mean_c2 = csum[n_l] / n_l
     gamma = max(mean_c2 - sigma, 1e-3 * max(mean_c2, _TINY))
@@ -162,10 +116,7 @@ def _fit_size(c, csum, vnorm2, k, n_l, sigma_ref, n_em, H, pdiag, poff, D, lsub,
 
 @numba.njit(cache=True)
 def _mbl_search(c, vnorm2, k, sigma_ref, n_init, n_em, tol, n_min, stat):
-    """Algorithm 1 for one signal.
-
-    Returns (n_l, sigma, gamma, r, resid2, n_sizes_visited, converged, H).
-    """  # pragma: no cover - jitted
+    """Algorithm 1 for one signal: ``(n_l, sigma, gamma, r, resid2, visits, converged, H)``."""  # pragma: no cover - jitted
     n_max = c.shape[0]
     csum = np.zeros(n_max + 1)
     for q in range(n_max):
@@ -240,27 +191,7 @@ def _mbl_search(c, vnorm2, k, sigma_ref, n_init, n_em, tol, n_min, stat):
 
 @dataclass(frozen=True)
 class MBLResult:
-    """Result of :func:`mbl_subspace` for one signal.
-
-    Attributes
-    ----------
-    n_keep : int
-        Learned subspace size ``n_l``.
-    noise_var : float
-        Learned noise variance ``sigma_z`` (Eq. 5.7).
-    coefficients : (n_keep,) float
-        Posterior mean ``H`` of the projected clean signal (Eq. 5.5); the denoised signal is
-        ``U[:, :n_keep] @ coefficients``.
-    gamma, r : float
-        Prior scale (Eq. 5.8) and Toeplitz correlation (Eq. 5.10).
-    n_iter : int
-        Number of subspace sizes visited (outer iterations of Algorithm 1).
-    converged : bool
-        False when even the largest size leaves a noise variance above the band (the signal has
-        more structure than the basis holds); the largest size is then returned.
-    residual : float
-        ``||v - U H||^2``.
-    """
+    """Result of :func:`mbl_subspace` (``coefficients``: the posterior mean ``H`` of Eq. 5.5)."""
 
     n_keep: int
     noise_var: float
@@ -283,33 +214,9 @@ def mbl_subspace(
     n_min: int = 1,
     rule: str = "residual",
 ) -> MBLResult:
-    """Learn the subspace size and the noise variance of one signal by MBL (Algorithm 1).
-
-    Parameters
-    ----------
-    v : (k,) float
-        The signal (one coordinate of a submesh).
-    U : (k, n_max) float
-        Orthonormal basis, columns ordered from the lowest frequency (the candidate subspaces are its
-        leading columns).
-    noise_var : float
-        Reference noise variance ``sigma_ref`` (Eq. 5.15) used by the stopping rule (> 0).
-    n_init : int, optional
-        Initial subspace size ``n_l^(0)`` (Eq. 5.11); default ``n_max // 2``.
-    n_em : int
-        EM iterations ``b`` per subspace size (Algorithm 1, line 5).
-    tol : float
-        Relative width ``epsilon / sigma_ref`` of the acceptance band.
-    n_min : int
-        Smallest subspace size allowed.
-    rule : {"residual", "em"}
-        Statistic compared with ``noise_var``: ``||v - U H||^2 / k`` (Algorithm 1 as written) or
-        the EM noise variance of Eq. (5.7) (module notes).
-
-    Returns
-    -------
-    :class:`MBLResult`
-    """
+    """Learn the subspace size and noise variance of one signal ``v`` (k,) on the orthonormal basis
+    ``U`` (k, n_max), lowest frequency first (Algorithm 1), against the reference ``noise_var``
+    (Eq. 5.15); ``n_init``, ``n_em``, ``tol``, ``n_min`` and ``rule`` as in Algorithm 1."""
     v = np.asarray(v, dtype=np.float64)
     U = np.asarray(U, dtype=np.float64)
     if v.ndim != 1:

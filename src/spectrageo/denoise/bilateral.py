@@ -19,7 +19,7 @@ from ._normals import (
     mean_centroid_distance,
     spatial_weights,
 )
-from ._registry import register
+from ._table import register
 
 
 def _optional_positive(value, name: str) -> float | None:
@@ -29,7 +29,6 @@ def _optional_positive(value, name: str) -> float | None:
 
 
 def _ring_pairs(F: np.ndarray, n: int, rings: int) -> tuple[np.ndarray, np.ndarray]:
-    """Ordered pairs ``(i, j)``, ``i != j``, with ``j`` in the ``rings``-ring of ``i``."""
     C = adjacency_matrix(F, n)
     R = C.copy()
     for _ in range(rings - 1):
@@ -51,6 +50,7 @@ def _radius_pairs(X: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]
     "bilateral",
     summary="bilateral mesh denoising of vertices along their normals",
     reference="Fleishman, Drori & Cohen-Or 2003, 'Bilateral mesh denoising', SIGGRAPH",
+    trusted=True,
 )
 def bilateral(
     V,
@@ -63,45 +63,11 @@ def bilateral(
     rings: int = 2,
     n_iter: int = 3,
 ) -> np.ndarray:
-    """Bilateral mesh denoising (Fleishman et al. 2003).
-
-    Each iteration moves every vertex ``v`` with unit normal ``n`` (area-weighted mean of the incident
-    face normals) along ``n``::
-
-        h_j = <n, q_j - v>,   w_j = exp(-||v - q_j||^2 / (2 sigma_c^2)) exp(-h_j^2 / (2 sigma_s^2))
-        v <- v + n (sum_j w_j h_j) / (sum_j w_j)
-
-    over the neighbours ``q_j`` of ``v`` (the vertex itself excluded: it has ``h = 0`` and would only
-    damp the step). All vertices are updated simultaneously with sparse pair lists.
-
-    Parameters
-    ----------
-    V : (n, 3) float
-        Vertex positions (not modified).
-    F : (m, 3) int
-    sigma_c : float, optional
-        Spatial (closeness) kernel width. Default: the mean edge length of the input mesh (the paper
-        lets the user pick it interactively as the radius of a typical smooth region).
-    sigma_s : float, optional
-        Range (similarity) kernel width on the offsets ``h``. Default, following the paper's rule
-        "the standard deviation of the offsets in a smooth neighbourhood": the median over vertices of
-        the standard deviation of the offsets ``h`` in each vertex's neighbourhood, computed on the
-        input mesh and then kept fixed.
-    radius : float, optional
-        Neighbourhood radius for ``neighborhood="radius"``; default ``2 sigma_c`` (the paper's
-        ``rho = 2 sigma_c``).
-    neighborhood : {"radius", "ring"}
-        ``"radius"``: vertices within ``radius`` (Euclidean ball, recomputed every iteration);
-        ``"ring"``: the ``rings``-ring of each vertex on the mesh graph.
-    rings : int, default 2
-        Ring size for ``neighborhood="ring"``.
-    n_iter : int, default 3
-        Number of iterations (the paper applies 1 to 5).
-
-    Returns
-    -------
-    (n, 3) float64 denoised positions, same vertex order.
-    """
+    """Bilateral mesh denoising (Fleishman et al. 2003): ``n_iter`` simultaneous moves
+    ``v <- v + n sum_j w_j h_j / sum_j w_j`` along the vertex normal, ``h_j = <n, q_j - v>``,
+    ``w_j = exp(-||v - q_j||^2 / 2 sigma_c^2) exp(-h_j^2 / 2 sigma_s^2)``, over the vertices within
+    ``radius`` (default ``2 sigma_c``) or the ``rings``-ring. ``sigma_c`` defaults to the mean edge
+    length, ``sigma_s`` to the median local deviation of ``h`` (the paper's rule)."""
     V = as_points(V, "V")
     n = V.shape[0]
     F = as_faces(F, n, "F")
@@ -147,6 +113,7 @@ def bilateral(
     "bnf",
     summary="bilateral normal filtering (local iterative scheme) + vertex update",
     reference="Zheng, Fu, Au & Tai 2011, 'Bilateral normal filtering for mesh denoising', IEEE TVCG",
+    trusted=True,
 )
 def bnf(
     V,
@@ -158,40 +125,10 @@ def bnf(
     vertex_iter: int = 10,
     shared: str = "vertex",
 ) -> np.ndarray:
-    """Bilateral normal filtering, local iterative scheme (Zheng et al. 2011).
-
-    Face normals are filtered ``n_iter`` times with::
-
-        n_i <- normalize( sum_{j in N(i)} A_j W_s(||c_i - c_j||) W_r(||n_i - n_j||) n_j )
-
-    with Gaussian kernels ``W(x) = exp(-x^2 / (2 sigma^2))``, face areas ``A_j`` and centroids
-    ``c_j`` of the input mesh, over the faces ``N(i)`` sharing a vertex (or an edge) with face ``i``
-    and the face itself. The vertices are then moved to fit the filtered normals with
-    ``vertex_iter`` iterations of Eq. (4.28)-(4.29) (:func:`spectrageo.geometry.update_vertices`).
-    Zheng et al. call the spatial width ``sigma_c`` and the range width ``sigma_s``; here ``sigma_s``
-    is spatial and ``sigma_r`` range, as in guided normal filtering.
-
-    Parameters
-    ----------
-    V : (n, 3) float
-        Vertex positions (not modified).
-    F : (m, 3) int
-    sigma_s : float, optional
-        Spatial width; default the mean distance between centroids of edge-adjacent faces (the
-        paper's default).
-    sigma_r : float, default 0.35
-        Range width on normal differences (the paper uses 0.2-0.6).
-    n_iter : int, default 20
-        Normal filtering iterations.
-    vertex_iter : int, default 10
-        Vertex update iterations (Eq. 4.28-4.29).
-    shared : {"vertex", "edge"}
-        Faces sharing a vertex (default, includes edge neighbours) or only an edge.
-
-    Returns
-    -------
-    (n, 3) float64 denoised positions, same vertex order.
-    """
+    """Bilateral normal filtering, local iterative scheme (Zheng et al. 2011): ``n_iter`` passes of
+    ``n_i <- normalize(sum_j A_j W_s(||c_i - c_j||) W_r(||n_i - n_j||) n_j)`` over the faces sharing a
+    vertex (or an edge, ``shared``), then ``vertex_iter`` vertex updates (Eqs. 4.28-4.29). ``sigma_s``
+    defaults to the mean adjacent-centroid distance."""
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     check_choice(shared, "shared", ("vertex", "edge"))

@@ -1,45 +1,35 @@
-"""Denoising of mesh animations (dynamic 3D meshes with fixed connectivity), Section 5.1.2.
-
-Two methods work on the whole animation at once and exploit its temporal coherence:
-
-``"gft-rpca"`` -- :func:`gft_rpca`, Algorithm 3 ("Spectral denoising of dynamic 3D meshes"):
-    the binary graph Laplacian of the shared connectivity is decomposed once (Eq. 4.3); every frame
-    is transformed by the GFT (Eq. 4.4); the number of high-frequency components ``n_h`` follows
-    from the energy rule of Eq. 5.25-5.27 (99.99 % of the energy is kept in the unchanged low
-    frequencies); the ``n_h`` high-frequency coefficients of all frames form one coherent matrix per
-    coordinate (Eq. 5.24), whose low-rank part is estimated by the bilateral-factorisation RPCA
-    (Eq. 5.29-5.35, :func:`spectrageo.linalg.rpca` with ``method="godec"``); the denoised spectra
-    (Eq. 5.36) are transformed back by the IGFT (Eq. 5.37).
-
-``"normals-rpca"`` -- :func:`normals_rpca`, the spatio-temporal RPCA on face normals mentioned with
-    Fig. 5.71: the face normals of all frames form one coherent matrix per coordinate; their low-rank
-    part gives the denoised normals, and the vertices of every frame are moved to agree with them
-    by the vertex update of Eq. 4.28-4.29.
-
-Any static method of :mod:`spectrageo.denoise` can also be run frame by frame
-(:func:`denoise_frames`); :func:`denoise_animation` dispatches between the two.
-
-Known limitation (Section 5.1.2, Fig. 5.29): noise that repeats identically in every frame (a
-*spatial mask*, :func:`spectrageo.noise.spatial_mask`) is itself temporally coherent, hence low rank,
-and is kept by the RPCA; ``"gft-rpca"`` removes little of it. Time-varying connectivity is not
-supported (one face array for all frames).
-"""
+"""Denoising of mesh animations with fixed connectivity (thesis Section 5.1.2): Algorithm 3
+(:func:`gft_rpca`, low-rank analysis of the high GFT frequencies of all frames), an RPCA of the
+face normals (:func:`normals_rpca`), or any static method frame by frame
+(:func:`denoise_frames`); :func:`denoise_animation` dispatches. Noise that repeats in every
+frame is itself low rank and is kept (Fig. 5.29)."""
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from .._errors import InvalidInputError
+from .._plugins import load_plugins
 from .._progress import progress
-from .._validation import as_faces, as_frames, as_rng, check_choice, check_positive
+from .._validation import (
+    as_faces,
+    as_frames,
+    as_rng,
+    check_choice,
+    check_positive,
+    options_with_legacy,
+)
 
 __all__ = [
     "DYNAMIC_METHODS",
     "GFTRPCABlock",
+    "GFTRPCAOptions",
     "GFTRPCAResult",
     "GFTRPCASetup",
     "NormalsRPCAResult",
@@ -50,6 +40,7 @@ __all__ = [
     "gft_rpca_block",
     "gft_rpca_setup",
     "normals_rpca",
+    "register_animation_method",
 ]
 
 #: Methods that treat the animation as one object (the others run frame by frame).
@@ -138,7 +129,7 @@ class _Stats:
 
 def _low_rank(M: np.ndarray, rank: int | None, lam, max_iter: int, tol: float, gen, stats):
     """Low-rank part of ``M`` by the bilateral-factorisation RPCA (Eq. 5.29-5.35)."""
-    from ..linalg import rpca
+    from ..linalg import RPCASolverOptions, rpca
 
     r = None if rank is None else min(rank, *M.shape)
     res = rpca(
@@ -148,8 +139,8 @@ def _low_rank(M: np.ndarray, rank: int | None, lam, max_iter: int, tol: float, g
         lam=lam,
         tol=tol,
         max_iter=max_iter,
-        backend="dense",
         on_nonconvergence="ignore",
+        options=RPCASolverOptions(backend="dense"),
         rng=gen,
     )
     stats.add(res)
@@ -159,44 +150,25 @@ def _low_rank(M: np.ndarray, rank: int | None, lam, max_iter: int, tol: float, g
 # --------------------------------------------------------------------------- Algorithm 3
 @dataclass(frozen=True, eq=False)
 class GFTRPCAResult:
-    """Result of :func:`gft_rpca`.
+    """Result of :func:`gft_rpca`."""
 
-    Attributes
-    ----------
-    frames : (T, n, 3) float64
-        Denoised animation (same frame count and vertex order as the input).
-    n_high : (n_parts, n_blocks) int64
-        ``n_h`` of Eq. 5.27 for every spectral part (the whole mesh, or each submesh) and frame block.
-    basis : str
-        ``"exact"`` or ``"partitioned"``.
-    n_submeshes : int
-        1 for the exact basis.
-    n_iter : int
-        Largest number of RPCA iterations over all coherent matrices.
-    converged : bool
-        Every RPCA met its tolerance.
-    residual : float
-        Largest final relative change of the RPCA iterations.
-    seconds : float
-        Wall time.
-    """
-
+    #: (T, n, 3) denoised animation
     frames: np.ndarray
+    #: (n_parts, n_blocks) ``n_h`` of Eq. (5.27) per spectral part and frame block
     n_high: np.ndarray
+    #: "exact" or "partitioned"
     basis: str
     n_submeshes: int
+    #: RPCA statistics: largest iteration count, all converged, largest final change
     n_iter: int
     converged: bool
     residual: float
+    #: wall time
     seconds: float
 
 
 def _n_high(H: np.ndarray, energy: float) -> np.ndarray:
-    """Per-frame ``n_hi`` of Eq. 5.25-5.26 for spectra ``H`` (T, k, 3) in ascending frequency.
-
-    ``n_hi`` is the largest number of highest-frequency components whose cumulative energy does
-    not exceed ``(1 - energy) E_s`` (``E_s`` the total energy of the frame's GFT, Eq. 5.25).
-    """
+    """Per-frame ``n_hi`` of Eqs. (5.25)-(5.26) for spectra ``H`` (T, k, 3), ascending frequency."""
     e = np.einsum("tkc,tkc->tk", H, H)
     total = e.sum(axis=1, keepdims=True)
     cum = np.cumsum(e[:, ::-1], axis=1)
@@ -259,17 +231,43 @@ def _derived_rng(entropy: tuple[int, ...], *key: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=key))
 
 
-def _check_options(energy, rank, lam, basis, submesh_size, overlap, submesh_solver, max_iter, tol):
-    energy = _check_energy(energy)
-    rank = _check_rank(rank)
-    if lam is not None:
-        check_positive(lam, "lam")
-    check_choice(basis, "basis", ("auto", "exact", "partitioned"))
-    check_choice(submesh_solver, "submesh_solver", ("exact", "oi"))
-    check_positive(submesh_size, "submesh_size", integer=True)
-    check_positive(max_iter, "max_iter", integer=True)
-    check_positive(tol, "tol")
-    return energy, rank
+@dataclass(frozen=True)
+class GFTRPCAOptions:
+    """Options of :func:`gft_rpca` and :func:`gft_rpca_setup`, validated on construction."""
+
+    #: GFT energy kept unchanged in the low frequencies (Eq. 5.26), in (0, 1]; 1: no change
+    energy: float = 0.9999
+    #: rank of the bilateral factorisation (Eq. 5.30); None: Gavish-Donoho estimate per matrix
+    rank: int | None = None
+    #: soft threshold of Eq. (5.32); None: a robust three-sigma level
+    lam: float | None = None
+    #: "exact" (whole mesh, at most ``EXACT_LIMIT`` vertices), "partitioned" (overlapped
+    #: submeshes, Section 5.2.1, weights of Algorithm 8) or "auto" ("partitioned")
+    basis: str = "auto"
+    submesh_size: int = 700
+    overlap: float = 0.15
+    #: "exact" (dense) or "oi" (orthogonal iterations, Eq. 4.7) per submesh
+    submesh_solver: str = "exact"
+    #: RPCA iteration limit and tolerance
+    max_iter: int = 100
+    tol: float = 1e-5
+    #: one BLAS thread for the many small products
+    single_thread: bool = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "energy", _check_energy(self.energy))
+        object.__setattr__(self, "rank", _check_rank(self.rank))
+        if self.lam is not None:
+            check_positive(self.lam, "lam")
+        check_choice(self.basis, "basis", ("auto", "exact", "partitioned"))
+        check_choice(self.submesh_solver, "submesh_solver", ("exact", "oi"))
+        check_positive(self.submesh_size, "submesh_size", integer=True)
+        check_positive(self.max_iter, "max_iter", integer=True)
+        check_positive(self.tol, "tol")
+
+    @property
+    def _rpca(self) -> tuple:
+        return (self.energy, self.rank, self.lam, int(self.max_iter), float(self.tol))
 
 
 def _resolve_basis(basis: str, n: int) -> str:
@@ -320,14 +318,9 @@ def _part_items(C, subs, submesh_solver, gen, progress_desc=None):
 
 
 def _denoise_parts(items, A, starts, bs, b0, n_parts, rpca_opts, entropy):
-    """Algorithm 3 on the frame blocks ``A[s : s + bs]`` (global indices ``b0, b0 + 1, ...``) for
-    every spectral part of ``items`` (``(i, part, w, U)``; ``part`` None: the whole mesh on the
-    exact basis), the overlapping submesh results averaged with the weights of Algorithm 8.
-
-    The RPCA of part ``i`` and block ``b`` draws from its own generator (:func:`_derived_rng`), and
-    every output value is the same sum in the same submesh order whether the blocks are processed
-    together or one by one: a block's result depends only on ``entropy``, its frames and ``b``.
-    """
+    """Algorithm 3 on the frame blocks of ``A`` for every spectral part, the overlapping submesh
+    results averaged with the weights of Algorithm 8; a block depends only on ``entropy``, its
+    frames and its index."""
     energy, rank, lam, max_iter, tol = rpca_opts
     stats = _Stats()
     n_high = np.zeros((n_parts, len(starts)), dtype=np.int64)
@@ -362,44 +355,29 @@ def _denoise_parts(items, A, starts, bs, b0, n_parts, rpca_opts, entropy):
 
 @dataclass(frozen=True, eq=False)
 class GFTRPCASetup:
-    """The spatial part of Algorithm 3, shared by all frame blocks (from :func:`gft_rpca_setup`).
-
-    Attributes
-    ----------
-    basis : str
-        ``"exact"`` or ``"partitioned"``.
-    n_vertices : int
-    parts : tuple of (n_i,) int64 arrays
-        Sorted vertex indices of every submesh (``(None,)`` for the exact basis: the whole mesh).
-    weights : tuple of (n_i,) float64 arrays
-        Degree weights of Algorithm 8 (``(None,)`` for the exact basis).
-    bases : tuple of (n_i, n_i) float64 arrays
-        Full eigenbasis of every part's binary Laplacian, eigenvalues ascending.
-    options : tuple
-        ``(energy, rank, lam, max_iter, tol)`` of the RPCA, validated.
-    single_thread : bool
-    entropy : tuple of int
-        Entropy of the :class:`numpy.random.SeedSequence` from which the generator of every
-        (submesh, frame block) is derived.
-    """
+    """The spatial part of Algorithm 3 shared by all frame blocks (:func:`gft_rpca_setup`)."""
 
     basis: str
     n_vertices: int
+    #: sorted vertex indices of every submesh (``(None,)`` for the exact basis)
     parts: tuple
+    #: degree weights of Algorithm 8 (``(None,)`` for the exact basis)
     weights: tuple
+    #: full eigenbasis of every part's binary Laplacian, eigenvalues ascending
     bases: tuple
+    #: ``(energy, rank, lam, max_iter, tol)`` of the RPCA
     options: tuple
     single_thread: bool
+    #: entropy of the SeedSequence of the per-block generators
     entropy: tuple
 
     @property
     def n_parts(self) -> int:
-        """Number of spectral parts (1 for the exact basis)."""
         return len(self.bases)
 
     @property
     def nbytes(self) -> int:
-        """Bytes of the index, weight and basis arrays (what is sent once to every worker)."""
+        """Bytes of the index, weight and basis arrays."""
         arrays = [*self.parts, *self.weights, *self.bases]
         return int(sum(a.nbytes for a in arrays if a is not None))
 
@@ -409,20 +387,11 @@ class GFTRPCASetup:
 
 @dataclass(frozen=True, eq=False)
 class GFTRPCABlock:
-    """Result of :func:`gft_rpca_block` on one block of ``T_b`` frames.
+    """Result of :func:`gft_rpca_block` on one block of frames."""
 
-    Attributes
-    ----------
-    frames : (T_b, n, 3) float64
-        The block's denoised frames.
-    n_high : (n_parts,) int64
-        ``n_h`` of Eq. 5.27 of every spectral part for this block (a column of
-        :attr:`GFTRPCAResult.n_high`).
-    n_iter, converged, residual :
-        RPCA statistics over this block (maximum / all / maximum).
-    """
-
+    #: (T_b, n, 3) denoised frames of the block
     frames: np.ndarray
+    #: (n_parts,) ``n_h`` of every spectral part
     n_high: np.ndarray
     n_iter: int
     converged: bool
@@ -430,86 +399,35 @@ class GFTRPCABlock:
 
 
 def gft_rpca_setup(
-    F,
-    n_vertices: int,
-    *,
-    energy: float = 0.9999,
-    rank: int | None = None,
-    lam: float | None = None,
-    basis: str = "auto",
-    submesh_size: int = 700,
-    overlap: float = 0.15,
-    submesh_solver: str = "exact",
-    max_iter: int = 100,
-    tol: float = 1e-5,
-    single_thread: bool = True,
-    rng=None,
+    F, n_vertices: int, *, options: GFTRPCAOptions | None = None, rng=None, **legacy
 ) -> GFTRPCASetup:
-    """Compute once what every frame block of :func:`gft_rpca` shares (Algorithm 3, line 1).
-
-    The submeshes (METIS + ring growth) and the full eigenbasis of every submesh's binary Laplacian
-    ``L = D - C``, or the exact eigenbasis of the whole mesh's, exactly as :func:`gft_rpca` computes
-    them, plus the validated RPCA options and the seed entropy of the per-block generators. Unlike
-    :func:`gft_rpca`, which holds one submesh basis at a time, all bases are kept:
-    ``sum_i n_i^2`` doubles (about ``8 n (1 + overlap) submesh_size`` bytes; see
-    :attr:`GFTRPCASetup.nbytes`). :func:`gft_rpca_block` then denoises any frame block with it, in
-    any order or process, with the same result as the block's slice of ``gft_rpca(...,
-    block_size=...)`` with the same ``rng``.
-
-    Parameters
-    ----------
-    F : (m, 3) int
-        Faces shared by all frames.
-    n_vertices : int
-        Vertices per frame.
-    energy, rank, lam, basis, submesh_size, overlap, submesh_solver, max_iter, tol, single_thread, rng :
-        As in :func:`gft_rpca`.
-
-    Returns
-    -------
-    GFTRPCASetup
-    """
+    """What every frame block of :func:`gft_rpca` shares (Algorithm 3, line 1), all submesh bases
+    kept (:attr:`GFTRPCASetup.nbytes`); options and ``rng`` as in :func:`gft_rpca`."""
+    o = options_with_legacy(options, legacy, GFTRPCAOptions, "gft_rpca_setup")
     if isinstance(n_vertices, bool) or not isinstance(n_vertices, (int, np.integer)):
         raise InvalidInputError(f"`n_vertices` must be a positive integer; got {n_vertices!r}.")
     check_positive(n_vertices, "n_vertices", integer=True)
     n = int(n_vertices)
     F = as_faces(F, n, "F")
-    energy, rank = _check_options(
-        energy, rank, lam, basis, submesh_size, overlap, submesh_solver, max_iter, tol
-    )
     entropy = _seed_entropy(rng)
-    basis = _resolve_basis(basis, n)
+    basis = _resolve_basis(o.basis, n)
     C = _binary_adjacency(F, n)
-    opts = (energy, rank, lam, int(max_iter), float(tol))
+    opts = o._rpca
+    single = bool(o.single_thread)
     if basis == "exact":
         U = _exact_basis(C)
-        return GFTRPCASetup("exact", n, (None,), (None,), (U,), opts, bool(single_thread), entropy)
+        return GFTRPCASetup("exact", n, (None,), (None,), (U,), opts, single, entropy)
     gen = _derived_rng(entropy, _KEY_SPATIAL)
-    subs = _partition(C, submesh_size, overlap, gen)
-    with _blas_threads(1 if single_thread else None):
-        items = list(_part_items(C, subs, submesh_solver, gen))
+    subs = _partition(C, o.submesh_size, o.overlap, gen)
+    with _blas_threads(1 if single else None):
+        items = list(_part_items(C, subs, o.submesh_solver, gen))
     parts, weights, bases = (tuple(x[k] for x in items) for k in (1, 2, 3))
-    return GFTRPCASetup("partitioned", n, parts, weights, bases, opts, bool(single_thread), entropy)
+    return GFTRPCASetup("partitioned", n, parts, weights, bases, opts, single, entropy)
 
 
 def gft_rpca_block(setup: GFTRPCASetup, frames, block_index: int = 0) -> GFTRPCABlock:
-    """Denoise one block of frames with a precomputed :class:`GFTRPCASetup` (Algorithm 3, lines 2-17).
-
-    Parameters
-    ----------
-    setup : GFTRPCASetup
-        From :func:`gft_rpca_setup`.
-    frames : (T_b, n, 3) array_like
-        The block's frames (consecutive frames of the animation).
-    block_index : int
-        Position of the block in the animation (0, 1, ...): it selects the block's random
-        generators, so that the result equals the block's slice of :func:`gft_rpca` run with
-        ``block_size=T_b`` (the last block may be shorter) and the same ``rng``.
-
-    Returns
-    -------
-    GFTRPCABlock
-    """
+    """Denoise frame block number ``block_index`` with a :class:`GFTRPCASetup` (Algorithm 3, lines
+    2-17): the block's slice of ``gft_rpca(..., block_size=T_b)`` with the same ``rng``."""
     if not isinstance(setup, GFTRPCASetup):
         raise InvalidInputError(f"`setup` must be a GFTRPCASetup; got {type(setup).__name__}.")
     X = as_frames(frames)
@@ -535,122 +453,46 @@ def gft_rpca(
     frames,
     F=None,
     *,
-    energy: float = 0.9999,
-    rank: int | None = None,
-    lam: float | None = None,
-    basis: str = "auto",
-    submesh_size: int = 700,
-    overlap: float = 0.15,
-    submesh_solver: str = "exact",
+    options: GFTRPCAOptions | None = None,
     block_size: int | None = None,
-    max_iter: int = 100,
-    tol: float = 1e-5,
-    single_thread: bool = True,
     rng=None,
+    **legacy,
 ) -> GFTRPCAResult:
     """Spectral denoising of a mesh animation by low-rank analysis of its GFT (Algorithm 3).
 
-    The binary Laplacian ``L = D - C`` (positive semi-definite, Eq. 4.1 with unit weights) of the
-    shared connectivity is decomposed once; for each block of frames the GFT of every frame is
-    computed (Eq. 4.4), the per-frame number of high-frequency components ``n_hi`` is the largest
-    number of highest-frequency components holding at most ``1 - energy`` of the frame's GFT energy
-    (Eq. 5.25-5.26, energy summed over all ``n`` components of the uncentred coordinates, as
-    written), ``n_h = max_i n_hi`` (Eq. 5.27), and for each coordinate the ``T x n_h`` coherent
-    matrix of Eq. 5.24 is split by the bilateral-factorisation RPCA (Eq. 5.29-5.35, GoDec with
-    soft thresholding) into a low-rank ``E`` and a sparse ``S``. Frame ``i`` gets its ``n_hi``
-    highest components from ``E`` and keeps the rest (Eq. 5.36); the IGFT gives the vertices
-    (Eq. 5.37).
-
-    Bases
-    -----
-    ``basis="exact"``: the full eigendecomposition of the whole Laplacian (dense, O(n^3) time and
-    O(n^2) memory; refused above ``EXACT_LIMIT`` = 6000 vertices).
-    ``basis="partitioned"``: the mesh is split into overlapped submeshes of ``submesh_size``
-    vertices (:func:`spectrageo.spectral.overlapped_submeshes`, METIS + ring growth, ``overlap``
-    15 % as in Section 5.2.1); Algorithm 3 runs on every submesh with the full eigenbasis of its
-    binary Laplacian (:func:`spectrageo.spectral.submesh_eigenbases`: ``submesh_solver="exact"`` is
-    a dense LAPACK decomposition, ``"oi"`` the orthogonal iterations of Eq. 4.7 started from the
-    previous submesh's basis), and the overlapping results are averaged with the degree weights of
-    Algorithm 8. Memory is O(T n) for the animation plus O(submesh_size^2 + T submesh_size) per
-    submesh (one accumulator of the animation's size; the crane animation, 10k vertices, played to
-    400 frames: about 1.5x the animation's 92 MB above the input, under a minute on two cores), so
-    10k-50k-vertex animations run in seconds to minutes. On the shared animations it is
-    as good as the exact basis or better (the RPCA is then local: a low rank suffices for the
-    nearly rigid motion of a small patch). ``basis="auto"`` is ``"partitioned"`` (which is exact for
-    meshes with at most ``submesh_size`` vertices: a single submesh holds the whole mesh).
-
-    Online mode
-    -----------
-    ``block_size``: frames are processed in consecutive blocks of that many frames, each with its
-    own ``n_h`` and RPCA (the "online / groups of frames" mode of Section 5.1.2); the basis is
-    computed once. A block's result depends only on the seed, its own frames and its position, so
-    blocks can be denoised as they arrive, in any order or in parallel:
-    :func:`gft_rpca_setup` computes the basis once and :func:`gft_rpca_block` denoises one block
-    with it (:func:`spectrageo.distributed.gft_rpca_blocks` runs the blocks as Dask tasks, with
-    the same result). Blocks should hold at least ~10 frames for the low-rank model to have
-    something to work with.
+    The binary Laplacian ``L = D - C`` is decomposed once (Eq. 4.3; per overlapped submesh by
+    default). Per block of frames: GFT of every frame (Eq. 4.4); ``n_hi``, the most
+    highest-frequency components holding at most ``1 - energy`` of the energy (Eqs. 5.25-5.26),
+    ``n_h = max_i n_hi`` (Eq. 5.27); per coordinate the ``T x n_h`` coherent matrix (Eq. 5.24) is
+    split by the bilateral-factorisation RPCA (Eqs. 5.29-5.35), frame ``i`` takes its ``n_hi``
+    highest components from the low-rank part (Eq. 5.36), and the IGFT gives the vertices
+    (Eq. 5.37). A block depends only on the seed, its frames and its index (:func:`gft_rpca_block`).
 
     Parameters
     ----------
     frames : (T, n, 3) array_like or MeshAnimation
-        Noisy animation with shared connectivity.
     F : (m, 3) int, optional
-        Shared faces (taken from ``frames.faces`` for a MeshAnimation).
-    energy : float in (0, 1]
-        Fraction of the GFT energy kept unchanged in the low frequencies (Eq. 5.26: 0.9999).
-        ``1.0`` leaves the animation unchanged.
-    rank : int or None
-        Rank ``r`` of the bilateral factorisation (Eq. 5.30). ``None`` (default): the Gavish-Donoho
-        estimate of :func:`~spectrageo.linalg.rpca` from the singular values of every coherent
-        matrix. A fixed small rank (3) is slightly better on short clips (40-50 frames) but fails on
-        long ones (chickenCrossing, 400 frames: KG 7 % against 0.5 % with the estimate), so the
-        estimate is the default.
-    lam : float or None
-        Soft threshold of Eq. 5.32 (``None``: a robust three-sigma level of the rank-``r`` residual,
-        the default of :func:`~spectrageo.linalg.rpca`).
-    basis : {"auto", "exact", "partitioned"}
-    submesh_size : int
-        Vertices per submesh for the partitioned basis (500-800 recommended, Section 5.2.1).
-    overlap : float in [0, 1)
-        Overlap of the submeshes.
-    submesh_solver : {"exact", "oi"}
-        Eigensolver of the submesh Laplacians (partitioned basis only).
-    block_size : int or None
-        Frames per block (online mode); ``None``: all frames at once.
-    max_iter, tol :
-        RPCA iteration limit and tolerance (relative change of ``(E, S)``).
-    single_thread : bool
-        Run the many small matrix products with one BLAS thread (faster on shared machines).
+        Shared faces (default ``frames.faces``).
+    options : GFTRPCAOptions, optional
+    block_size : int, optional
+        Frames per block (online mode); None: all at once.
     rng : int, Generator or None
-        Seed (``None``: 0). 128 bits of entropy are drawn from it once; a
-        :class:`numpy.random.SeedSequence` of that entropy gives one generator to METIS and the
-        submesh eigensolver and an independent one to the RPCA random starts of every (submesh,
-        frame block) pair (child keys ``(0,)`` and ``(1, i, b)``). A block's result therefore does
-        not depend on which other blocks are processed, nor in which order.
-
-    Returns
-    -------
-    GFTRPCAResult
-
-    Raises
-    ------
-    InvalidInputError
-        Bad shapes, NaN, unknown option, ``basis="exact"`` on more than ``EXACT_LIMIT`` vertices.
+        Seed (None: 0) of the SeedSequence whose children seed METIS and each block's RPCA.
+    **legacy
+        The fields of :class:`GFTRPCAOptions` as keywords: deprecated.
     """
+    o = options_with_legacy(options, legacy, GFTRPCAOptions, "gft_rpca")
     t_start = time.perf_counter()
     F = _faces_of(frames, F)
     A = as_frames(frames)
     T, n, _ = A.shape
     F = as_faces(F, n, "F")
-    energy, rank = _check_options(
-        energy, rank, lam, basis, submesh_size, overlap, submesh_solver, max_iter, tol
-    )
     bs = _check_block_size(block_size, T)
     entropy = _seed_entropy(rng)
-    basis = _resolve_basis(basis, n)
+    basis = _resolve_basis(o.basis, n)
     C = _binary_adjacency(F, n)
     starts = list(range(0, T, bs))
-    opts = (energy, rank, lam, int(max_iter), float(tol))
+    opts = o._rpca
     # the same spatial setup and per-block code as gft_rpca_setup / gft_rpca_block, but the
     # submesh bases are computed and dropped one at a time (submesh outer loop, blocks inner)
     if basis == "exact":
@@ -658,9 +500,9 @@ def gft_rpca(
         n_parts, threads = 1, None
     else:
         gen = _derived_rng(entropy, _KEY_SPATIAL)
-        subs = _partition(C, submesh_size, overlap, gen)
-        n_parts, threads = len(subs.parts), (1 if single_thread else None)
-        items = _part_items(C, subs, submesh_solver, gen, progress_desc="gft-rpca submeshes")
+        subs = _partition(C, o.submesh_size, o.overlap, gen)
+        n_parts, threads = len(subs.parts), (1 if o.single_thread else None)
+        items = _part_items(C, subs, o.submesh_solver, gen, progress_desc="gft-rpca submeshes")
     with _blas_threads(threads):
         out, n_high, stats = _denoise_parts(items, A, starts, bs, 0, n_parts, opts, entropy)
     return GFTRPCAResult(
@@ -672,20 +514,10 @@ def gft_rpca(
 # --------------------------------------------------------------------------- normals variant
 @dataclass(frozen=True, eq=False)
 class NormalsRPCAResult:
-    """Result of :func:`normals_rpca`.
-
-    Attributes
-    ----------
-    frames : (T, n, 3) float64
-        Denoised animation.
-    normals : (T, m, 3) float64
-        Denoised unit face normals (the low-rank part, re-normalised).
-    n_iter, converged, residual :
-        RPCA statistics (maximum / all / maximum over the three coordinates).
-    seconds : float
-    """
+    """Result of :func:`normals_rpca`."""
 
     frames: np.ndarray
+    #: (T, m, 3) denoised unit face normals
     normals: np.ndarray
     n_iter: int
     converged: bool
@@ -705,33 +537,12 @@ def normals_rpca(
     single_thread: bool = True,
     rng=None,
 ) -> NormalsRPCAResult:
-    """Spatio-temporal RPCA on face normals, then the vertex update (Fig. 5.71 context, Section 5.2.3).
+    """Spatio-temporal RPCA on face normals, then the vertex update (Section 5.2.3, Fig. 5.71).
 
-    The unit face normals of all frames form, per coordinate, a ``T x m`` coherent matrix (frames
-    as rows, as in Eq. 5.24); its low-rank part (bilateral-factorisation RPCA, Eq. 5.29-5.35) is the
-    denoised normal field of every frame, the sparse part holds the noise spikes. The rows are
-    re-normalised and every frame's vertices are moved to agree with them by ``n_update``
-    iterations of the vertex update of Eq. 4.28-4.29 (:func:`spectrageo.geometry.update_vertices`)
-    starting from the noisy positions. The individual normals are used rather than guided normals,
-    which the thesis reports to smooth sharp features less.
-
-    Parameters
-    ----------
-    frames : (T, n, 3) array_like or MeshAnimation
-    F : (m, 3) int, optional
-    rank : int or None
-        Rank of the factorisation; ``None``: Gavish-Donoho estimate from the singular values.
-    lam : float or None
-        Soft threshold of Eq. 5.32 (``None``: robust three-sigma level).
-    n_update : int
-        Iterations of the vertex update.
-    max_iter, tol, single_thread, rng :
-        As in :func:`gft_rpca`.
-
-    Returns
-    -------
-    NormalsRPCAResult
-    """
+    Per coordinate, the ``T x m`` matrix of unit face normals is split by the bilateral-factorisation
+    RPCA (Eqs. 5.29-5.35) and every frame is fitted to its re-normalised low-rank part by
+    ``n_update`` vertex updates (Eqs. 4.28-4.29). ``rank``, ``lam``, ``max_iter``, ``tol``,
+    ``single_thread`` and ``rng`` as in :func:`gft_rpca`; returns a :class:`NormalsRPCAResult`."""
     from ..geometry import face_normals, update_vertices
 
     t_start = time.perf_counter()
@@ -762,16 +573,35 @@ def normals_rpca(
 
 
 # --------------------------------------------------------------------------- dispatch
+#: animation methods registered by other packages (``dae`` by :mod:`spectrageo.learn`)
+_ANIMATION_METHODS: dict[str, Callable[..., np.ndarray]] = {}
+
+
+def register_animation_method(name: str, func: Callable[..., np.ndarray]) -> None:
+    """Register ``func(frames, F, **options) -> (T, n, 3)`` as the animation method ``name``
+    (plugins of the ``spectrageo.denoisers`` entry points; ``dae`` comes from :mod:`spectrageo.learn`)."""
+    if not isinstance(name, str) or not name:
+        raise InvalidInputError(f"`name` must be a non-empty string; got {name!r}.")
+    if not callable(func):
+        raise InvalidInputError(f"`func` must be callable; got {type(func).__name__}.")
+    _ANIMATION_METHODS[name] = func
+
+
+def _animation_method(name: str):
+    """The registered animation method ``name`` (plugins loaded on a miss), or None."""
+    if name not in _ANIMATION_METHODS:
+        load_plugins("spectrageo.denoisers")
+    return _ANIMATION_METHODS.get(name)
+
+
 def dynamic_methods() -> list[str]:
     """Names of the methods that denoise an animation as a whole (``"gft-rpca"``, ``"normals-rpca"``)."""
     return list(DYNAMIC_METHODS)
 
 
 def denoise_frames(frames, F=None, *, method: str = "bnf", **options) -> np.ndarray:
-    """Run the static denoiser ``method`` (see :func:`spectrageo.denoise.available`) on every frame.
-
-    Returns the denoised frames (T, n, 3); the per-frame baseline of Section 5.1.2.
-    """
+    """Run the static denoiser ``method`` (:func:`spectrageo.denoise.available`) on every frame,
+    the per-frame baseline of Section 5.1.2; returns the (T, n, 3) denoised frames."""
     from ._registry import denoise, get
 
     F = _faces_of(frames, F)
@@ -786,35 +616,40 @@ def denoise_frames(frames, F=None, *, method: str = "bnf", **options) -> np.ndar
     )
 
 
-def denoise_animation(frames, F=None, *, method: str = "gft-rpca", **options) -> np.ndarray:
-    """Denoise a mesh animation; returns the denoised frames (T, n, 3) in the input vertex order.
+def _keyword_options(func, method: str, options: dict) -> dict:
+    """``options`` checked against ``func``'s keywords (for :func:`gft_rpca` its option fields)."""
+    import inspect
 
-    ``method``: ``"gft-rpca"`` (:func:`gft_rpca`, Algorithm 3), ``"normals-rpca"``
-    (:func:`normals_rpca`), ``"dae"`` (:func:`spectrageo.learn.dae_animation`, Section 5.1.3,
-    option ``train_frames``), or any static method of :func:`spectrageo.denoise.available`, which is
-    then run frame by frame (:func:`denoise_frames`). ``options`` go to that function.
-    """
+    allowed = {
+        p.name
+        for p in inspect.signature(func).parameters.values()
+        if p.kind is inspect.Parameter.KEYWORD_ONLY
+    }
+    fields = {f.name for f in dataclasses.fields(GFTRPCAOptions)} if func is gft_rpca else set()
+    unknown = sorted(set(options) - allowed - fields)
+    if unknown:
+        raise InvalidInputError(
+            f"unknown option(s) for method {method!r}: {', '.join(unknown)}; "
+            f"accepted: {', '.join(sorted((allowed | fields) - {'options'}))}."
+        )
+    given = {k: options.pop(k) for k in list(options) if k in fields}
+    if given:
+        base = options.pop("options", None) or GFTRPCAOptions()
+        options["options"] = dataclasses.replace(base, **given)
+    return options
+
+
+def denoise_animation(frames, F=None, *, method: str = "gft-rpca", **options) -> np.ndarray:
+    """Denoise a mesh animation into (T, n, 3) frames: ``"gft-rpca"`` (:func:`gft_rpca`; the fields
+    of :class:`GFTRPCAOptions` may be keywords), ``"normals-rpca"``, a method of
+    :func:`register_animation_method` (``"dae"``, Section 5.1.3), or a static method frame by frame."""
     if not isinstance(method, str):
         raise InvalidInputError(f"`method` must be a string; got {type(method).__name__}.")
-    if method == "dae":  # content-wise DAEs, trained on the first frames (Section 5.1.3)
-        from ..learn.dae import dae_animation
-
-        return dae_animation(frames, F, **options)
     funcs = {"gft-rpca": gft_rpca, "normals-rpca": normals_rpca}
     if method in funcs:
         func = funcs[method]
-        import inspect
-
-        allowed = {
-            p.name
-            for p in inspect.signature(func).parameters.values()
-            if p.kind is inspect.Parameter.KEYWORD_ONLY
-        }
-        unknown = sorted(set(options) - allowed)
-        if unknown:
-            raise InvalidInputError(
-                f"unknown option(s) for method {method!r}: {', '.join(unknown)}; "
-                f"accepted: {', '.join(sorted(allowed))}."
-            )
-        return func(frames, F, **options).frames
+        return func(frames, F, **_keyword_options(func, method, dict(options))).frames
+    plugin = _animation_method(method)
+    if plugin is not None:
+        return plugin(frames, F, **options)
     return denoise_frames(frames, F, method=method, **options)

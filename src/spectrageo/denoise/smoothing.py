@@ -1,10 +1,6 @@
-"""Umbrella-operator smoothing: uniform Laplacian smoothing and Taubin's lambda|mu smoothing.
-
-Both use the uniform (umbrella) operator ``U(v_i) = (1 / |N_i|) sum_{j in N_i} v_j - v_i`` over the
-1-ring vertex neighbours ``N_i`` (Taubin 1995, Eq. 2 with weights ``w_ij = 1 / |N_i|``), i.e.
-``U = -D^-1 L`` for the binary Laplacian ``L = D - C`` of Eq. (4.1). Isolated vertices do not move,
-nor do connected components without an interior vertex (separate triangles of a soup).
-"""
+"""Umbrella-operator smoothing (Taubin 1995, Eq. 2 with uniform weights):
+``U(v_i) = mean_{N_i} v_j - v_i = -(D^-1 L v)_i`` for the binary Laplacian ``L = D - C``
+(Eq. 4.1). Isolated vertices and components without an interior vertex do not move."""
 
 from __future__ import annotations
 
@@ -15,15 +11,11 @@ from scipy.sparse.csgraph import connected_components
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
 from ..graph import adjacency_matrix
-from ._registry import register
+from ._table import register
 
 
 def _umbrella(V: np.ndarray, F: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
-    """Row-stochastic (n, n) matrix ``D^-1 C`` of the uniform 1-ring average, and the (n,) mask of
-    the vertices that move: those with neighbours in a connected component that has at least one
-    interior vertex (a vertex on no boundary edge). A component made only of boundary vertices (a
-    separate triangle, a strip one triangle wide) would shrink towards its centroid at every
-    step, so it is left as it is."""
+    """``D^-1 C`` and the mask of the vertices that move."""
     n = V.shape[0]
     C = adjacency_matrix(F, n)
     d = np.asarray(C.sum(axis=1)).ravel()
@@ -57,25 +49,8 @@ def _check_finite_number(value, name: str) -> float:
     reference="Taubin 1995, Eq. 2 with uniform weights (Vollmer et al. 1999 'umbrella')",
 )
 def laplacian(V, F, *, lam: float = 0.5, n_iter: int = 5) -> np.ndarray:
-    """Uniform Laplacian smoothing ``v_i <- v_i + lam U(v_i)``, ``n_iter`` times.
-
-    Parameters
-    ----------
-    V : (n, 3) float
-        Vertex positions (not modified).
-    F : (m, 3) int
-        Triangles.
-    lam : float, default 0.5
-        Step size in (0, 1] (0.5 is the lambda of Taubin 1995; 1 moves each vertex to the centroid of
-        its neighbours).
-    n_iter : int, default 5
-        Number of steps. Plain Laplacian smoothing shrinks the surface and rounds sharp features at
-        every step, so the default is small.
-
-    Returns
-    -------
-    (n, 3) float64 smoothed positions, same vertex order.
-    """
+    """Uniform Laplacian smoothing ``v_i <- v_i + lam U(v_i)``, ``n_iter`` times (``lam`` in
+    (0, 1]); returns the (n, 3) positions."""
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     lam = _check_finite_number(lam, "lam")
@@ -96,28 +71,8 @@ def laplacian(V, F, *, lam: float = 0.5, n_iter: int = 5) -> np.ndarray:
     reference="Taubin 1995, 'A signal processing approach to fair surface design', SIGGRAPH",
 )
 def taubin(V, F, *, lam: float = 0.5, mu: float = -0.53, n_iter: int = 10) -> np.ndarray:
-    """Taubin's lambda|mu smoothing: alternate ``v += lam U(v)`` and ``v += mu U(v)``.
-
-    The pair of steps is a low-pass filter with transfer function ``(1 - lam k)(1 - mu k)`` and
-    pass-band frequency ``k_PB = 1/lam + 1/mu`` (0.113 for the defaults), so low frequencies are kept
-    without the shrinkage of plain Laplacian smoothing.
-
-    Parameters
-    ----------
-    V : (n, 3) float
-    F : (m, 3) int
-    lam : float, default 0.5
-        Positive (shrinking) step, in (0, 1]. Default from Taubin (1995).
-    mu : float, default -0.53
-        Negative (inflating) step with ``mu < -lam`` (Taubin 1995: ``0 < lam < -mu``).
-    n_iter : int, default 10
-        Number of lambda|mu pairs (Taubin 1995 shows 10 to 200 pairs; 10 removes Gaussian noise of
-        a few tenths of the edge length without visible feature loss).
-
-    Returns
-    -------
-    (n, 3) float64 smoothed positions, same vertex order.
-    """
+    """Taubin's lambda|mu smoothing, ``n_iter`` pairs of ``v += lam U(v)`` (``lam`` in (0, 1]) and
+    ``v += mu U(v)`` (``mu < -lam``): a low-pass with pass band ``1/lam + 1/mu``."""
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     lam = _check_finite_number(lam, "lam")

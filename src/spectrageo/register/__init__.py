@@ -1,7 +1,6 @@
-"""Registration and identification of partially observed objects in cluttered scans (thesis
-Section 6.2): broad phase, narrow phase, robustification, segmentation and identification.
+"""Registration and identification of partially observed objects in cluttered scans (Section 6.2).
 
-Public names are loaded on first use from the submodules that implement them.
+Public names are loaded on first use from their submodules.
 """
 
 from __future__ import annotations

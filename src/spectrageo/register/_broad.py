@@ -1,46 +1,10 @@
-r"""Broad-phase (global) registration, thesis Section 6.2.2 (Eq. 6.24-6.27).
+"""Broad-phase (global) registration, Section 6.2.2 (Eq. 6.24-6.27).
 
-Method
-------
-1. Both clouds are voxel down-sampled to a common voxel ``s`` (default: 1/45 of the larger
-   bounding-box diagonal) so that the local shape properties are measured at the same scale.
-2. *Local shape properties.* At every down-sampled point a quadric
-   ``z = a x^2 + b x y + c y^2 + d x + e y + f`` is fitted by least squares to its ``k`` nearest
-   neighbours in the local PCA frame; the principal curvatures ``k1 >= k2`` and the first principal
-   direction ``e1`` are the eigen-pairs of ``[[2a, b], [b, 2c]]``. The unoriented PCA normal is
-   made canonical by requiring a non-negative mean curvature, so no consistent orientation of the
-   input is needed. The descriptor is ``(k1 s, k2 s)`` at two neighbourhood sizes
-   (``k = 16, 40``; dimensionless because ``s`` is shared); the frame ``[e1, n x e1, n]`` is
-   taken at the larger one.
-3. *Candidate transforms.* ``n_samples`` (600) source points are drawn (``rng``) among the 60 % most
-   curved; each is matched to its ``n_matches`` (15) nearest target points in descriptor space, and each
-   match gives two candidates (``e1`` has no sign): ``R = F_t F_s^T``, ``t = p_t - R p_s``.
-4. *Density peak* (Eq. 6.24): ``rho(T_i) = sum_j exp(-(b d(T_i, T_j))^2)`` evaluated at the
-   candidates only, with ``b = sqrt(-ln phi) / r`` so that candidates beyond ``r``
-   (``kernel_radius``, default ``3 s``) contribute less than ``phi = 0.01``.
-5. *Metric* (Eq. 6.25-6.27): the effect of the two transforms on the source surface,
-   integrated over triangles formed by every down-sampled source point and its two nearest
-   neighbours. We integrate the *squared* displacement, ``d(T1, T2)^2 = (1/A) sum_t int_t
-   ||(R1 - R2) v + t1 - t2||^2 da`` (normalised by the total area ``A``, so ``d`` is an RMS
-   displacement in input units). This is the form that has the constant-time evaluation the thesis
-   mentions: with the area ``A``, centroid ``c`` and covariance ``C = L L^T`` of the triangles,
-   ``d(T1, T2) = || phi(T1) - phi(T2) ||`` with the 12-vector
-   ``phi(T) = [vec(R L), R c + t]``. The metric is therefore *Euclidean in this embedding*, so an
-   exact KD-tree (:class:`scipy.spatial.cKDTree`) replaces the thesis' vantage-point tree [373]
-   (which exists for metrics without such an embedding); each density is summed over at most the
-   64 nearest candidates within ``r`` (bounded memory).
-6. *Peak verification* (our addition; ``n_peaks=1`` gives the thesis' plain maximum): the
-   ``n_peaks`` highest density peaks that are at least ``r`` apart are each refined by 20
-   iterations of the narrow phase on the down-sampled clouds, and the one with the highest
-   fitness (fraction of source points within ``1.5 s`` of the target) is returned, refined.
-   On the 28 tuning pairs (:mod:`spectrageo.evaluate.register`) the broad phase alone is
-   within 5 degrees / 5 % of the diagonal on 19 with the plain maximum and on 26 with the
-   verified best of 15 peaks.
-
-Tried and not kept: leaving points on the rim of a partial scan out of the candidates (centroid
-of the 40 neighbours more than 0.4 mean distances away) raised the share of correct
-descriptor matches on the low-overlap bunny pairs slightly but lowered the tuning result from 27
-to 26 of 28 pairs.
+Both clouds are voxel down-sampled to a common voxel ``s``; ``n_samples`` of the most curved
+source points are matched to ``n_matches`` target points by curvature descriptors, each match
+giving candidate transforms; the density ``rho(T_i) = sum_j exp(-(b d(T_i, T_j))^2)`` (Eq. 6.24)
+under the surface metric (Eq. 6.25-6.27) picks peaks, verified by short narrow phases.
+Details: docs/decisions.md#register-broad-details.
 """
 
 from __future__ import annotations
@@ -62,9 +26,7 @@ SCALES = (16, 40)
 
 
 def shape_properties(P: np.ndarray, tree: cKDTree, ks=SCALES, chunk: int = 20000):
-    """Principal curvatures (n, 2 * len(ks)) and frames (n, 3, 3) (columns ``e1, e2, n`` at the
-    largest scale) of every point (see the module docstring, step 2); rows are processed in
-    chunks of ``chunk`` points (bounded memory)."""
+    """Principal curvatures (n, 2 len(ks)) and frames (n, 3, 3) of every point, by chunks."""
     n = P.shape[0]
     if n > chunk:
         parts = [shape_properties_rows(P, tree, ks, np.arange(i, min(i + chunk, n)))
@@ -114,8 +76,7 @@ def shape_properties_rows(P: np.ndarray, tree: cKDTree, ks, rows: np.ndarray):
 
 
 def triangle_embedding_basis(P: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndarray]:
-    """Centroid ``c`` (3,) and Cholesky factor ``L`` (3, 3) of the area-weighted second moments of
-    the kNN triangles of ``P`` (each point with its two nearest neighbours), Eq. 6.26-6.27."""
+    """Centroid ``c`` and Cholesky factor ``L`` of the source triangles' second moments."""
     n = P.shape[0]
     _, idx = tree.query(P, k=min(3, n), workers=WORKERS)
     idx = np.asarray(idx).reshape(n, -1)
@@ -140,16 +101,13 @@ def triangle_embedding_basis(P: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, 
 
 
 def embed(R: np.ndarray, t: np.ndarray, cen: np.ndarray, L: np.ndarray) -> np.ndarray:
-    """12-vectors ``[vec(R L), R c + t]`` of transforms ``R`` (m, 3, 3), ``t`` (m, 3): Euclidean
-    distances between them are the triangle-integrated RMS distances of Eq. 6.27."""
+    """12-vectors ``[vec(R L), R c + t]``: Euclidean for the metric of Eq. 6.25-6.27."""
     RL = (R @ L).reshape(R.shape[0], 9)
     return np.c_[RL, R @ cen + t]
 
 
 def density(Phi: np.ndarray, radius: float, max_neighbors: int = 64) -> np.ndarray:
-    """``rho`` of Eq. 6.24 at every candidate, Gaussian kernel ``exp(-(b d)^2)``,
-    ``b = sqrt(-ln PHI) / radius``, summed over the (at most ``max_neighbors``) candidates within
-    ``radius``."""
+    """``rho`` of Eq. 6.24 at every candidate over at most ``max_neighbors`` within ``radius``."""
     m = Phi.shape[0]
     b = np.sqrt(-np.log(PHI)) / radius
     d, _ = cKDTree(Phi).query(
@@ -173,7 +131,7 @@ def broad_phase_points(
     n_peaks: int = 15,
     verify_iter: int = 20,
 ) -> tuple[np.ndarray, dict[str, Any]]:
-    """Broad phase on validated point arrays; returns ``(T, info)`` (see the module docstring)."""
+    """Broad phase on validated point arrays; returns ``(T, info)``."""
     t0 = time.perf_counter()
     check_positive(n_samples, "n_samples", integer=True)
     check_positive(n_matches, "n_matches", integer=True)

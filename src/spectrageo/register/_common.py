@@ -1,9 +1,4 @@
-"""Shared helpers of the registration steps: input coercion, voxel down-sampling, kNN normals and
-rigid-transform algebra.
-
-Transforms are (4, 4) float64 matrices acting on column vectors, ``x_target = R x_source + t``;
-for row-vector point arrays this is ``P @ R.T + t`` (:func:`apply_transform`).
-"""
+"""Shared helpers of the registration steps: inputs, down-sampling, normals, rigid transforms."""
 
 from __future__ import annotations
 
@@ -22,8 +17,7 @@ WORKERS = -1
 
 
 def points_of(x: Any, name: str) -> np.ndarray:
-    """(n, 3) float64 points of an array, a :class:`~spectrageo.geometry.PointCloud` (``points``)
-    or a :class:`~spectrageo.geometry.Mesh` (``vertices``); validated (shape, finite, non-empty)."""
+    """(n, 3) float64 points of an array, a PointCloud or a Mesh, validated."""
     if x is None:
         raise InvalidInputError(
             f"`{name}` must be an (n, 3) array, a PointCloud or a Mesh; got None."
@@ -41,8 +35,7 @@ def points_of(x: Any, name: str) -> np.ndarray:
 
 
 def as_transform(T: Any, name: str) -> np.ndarray:
-    """Validate a rigid (4, 4) transform: finite, last row ``[0, 0, 0, 1]``, orthonormal rotation
-    with det +1 (tolerance 1e-4). Returned as a float64 copy with the rotation re-orthonormalised."""
+    """A validated rigid (4, 4) transform (tolerance 1e-4), rotation re-orthonormalised."""
     try:
         A = np.array(T, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -111,11 +104,7 @@ def bbox_diagonal(P: np.ndarray) -> float:
 
 
 def voxel_downsample(P: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
-    """Centroid of the points in every occupied cube of side ``voxel``.
-
-    Returns ``(Q, label)`` with ``Q`` (m, 3) ordered by voxel key (deterministic) and ``label``
-    (n,) the row of ``Q`` each input point went to.
-    """
+    """``(Q, label)``: centroids of the occupied voxels by key and each point's voxel row."""
     if voxel <= 0 or P.shape[0] == 0:
         return P.copy(), np.arange(P.shape[0])
     key = np.floor((P - P.min(axis=0)) / voxel).astype(np.int64)
@@ -136,8 +125,7 @@ def voxel_downsample(P: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarra
 
 
 def downsample_to(P: np.ndarray, max_points: int) -> np.ndarray:
-    """Voxel down-sampling with the voxel grown until at most ``max_points`` remain (the input
-    itself when it is already small enough)."""
+    """Voxel down-sampling grown until at most ``max_points`` remain."""
     if P.shape[0] <= max_points:
         return P
     diag = bbox_diagonal(P)
@@ -168,9 +156,7 @@ def spacing(P: np.ndarray, tree: cKDTree | None = None, *, n_sample: int = 2000)
 def knn_normals(
     P: np.ndarray, k: int = 10, tree: cKDTree | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Unoriented unit normals and neighbour indices from the covariance of each point's ``k``
-    nearest neighbours (self included; Eq. 6.31 with the patch mean as centre, which is the
-    least-squares plane). Returns ``(normals (n, 3), idx (n, k))``."""
+    """Unoriented normals (n, 3) and neighbour indices (n, k) from kNN covariances (Eq. 6.31)."""
     tree = tree if tree is not None else cKDTree(P)
     return knn_normals_at(P, P, k, tree)
 
@@ -178,8 +164,7 @@ def knn_normals(
 def knn_normals_at(
     P: np.ndarray, X: np.ndarray, k: int, tree: cKDTree
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`knn_normals` of the cloud ``P`` (``tree`` its KD-tree) evaluated at the points
-    ``X`` (rows of ``P``: each row's value does not depend on which other rows are asked)."""
+    """:func:`knn_normals` of the cloud ``P`` at its points ``X``."""
     n = X.shape[0]
     k = int(min(k, P.shape[0]))
     _, idx = tree.query(X, k=k, workers=WORKERS)
@@ -194,25 +179,19 @@ def knn_normals_at(
 
 @dataclass(frozen=True)
 class RegistrationResult:
-    """Result of :func:`~spectrageo.register.register` / :func:`~spectrageo.register.narrow_phase`.
+    """Result of :func:`register` and :func:`narrow_phase`.
 
     Attributes
     ----------
     transformation : (4, 4) float64
-        Rigid transform mapping the source into the target frame (``x_t = R x_s + t``; for row
-        arrays ``P @ R.T + t``).
-    fitness : float
-        Fraction of the (down-sampled) source points with a target point within ``inlier_distance``.
-    inlier_rmse : float
-        RMS distance of those inlier points to their nearest target point (``inf`` without inliers).
-    n_iter : int
-        Narrow-phase (ICP) iterations.
-    converged : bool
-        Whether the narrow phase met its tolerance before ``max_iter``.
+        Source-to-target transform.
+    fitness, inlier_rmse : float
+        Share of down-sampled source points within ``inlier_distance`` of the target; their RMS.
+    n_iter, converged : int, bool
+        Narrow-phase iterations and whether it met its tolerance.
     inlier_distance : float
-        Distance used for ``fitness`` and ``inlier_rmse`` (input units).
     info : dict
-        Diagnostics: ``gamma`` (final Tukey scale), ``time_s``, broad-phase ``n_candidates`` ...
+        Diagnostics (``gamma``, ``time_s``, ...).
     """
 
     transformation: np.ndarray = field(repr=False)

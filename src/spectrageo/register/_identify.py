@@ -1,70 +1,10 @@
-"""Identification of known models in a cluttered single-view scan (thesis Section 6.2.3-6.2.6).
+"""Identification of known models in a cluttered single-view scan (Section 6.2.3-6.2.6).
 
-:func:`identify` returns one :class:`Match` per model: whether the model is in the scene, its
-dissimilarity factor ``h`` (Eq. 6.38), the rigid transform that maps the model into the scene and
-the scene points of the segment it was matched to.
-
-Pipeline (defaults of Table 6.7 unless stated):
-
-1. **Resolution.** Scene and models are brought to one sampling step ``voxel`` (default: the
-   largest of the scene spacing and 1/40 of the median model bounding-box diagonal) by voxel
-   down-sampling; meshes are first sampled uniformly by area. Every later length is a multiple of
-   ``voxel``, so the method is invariant to the unit of the data (Section 6.2.6).
-2. **Segmentation** (Section 6.2.3): large planes (support table, walls) are removed by RANSAC
-   (not in the thesis; see :mod:`._segment`), then adaptive-epsilon DBSCAN (Eq. 6.28-6.29,
-   ``K_a = 5``) splits the rest into segments. Each segment is a candidate query object ``Q``.
-3. **Robustification** (Section 6.2.5): boundary points of each segment (mean distance to the
-   ``K_D = 10`` nearest neighbours at least twice the segment mean, Eq. 6.43-6.44) are left out of
-   the descriptors. The RPCA small-scale outlier step (Eq. 6.42) is not applied: the voxel
-   averaging of step 1 already removes the small-scale noise it targets.
-4. **Saliency and descriptors** (Eq. 6.30-6.36): spectral saliency of every point
-   (:func:`~spectrageo.saliency.pointcloud.pointcloud_saliency`, ``k = 20``), the joint
-   exponential normalisation of a model/segment pair (Eq. 6.34, ``K_s = 1000``) and the multi-scale
-   means ``a`` over ``5, 10, ..., 25`` neighbours (Eq. 6.35), ``f = [v / voxel, a]`` (Eq. 6.36).
-5. **Initial pose.** The thesis takes it from a separate global registration (Section 6.2.2).
-   Here it comes from the pose-free part of the descriptors: every point also gets the multi-scale
-   saliency ``a`` and a sign-invariant point-pair histogram (``|n_i . n_j|``, ``|n_i . d|``,
-   ``|n_j . d|`` over its ``desc_k = 48`` neighbours, averaged over the neighbourhood as in FPFH),
-   which do not depend on the pose; the 3 nearest model descriptors of every segment point give
-   putative correspondences (Eq. 6.37 without the coordinates). A vectorised RANSAC draws
-   ``n_hypotheses`` triples by guided sampling: the first correspondence among ``N_ANCHORS``
-   (500) random anchors, the second and third among the correspondences *compatible* with it
-   (their model and segment distances to it agree within 10 % + ``voxel``, the segment distance
-   lies between a minimum separation and 0.6 model diagonals -- a segment holding several
-   touching objects still yields triples on one of them -- and the unoriented angle between the
-   two normals agrees within ``PAIR_COS_TOL``), so that a triple needs only its first pick right
-   at the low inlier ratios of occluded objects (2-5 % of the correspondences). It keeps the
-   triples that preserve their pairwise distances, fits them all at once (batched Kabsch) and
-   scores them by the correspondences within ``2 voxel`` whose normals also agree within ~37
-   degrees (``INLIER_COS``; without the normal test, wrong poses collect more chance inliers
-   than the right one). More hypotheses do not help: with 1000 anchors and 40000 triples, 11
-   instead of 6 present models were missed on the development scenes (seeds 1-10), wrong poses
-   outscoring the right one more often. The best ``N_RERANK`` (64) are re-ranked
-   by the fraction of segment points that lie within ``1.5 voxel`` of the moved model with a
-   normal within ~37 degrees of the model's. The ``n_refine = 3`` best distinct poses are refined
-   by the Tukey-weighted ICP :func:`~spectrageo.register.narrow_phase` (Eq. 6.39-6.41),
-   registering the segment points within ``query_radius = 0.1`` model diagonals of the placed
-   model onto the model (each of them has a model counterpart, not the reverse; touching objects
-   are left out so they do not inflate the Tukey scale).
-6. **Correspondences and dissimilarity** (Eq. 6.37-6.38): with the model moved into the scene,
-   the salient points (normalised saliency above ``tau = 0.4``) of the model and of the segment
-   are paired by nearest augmented feature ``f`` (unique pairs, each model point used once),
-   and ``h`` is the mean feature distance of the ``K_p`` best pairs. Eq. 6.38 as printed averages
-   only the ``K_p = 200`` best pairs, which a wrong model can always produce somewhere after ICP;
-   here ``K_p`` is the larger of 200 and ``k_p_fraction`` (default 0.5) of the salient segment
-   points, so that ``h`` measures how well the model explains the segment as a whole. The
-   coordinates are in units of ``voxel`` (the thesis's UWA data are in millimetres at a ~1 mm
-   sampling, where the same holds).
-   Only the segment points within ``query_radius`` model diagonals of the moved model form the
-   query object (the thesis merges the clusters close to the registered model; here a cluster may
-   also hold touching objects, whose points are left out). Segments smaller than
-   ``min_fraction = 0.05`` of the model's points or 0.15 of its diagonal are not tried.
-7. **Decision**: for each model the segment with the smallest ``h`` is kept; ``found`` when
-   ``h < zeta = 0.4``. When two found models claim mostly the same scene points (more than half
-   of the smaller set), only the one with the smaller ``h`` stays found.
-
-The result is deterministic for a given ``rng``; memory is O(n) (k-d trees, RANSAC scored by a
-compiled kernel without an (hypotheses x correspondences) temporary).
+Scene and models share one sampling step; planes are removed and adaptive DBSCAN gives segments
+(Eq. 6.28-6.29); boundary points are left out (Eq. 6.43-6.44); point saliency and multi-scale
+features (Eq. 6.30-6.36) give correspondences, RANSAC and Tukey ICP a pose, and the dissimilarity
+``h`` of the salient pairs (Eq. 6.37-6.38) decides ``found`` (``h < zeta``). Departures from the
+thesis: docs/decisions.md#identify-pipeline.
 """
 
 from __future__ import annotations
@@ -115,17 +55,8 @@ DEFAULTS: dict[str, Any] = {
 
 @dataclass(frozen=True)
 class Match:
-    """Result of :func:`identify` for one model.
-
-    Attributes
-    ----------
-    model : the model's path or dict key as given (its list index for in-memory geometry).
-    found : bool; ``dissimilarity < zeta``.
-    dissimilarity : float; ``h`` of Eq. 6.38 for the best segment (``inf`` when no segment).
-    transformation : (4, 4) float64; maps the model into the scene frame.
-    n_points : int; number of scene points in ``segment``.
-    segment : (m,) int64; indices of the scene points of the best segment (also reported when the
-        model is not found: the segment that resembled it most).
+    """Result of :func:`identify` for one model: ``model`` key, ``found``, ``dissimilarity`` ``h``
+    (Eq. 6.38), model-to-scene ``transformation``, ``n_points`` and scene indices ``segment``.
     """
 
     model: Any
@@ -390,12 +321,7 @@ def _ransac_poses(
 
 
 def _refine(model: _Cloud, seg: _Cloud, T0: np.ndarray, o: dict) -> np.ndarray:
-    """Tukey ICP of the segment onto the model from ``inv(T0)``; returns model->scene.
-
-    Only the segment points within ``query_radius`` model diagonals of the initially placed
-    model take part: a segment that also holds touching objects would otherwise set the initial
-    Tukey scale from their (large) distances and drag the model off its object.
-    """
+    """Tukey ICP of the nearby segment points onto the model from ``inv(T0)``; model->scene."""
     import warnings
 
     from ._api import narrow_phase
@@ -463,22 +389,19 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
 
     Parameters
     ----------
-    scene : (n, 3) array, PointCloud, Mesh or path of a point-cloud/mesh file (a file's point
-        rows without coordinates, NaN, are left out; segment indices count the kept rows).
-    models : list of arrays/PointClouds/Meshes/paths, or a dict name -> geometry. Meshes are
-        sampled uniformly by area; point clouds are used as they are (a partial scan works).
-    rng : seed or numpy Generator (RANSAC hypotheses, mesh sampling).
-    **options : overrides of :data:`DEFAULTS`: ``zeta`` (decision threshold, 0.4), ``k_a``
-        (Eq. 6.29), ``k_d`` (Eq. 6.43), ``k_s`` (Eq. 6.34), ``k_p`` and ``k_p_fraction``
-        (Eq. 6.38), ``tau`` (salient points), ``saliency_k``, ``scale_k``, ``n_scales``
-        (Eq. 6.30, 6.35), ``voxel`` or ``voxel_fraction`` (sampling step), ``remove_planes``,
-        ``desc_k``, ``n_hypotheses``, ``n_refine`` (pose search), ``query_radius``,
-        ``min_fraction``, ``min_segment`` (segments considered). Unknown names raise
-        :class:`~spectrageo.InvalidInputError`.
+    scene : (n, 3) array, PointCloud, Mesh or file path
+        NaN rows of a file are left out; segment indices count the kept rows.
+    models : list or dict of arrays, PointClouds, Meshes or paths
+        Meshes are sampled uniformly by area.
+    rng : int or Generator
+    **options
+        Overrides of :data:`DEFAULTS` (``zeta``, ``k_a``, ``k_d``, ``k_s``, ``k_p``, ``tau``, ...);
+        unknown names raise InvalidInputError.
 
     Returns
     -------
-    list of :class:`Match`, one per model in the given order.
+    list of Match
+        One per model, in the given order.
     """
     o = _check_options(options)
     if isinstance(models, dict):

@@ -8,14 +8,7 @@ from numba import njit, prange
 
 @njit(cache=True, nogil=True, parallel=True)
 def count_inliers(R, t, A, B, thr2, NA, NB, cos_min):  # pragma: no cover - compiled
-    """Per hypothesis ``h``: how many correspondences ``(A[c], B[c])`` satisfy
-    ``||R[h] A[c] + t[h] - B[c]||^2 <= thr2`` and ``|(R[h] NA[c]) . NB[c]| >= cos_min``
-    (unoriented normals; ``cos_min <= 0`` disables the normal test). ``R`` (H, 3, 3), ``t``
-    (H, 3), ``A``/``B``/``NA``/``NB`` (C, 3).
-
-    The same sum of squares as ``((R A + t - B) ** 2).sum()`` over the three coordinates, without
-    the (H, C, 3) temporary; hypotheses run in parallel.
-    """
+    """Per hypothesis, correspondences within ``thr2`` (squared) whose unoriented normals agree."""
     H = R.shape[0]
     C = A.shape[0]
     out = np.zeros(H, dtype=np.int64)
@@ -59,10 +52,9 @@ def _compatible(A, B, NA, NB, a, c, voxel, max_d, sep, cos_tol):  # pragma: no c
 
 @njit(cache=True, nogil=True, parallel=True)
 def compatible_lists(A, B, NA, NB, anchors, voxel, max_d, sep, cos_tol):  # pragma: no cover
-    """For every anchor correspondence ``a``, the correspondences ``c`` (increasing index)
-    compatible with it: ``|d_A - d_B| <= 0.1 max(d_A, d_B) + voxel`` for the model and segment
-    distances of the pair, ``sep <= d_B <= max_d``, and ``| |NA_c . NA_a| - |NB_c . NB_a| | <=
-    cos_tol``. Returns ``(counts (n_anchors,), flat)``, the lists one after the other."""
+    """``(counts, flat)``: per anchor, the correspondences whose distances and normal angles
+    agree with it.
+    """
     n1 = anchors.shape[0]
     C = A.shape[0]
     counts = np.zeros(n1, dtype=np.int64)

@@ -1,5 +1,4 @@
-"""Narrow-phase registration: weighted ICP with Tukey's bi-weight (thesis Section 6.2.4,
-Eq. 6.39-6.41)."""
+"""Narrow-phase registration: Tukey-weighted ICP (Section 6.2.4, Eq. 6.39-6.41)."""
 
 from __future__ import annotations
 
@@ -40,12 +39,7 @@ COARSE_EPS = 1.0
 
 
 class TargetIndex:
-    """Reusable state of a target cloud: its KD-tree, point spacing and unoriented normals.
-
-    The normals (:func:`knn_normals` of the ``normal_k`` nearest neighbours) are computed on
-    first use and only for the target points that some source point is paired with
-    (:meth:`normals_at`): each is a function of its own neighbourhood in the whole target, so
-    the values equal a computation over every point."""
+    """KD-tree, spacing and lazily computed unoriented normals of a target cloud."""
 
     def __init__(self, T: np.ndarray, *, normal_k: int = 10, need_normals: bool = True):
         self.points = T
@@ -69,9 +63,7 @@ class TargetIndex:
 
 
 def tukey_weights(r: np.ndarray, gamma: float) -> np.ndarray:
-    """IRLS weights of Tukey's bi-weight: ``psi'(r) / r = (1 - r^2 / gamma^2)^2`` for
-    ``|r| <= gamma``, 0 beyond (Eq. 6.41 gives the influence ``psi'(r)``; dividing by ``r`` turns
-    it into the weight of a weighted least-squares step that minimises Eq. 6.39-6.40)."""
+    """IRLS weights ``psi'(r) / r = (1 - r^2 / gamma^2)^2`` for ``|r| <= gamma`` (Eq. 6.41)."""
     u = 1.0 - (r / gamma) ** 2
     return np.where(np.abs(r) <= gamma, u * u, 0.0)
 
@@ -90,9 +82,7 @@ def _kabsch(P: np.ndarray, Q: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def _plane_step(P: np.ndarray, Q: np.ndarray, N: np.ndarray, w: np.ndarray, scale: float):
-    """One linearised weighted point-to-plane step: minimise
-    ``sum w_i (n_i . (R p_i + t - q_i))^2`` for a small rotation; returns the increment or None
-    when the 6x6 system is singular (e.g. a single plane)."""
+    """Linearised weighted point-to-plane increment, or None when singular."""
     c = (w[:, None] * P).sum(0) / w.sum()
     Pc = (P - c) / scale
     J = np.c_[np.cross(Pc, N), N]
@@ -111,9 +101,7 @@ def _plane_step(P: np.ndarray, Q: np.ndarray, N: np.ndarray, w: np.ndarray, scal
 def _query(
     index: TargetIndex, P: np.ndarray, bound: float, eps: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest target point of every row of ``P`` within ``bound`` (``d = inf`` and index 0
-    beyond: such pairs get zero weight); ``eps > 0``: a point within ``(1 + eps)`` times the
-    nearest distance (the KD-tree's approximate search)."""
+    """Nearest target within ``bound`` (inf beyond); ``eps > 0`` approximate."""
     d, j = index.tree.query(P, k=1, eps=eps, distance_upper_bound=bound, workers=WORKERS)
     j = np.where(np.isfinite(d), j, 0)
     return d, j
@@ -140,9 +128,7 @@ def icp(
     inlier_distance: float,
     coarse: bool = False,
 ) -> RegistrationResult:
-    """Tukey-weighted ICP on prepared data (see :func:`narrow_phase`). ``coarse``: start on a
-    strided subset of the source (the narrow phase's coarse-to-fine schedule; off for the broad
-    phase's fixed-budget peak verification, whose scores it would change)."""
+    """Tukey-weighted ICP on prepared data (see :func:`narrow_phase`)."""
     t0 = time.perf_counter()
     scale = max(bbox_diagonal(S), 1e-300)
     T = T0.copy()

@@ -1,5 +1,4 @@
-"""Robustification by small-scale outlier and boundary removal (thesis Section 6.2.5,
-Eq. 6.42-6.44)."""
+"""Robustification: small-scale outlier and boundary removal (Section 6.2.5, Eq. 6.42-6.44)."""
 
 from __future__ import annotations
 
@@ -10,8 +9,7 @@ from ._common import WORKERS
 
 
 def boundary_mask(P: np.ndarray, k: int) -> np.ndarray:
-    """True for boundary points by Eq. 6.43-6.44: the mean distance ``d_Psi_i`` to the ``k``
-    nearest neighbours is at least twice the mean ``d_bar`` of those means over the cloud."""
+    """Boundary points: mean kNN distance at least twice the cloud mean (Eq. 6.43-6.44)."""
     n = P.shape[0]
     kk = int(min(k + 1, n))
     d, _ = cKDTree(P).query(P, k=kk, workers=WORKERS)
@@ -22,9 +20,7 @@ def boundary_mask(P: np.ndarray, k: int) -> np.ndarray:
 
 
 def outlier_scores(P: np.ndarray, k: int) -> np.ndarray:
-    """``m_i = ||(x~_i, y~_i, z~_i)||`` of Eq. 6.42: the norm of the point's row of the sparse
-    part of the RPCA of its kNN patch matrix (Section 4.5 / 5.4.1,
-    :func:`spectrageo.outliers.rpca_scores`), in units of the point spacing."""
-    from ..outliers import rpca_scores
+    """``m_i`` of Eq. 6.42: RPCA sparse-row norm in point spacings."""
+    from ..outliers import RPCAOptions, rpca_scores
 
-    return np.asarray(rpca_scores(P, k=k, on_nonconvergence="ignore").scores)
+    return np.asarray(rpca_scores(P, k, RPCAOptions(on_nonconvergence="ignore")).scores)

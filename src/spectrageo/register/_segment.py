@@ -1,22 +1,6 @@
-"""Scene segmentation: adaptive-epsilon DBSCAN (thesis Section 6.2.3, Eq. 6.28-6.29) and removal
-of large support planes.
+"""Scene segmentation: adaptive-epsilon DBSCAN (Section 6.2.3, Eq. 6.28-6.29) and plane removal.
 
-:func:`adaptive_dbscan` clusters a scan without a global radius. Every point gets its own radius
-``eps_i = eps_scale * mean_{j <= K_a} D_ij`` (Eq. 6.29, ``eps_scale = 2``, ``K_a = 5``, Table 6.7),
-so that sparse (far) parts of a range scan keep enough neighbours. As Section 6.2.7 describes, the
-neighbours are searched only among the ``n_neighbors`` nearest points of each point (one k-d tree
-query, ``O(n k log n)``), never against the whole cloud. Two points are directly connected when
-each lies inside the other's radius (``D_ij <= min(eps_i, eps_j)``: the symmetric reading keeps an
-isolated outlier, whose own radius is large, from attaching to a dense surface); a point with at
-least ``min_samples`` connected neighbours is a core point; clusters are the connected components
-of the core points (scipy's ``connected_components``), a non-core point joins the cluster of its
-nearest connected core point, and the rest is noise ``-1`` (Eq. 6.28). Clusters are numbered
-``0 .. n_c - 1`` by decreasing size (ties by smallest point index), so the labels are deterministic.
-
-:func:`remove_planes` is not an equation of the thesis: the UWA scenes of Section 6.2.8 float
-the objects over a background, whereas a tabletop scan joins every object through the table, and no
-density-based clustering can separate them. Large planes are therefore found by RANSAC (vectorised
-hypotheses on a subsample, least-squares refit on the inliers) and removed before clustering.
+Connection rule: docs/decisions.md#register-segment-reading.
 """
 
 from __future__ import annotations
@@ -47,10 +31,7 @@ def _check_float(v, name: str, *, lo: float = 0.0, hi: float = np.inf) -> float:
 
 
 def adaptive_eps(points, *, k_a: int = 5, eps_scale: float = 2.0, workers: int = -1) -> np.ndarray:
-    """Per-point DBSCAN radius ``eps_i = eps_scale * mean of the K_a nearest distances`` (Eq. 6.29).
-
-    Returns (n,) float64.
-    """
+    """Per-point radius ``eps_i = eps_scale * mean of the K_a nearest distances`` (Eq. 6.29)."""
     P = as_points(points, "points")
     k_a = _check_int(k_a, "k_a", 1)
     eps_scale = _check_float(eps_scale, "eps_scale")
@@ -70,28 +51,11 @@ def adaptive_dbscan(
     min_cluster_size: int = 1,
     workers: int = -1,
 ) -> np.ndarray:
-    """Density-based clustering with a spatially adaptive radius (Eq. 6.28-6.29).
+    """DBSCAN with the radius of Eq. 6.29 (thesis ``K_a = 5``, ``eps_scale = 2``).
 
-    Parameters
-    ----------
-    points : (n, 3) float
-    k_a : int
-        Neighbours of the radius estimate (Eq. 6.29; thesis ``K_a = 5``).
-    eps_scale : float
-        Factor of Eq. 6.29 (thesis: 2).
-    n_neighbors : int
-        Size of the candidate neighbourhood searched for each point (``>= k_a``).
-    min_samples : int
-        Connected neighbours (the point excluded) that make a core point.
-    min_cluster_size : int
-        Clusters with fewer points are relabelled noise.
-    workers : int
-        Threads of the k-d tree query (-1: all).
-
-    Returns
-    -------
-    (n,) int64
-        Labels: cluster ``0 .. n_c - 1`` by decreasing size, ``-1`` for noise (Eq. 6.28).
+    Candidates are the ``n_neighbors`` nearest points; a point with ``min_samples`` connected
+    neighbours is a core point; clusters smaller than ``min_cluster_size`` become noise. Returns
+    (n,) int64 labels ``0 .. n_c - 1`` by decreasing size, ``-1`` for noise (Eq. 6.28).
     """
     P = as_points(points, "points")
     k_a = _check_int(k_a, "k_a", 1)
@@ -128,7 +92,7 @@ def adaptive_dbscan(
 
 
 def _relabel(labels: np.ndarray, min_size: int) -> np.ndarray:
-    """Renumber clusters by decreasing size (ties: smallest first index); small ones -> -1."""
+    """Renumber clusters by decreasing size; small ones become -1."""
     out = np.full(labels.shape, -1, dtype=np.int64)
     ok = labels >= 0
     if not ok.any():
@@ -149,12 +113,7 @@ def _relabel(labels: np.ndarray, min_size: int) -> np.ndarray:
 def fit_plane_ransac(
     points, *, threshold: float, n_hypotheses: int = 500, sample: int = 20_000, rng=0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The plane ``n . x = c`` with most inliers (``|n . x - c| <= threshold``) by RANSAC.
-
-    Hypotheses from random point triples of a subsample are scored together (vectorised), the best
-    is refitted by least squares on its inliers (smallest principal axis). Returns
-    ``(plane (4,) = [n, c], inlier mask (n,))``.
-    """
+    """``([n, c], inliers)`` of the plane with most points within ``threshold`` (RANSAC, refit)."""
     P = as_points(points, "points")
     threshold = _check_float(threshold, "threshold")
     g = np.random.default_rng(rng)
@@ -198,12 +157,7 @@ def remove_planes(
     max_planes: int = 3,
     rng=0,
 ) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Remove large planes (support table, walls) before segmentation.
-
-    Repeatedly fits a RANSAC plane (:func:`fit_plane_ransac`) to the remaining points and removes
-    its inliers while they are at least ``min_fraction`` of the input points, at most
-    ``max_planes`` times. Returns ``(keep (n,) bool, planes [(4,) n, c])``.
-    """
+    """``(keep, planes)`` after removing up to ``max_planes`` planes of ``min_fraction`` points."""
     P = as_points(points, "points")
     min_fraction = _check_float(min_fraction, "min_fraction", hi=1.0)
     max_planes = _check_int(max_planes, "max_planes", 0)

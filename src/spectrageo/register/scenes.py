@@ -1,21 +1,8 @@
-"""Synthetic single-view scans of cluttered tabletop scenes with ground truth (for Section 6.2.8).
+"""Synthetic single-view scans of cluttered tabletop scenes with ground truth (Section 6.2.8).
 
-:func:`make_scene` places ``n_objects`` of the given models at random rigid poses on a support
-plane (``z = 0``), adds clutter (boxes, cylinders and spheres that are not in the model library),
-and scans the scene from one viewpoint with a pinhole camera:
-
-1. every surface is sampled densely and uniformly by area (about ``oversample`` samples per
-   image pixel it covers); the plane is intersected exactly with every pixel ray;
-2. a depth buffer keeps the nearest sample per pixel (numpy sort, no Python loop); pixels whose
-   depth lies far behind their 3 x 3 neighbourhood are dropped (samples seen through gaps of the
-   front surface) -- this replaces a ray caster, since neither embree nor rtree is required;
-3. each kept point moves along its viewing ray by Gaussian noise of standard deviation
-   ``noise`` x the pixel footprint at its depth (range noise of a structured-light or ToF sensor).
-
-Ground truth: per-point labels (object index ``0 .. n_objects - 1``, ``-1`` support plane, ``-2``
-clutter), the pose (4, 4) mapping each model into the scene, and the visible area fraction of each
-object (the fraction of its area samples that reach the depth buffer), ``occlusion = 1 - visible``
-as in the UWA data set (self-occlusion included, so a single view gives about 50 % already).
+Models at random poses on the plane ``z = 0`` with clutter are sampled by area, kept by a depth
+buffer of a pinhole camera (pixels far behind their 3 x 3 neighbourhood dropped) and moved along
+their rays by range noise; ``occlusion = 1 - visible fraction`` as in the UWA data set.
 """
 
 from __future__ import annotations
@@ -34,19 +21,9 @@ PLANE_LABEL = -1
 
 @dataclass(frozen=True)
 class Scene:
-    """A generated scan with ground truth.
-
-    Attributes
-    ----------
-    points : (n, 3) float64, scene (world) frame; the support plane is ``z = 0``.
-    labels : (n,) int64; object index, ``-1`` plane, ``-2`` clutter.
-    model_index : (n_objects,) int64; which of the given models each object is.
-    names : tuple of str; the name of each object's model (path stem, dict key or ``model<i>``).
-    poses : (n_objects, 4, 4) float64; maps model coordinates into the scene.
-    visible_fraction : (n_objects,) float64 in [0, 1].
-    occlusion : (n_objects,) float64, ``1 - visible_fraction``.
-    viewpoint : (3,) float64; camera centre.
-    pixel_size : float; pixel footprint at the distance of the scene centre (scene units).
+    """A generated scan: ``points``, ``labels`` (object, -1 plane, -2 clutter), ``model_index``,
+    ``names``, model-to-scene ``poses``, ``visible_fraction``, ``occlusion``, ``viewpoint`` and
+    ``pixel_size``.
     """
 
     points: np.ndarray
@@ -160,30 +137,12 @@ def make_scene(
     max_tries: int = 8,
     rng=0,
 ) -> Scene:
-    """Generate a single-view scan of ``n_objects`` distinct models on a plane with clutter.
+    """Single-view scan of ``n_objects`` distinct ``models`` on a plane with ``clutter`` primitives.
 
-    Parameters
-    ----------
-    models : list of meshes (paths, :class:`~spectrageo.geometry.Mesh`, ``(V, F)`` pairs) or a
-        dict name -> mesh. Models should have comparable sizes (the layout uses their footprints).
-    n_objects : int
-        Number of distinct models placed (``<= len(models)``).
-    occlusion : (low, high) or float
-        Wanted occlusion range of every object (a float ``t`` means ``(t - 0.1, t + 0.1)``). Up to
-        ``max_tries`` arrangements are drawn; the first whose objects all fall in the range is
-        kept, else the one with most objects in range. The realised values are in the result.
-    clutter : int
-        Number of clutter primitives (not in the library).
-    noise : float
-        Range noise standard deviation in pixel footprints (0: none).
-    image_size : (width, height) pixels.
-    oversample : float
-        Surface samples per covered pixel of the depth buffer.
-    rng : seed or numpy Generator.
-
-    Returns
-    -------
-    :class:`Scene`
+    ``occlusion`` (low, high) or ``t`` (``t +- 0.1``) is the wanted range; up to ``max_tries``
+    layouts are drawn and the first in range (else the best) kept. ``noise`` is the range noise in
+    pixel footprints, ``image_size`` (width, height), ``oversample`` samples per pixel. Returns a
+    :class:`Scene`.
     """
     if isinstance(models, dict):
         items = [(str(k), v) for k, v in models.items()]

@@ -1,17 +1,13 @@
-"""Mesh and point-cloud saliency, feature extraction and their applications (thesis Section 6.1).
+"""Mesh and point-cloud saliency, features and their applications (thesis Section 6.1).
 
-* saliency maps of meshes: :func:`saliency` (spectral, geometric, combined, fast; Eq. 6.1-6.14),
-  animations with per-frame reuse (:func:`animation_saliency`, Eq. 6.16), point clouds
-  (:func:`pointcloud_saliency`, Eq. 6.30-6.33) and multi-scale features (Eq. 6.34-6.36);
-* corner / edge / flat classification: :func:`classify_faces`, :func:`classify_vertices`
-  (Section 4.4, Eq. 4.14-4.15; re-exported from :mod:`spectrageo.geometry.features`);
-* feature vertices, feature curves and model similarity (Section 6.1.1, Eq. 6.5-6.7);
-* applications: simplification (Algorithm 15), saliency-aware guided denoising (Eq. 6.20-6.23),
-  deviation inspection (Eq. 6.17-6.19).
+Maps (Eq. 6.1-6.16, 6.30-6.36), corner/edge/flat classes (Section 4.4), feature vertices and
+curves (Eq. 6.5-6.7), simplification (Algorithm 15), guided denoising (Eq. 6.20-6.23) and
+deviation inspection (Eq. 6.17-6.19).
 """
 
 from ..geometry.features import FeatureClasses, classify_faces, classify_vertices
 from ._common import face_patches
+from ._options import SaliencyOptions
 from .combined import (
     FAST_CLASSES,
     METHODS,
@@ -46,6 +42,7 @@ from .inspect import Inspection, inspect, normalize_unit_box
 from .pointcloud import multiscale_features, normalize_saliency_pair, pointcloud_saliency
 from .simplify import Simplified, class_keep_fractions, saliency_classes, simplify
 from .spectral import spectral_face_values, spectral_saliency
+from .tsgsp import tsgsp_saliency
 
 __all__ = [
     "FAST_CLASSES",
@@ -57,6 +54,7 @@ __all__ = [
     "Inspection",
     "PatchRPCA",
     "SaliencyComponents",
+    "SaliencyOptions",
     "Simplified",
     "animation_saliency",
     "area_change",
@@ -93,5 +91,6 @@ __all__ = [
     "simplify",
     "spectral_face_values",
     "spectral_saliency",
+    "tsgsp_saliency",
     "vertex_spectral_saliency",
 ]

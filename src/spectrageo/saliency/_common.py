@@ -1,4 +1,4 @@
-"""Helpers shared by the saliency modules: validation, face patches, normalisation, face-to-vertex."""
+"""Helpers shared by the saliency modules."""
 
 from __future__ import annotations
 
@@ -17,8 +17,7 @@ PER = ("vertex", "face")
 
 
 def check_mesh(V, F, names=("V", "F")) -> tuple[np.ndarray, np.ndarray]:
-    """``(V, F)`` validated; a mesh none of whose faces has a positive area (every vertex in one
-    point, or on one line) has no surface to measure saliency on and is refused."""
+    """``(V, F)`` validated; a mesh without a face of positive area is refused."""
     V = as_points(V, names[0])
     F = as_faces(F, V.shape[0], names[1])
     if F.shape[0] and not (face_areas(V, F) > 0).any():
@@ -42,7 +41,7 @@ def check_int(value, name: str, *, minimum: int = 1, maximum: int | None = None)
 
 
 def check_k(k, n_faces: int, name: str = "k") -> int:
-    """Patch size ``k`` (neighbours besides the face itself); needs ``k + 1 <= n_faces``."""
+    """Patch size ``k``, needing ``k + 1 <= n_faces``."""
     k = check_int(k, name, minimum=2)
     if k + 1 > n_faces:
         raise InvalidInputError(
@@ -53,11 +52,7 @@ def check_k(k, n_faces: int, name: str = "k") -> int:
 
 
 def minmax(x: np.ndarray, *, rtol: float = 1e-9) -> np.ndarray:
-    """Min-max normalisation to [0, 1] (Eq. 6.4 / 6.12).
-
-    A map whose spread is below ``rtol`` times its magnitude (a constant map up to rounding, e.g. a
-    plane) maps to zeros instead of amplified rounding noise.
-    """
+    """Min-max normalisation to [0, 1] (Eq. 6.4, 6.12); zeros for a spread below ``rtol``."""
     x = np.asarray(x, dtype=np.float64)
     if x.size == 0:
         return x.copy()
@@ -69,21 +64,13 @@ def minmax(x: np.ndarray, *, rtol: float = 1e-9) -> np.ndarray:
 
 
 def face_patches(centroids: np.ndarray, k: int) -> np.ndarray:
-    """Patch ``P_i`` of every face: the face itself then its ``k`` nearest faces by centroid distance.
-
-    Returns (m, k + 1) int64 indices, column 0 being the face itself (the column order of Eq. 6.8).
-    """
+    """(m, k + 1) int64 patches: each face, then its ``k`` nearest faces by centroid."""
     nb, _ = knn(centroids, k, include_self=False)
     return np.concatenate([np.arange(centroids.shape[0])[:, None], nb], axis=1)
 
 
 def mesh_normals(V: np.ndarray, F: np.ndarray, normals) -> np.ndarray:
-    """Face normals used by the analysis: ``"face"`` (Eq. 3.2), ``"guided"`` (Section 4.2) or an array.
-
-    Guided normals are the area-weighted mean normals of each face's most consistent 1-ring face
-    patch (Eq. 4.8-4.11, :func:`spectrageo.denoise._normals.guided_normals`); on noisy scans they
-    are steadier than the raw face normals (Section 6.1.2).
-    """
+    """Face normals: "face" (Eq. 3.2), "guided" (Eq. 4.8-4.11) or a given (m, 3) array."""
     if isinstance(normals, str):
         check_choice(normals, "normals", NORMALS)
         N = face_normals(V, F)
@@ -102,7 +89,7 @@ def mesh_normals(V: np.ndarray, F: np.ndarray, normals) -> np.ndarray:
 
 
 def face_to_vertex(values: np.ndarray, F: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Mean of the values of the faces around each vertex (first ring, Eq. 6.14); isolated -> 0."""
+    """First-ring mean of face values at every vertex (Eq. 6.14); isolated vertices 0."""
     A = vertex_face_matrix(F, n_vertices)
     deg = np.asarray(A.sum(axis=1)).ravel()
     out = np.asarray(A @ np.asarray(values, dtype=np.float64)).ravel()

@@ -18,16 +18,8 @@ def ialm_fused_step(
     thr: float,
     group: bool,
 ) -> float:  # pragma: no cover - jitted
-    """One inexact-ALM iteration once the SVT basis is known, row by row, in place.
-
-    The low-rank row is rebuilt on the fly, ``L_i = (A_i Qk) W`` with ``W = diag(1 - tau / sigma)
-    Qk^T`` (singular value thresholding of ``A``), then ``S_i = shrink(M_i - L_i + Y_i / mu, thr)``
-    (group shrinkage of consecutive 3-vectors when ``group``, element-wise soft thresholding
-    otherwise), ``Y_i += mu (M_i - L_i - S_i)`` and ``A_i`` is overwritten with the next SVT input
-    ``M_i - S_i + Y_i / mu_next``. Neither ``L`` nor ``S`` is stored (the caller recovers the last
-    ``S = M - A + Y / mu_next``), which keeps the pass to three arrays read and two written.
-    Returns ``||M - L - S||_F^2``. Serial on purpose: the pass is memory bound and on a loaded
-    machine a second thread mostly waits.
+    """One inexact-ALM row pass (SVT rebuild, shrinkage, multiplier, next SVT input), in place;
+    returns ``||M - L - S||_F^2``.
     """
     m, p = M.shape
     r = Qk.shape[1]

@@ -1,21 +1,4 @@
-"""Saliency-aware guided denoising (Section 6.1.3, Eq. 6.20-6.23).
-
-Guided normal filtering needs, for every face, an "ideal" patch whose normals agree. Here the ideal
-patch is chosen by the saliency map: among the candidate patches of face ``f_i`` (the first-ring
-face patches that contain it) the one with the smallest mean face saliency ``Xi`` is taken
-(Eq. 6.20-6.21), since low saliency marks flat, consistent areas. The guided normal of the face is
-the area-weighted mean normal of that patch, and a joint bilateral filter (Eq. 6.22-6.23) smooths
-the face normals, followed by the vertex update of Section 4.7.
-
-Building blocks for other denoisers:
-
-* :func:`select_patches_by_saliency` (Eq. 6.20-6.21) takes any binary patch matrix ``P``
-  (``P[j, l] = 1`` when face ``l`` is in the patch centred at ``j``, the convention of
-  ``spectrageo.denoise``) and returns the centre of the chosen patch of every face;
-* :func:`saliency_patch_weights` gives the same choice as a sparse row-stochastic (m, m) matrix of
-  area weights: ``W @ N`` (then row-normalised) is the saliency-guided normal field;
-* :func:`saliency_guided_normals` and :func:`saliency_denoise` are the whole method.
-"""
+"""Saliency-aware guided denoising (Section 6.1.3, Eq. 6.20-6.23)."""
 
 from __future__ import annotations
 
@@ -31,7 +14,7 @@ from ._common import check_int
 
 
 def first_ring_patches(F) -> sp.csr_matrix:
-    """Binary (m, m) CSR patch matrix of the first-ring face patches (faces sharing a vertex)."""
+    """Binary (m, m) CSR matrix of the first-ring face patches (faces sharing a vertex)."""
     F = np.asarray(F, dtype=np.int64)
     P = (face_adjacency(F, shared="vertex") + sp.identity(F.shape[0], format="csr")).tocsr()
     P.data[:] = 1.0
@@ -49,20 +32,8 @@ def _check_face_values(values, m: int, name: str) -> np.ndarray:
 
 
 def select_patches_by_saliency(face_saliency, P) -> np.ndarray:
-    """Ideal patch of every face: the candidate with the lowest mean saliency (Eq. 6.20-6.21).
-
-    Parameters
-    ----------
-    face_saliency : (m,) float
-        Per-face saliency ``s_g``.
-    P : (m, m) sparse binary
-        Patch matrix (row ``j`` = members of the patch centred at face ``j``). The candidate
-        patches of face ``i`` are those containing it (column ``i``).
-
-    Returns
-    -------
-    (m,) int64: centre of the chosen patch of every face (ties: lowest centre index; a face in no
-    patch keeps itself).
+    """Centre of the least salient patch containing each face (Eq. 6.20-6.21), (m,) int64;
+    ``P[j, l] = 1`` when face ``l`` is in the patch centred at ``j``.
     """
     P = sp.csr_matrix(P, dtype=np.float64)
     m = P.shape[0]
@@ -89,12 +60,7 @@ def select_patches_by_saliency(face_saliency, P) -> np.ndarray:
 
 
 def saliency_patch_weights(V, F, face_saliency, *, P=None) -> sp.csr_matrix:
-    """Sparse (m, m) weights of the saliency-guided normals (Eq. 6.20-6.21 then area mean).
-
-    Row ``i`` holds the face areas of the members of face ``i``'s chosen patch, divided by their sum;
-    ``normalize(W @ N)`` is the guided normal field for any current normals ``N``.
-    ``P`` defaults to :func:`first_ring_patches`.
-    """
+    """Row-stochastic (m, m) area weights of the chosen patches: ``normalize(W @ N)``."""
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     P = first_ring_patches(F) if P is None else sp.csr_matrix(P, dtype=np.float64)
@@ -112,11 +78,7 @@ def _unit(X: np.ndarray) -> np.ndarray:
 
 
 def saliency_guided_normals(V, F, *, face_saliency=None, normals=None, **saliency_options):
-    """Guided normals from the least salient candidate patch (Eq. 6.20-6.21), shape (m, 3).
-
-    ``face_saliency`` defaults to :func:`spectrageo.saliency.saliency` (``per="face"``, with
-    ``saliency_options``); ``normals`` to the face normals of ``(V, F)``.
-    """
+    """Guided normals (m, 3) from the least salient candidate patch (Eq. 6.20-6.21)."""
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     if face_saliency is None:
@@ -139,33 +101,11 @@ def saliency_denoise(
     vertex_iter: int = 20,
     **saliency_options,
 ) -> np.ndarray:
-    """Saliency-aware guided denoising (Eq. 6.20-6.23 and the vertex update of Section 4.7).
+    """Saliency-aware guided denoising (Eq. 6.20-6.23, Section 4.7), (n, 3) float64.
 
-    Each of the ``n_iter`` iterations recomputes the guided normals ``g`` of the current face
-    normals on the saliency-chosen patches and applies the joint bilateral filter over the
-    first-ring faces ``Psi_1i``::
-
-        n_i <- normalize( sum_j A_j W1_ij W2_ij n_j ),
-        W1_ij = exp(-||c_i - c_j||^2 / (2 sigma_1i^2)),  W2_ij = exp(-||g_i - g_j||^2 / (2 sigma_r^2))
-
-    then ``vertex_iter`` vertex updates (Eq. 4.28-4.29) fit the vertices to the normals. The thesis
-    sets ``sigma_1i`` to the mean *squared* centroid distance over ``Psi_1i``, which has units of
-    length squared; the mean distance is used instead (same role, consistent units).
-
-    Parameters
-    ----------
-    V, F : noisy mesh
-    face_saliency : (m,) float, optional
-        Per-face saliency of the noisy mesh (default: :func:`spectrageo.saliency.saliency` with
-        ``saliency_options``, computed once).
-    sigma_r : float
-        Range width ``sigma_2`` (thesis: 0.25).
-    n_iter, vertex_iter : int
-        Normal-filtering and vertex-update iterations (thesis: 15 and 20).
-
-    Returns
-    -------
-    (n, 3) float64 denoised vertices.
+    ``n_iter`` joint bilateral passes (range width ``sigma_r``, thesis 0.25; spatial width as in
+    docs/decisions.md#saliency-readings) and ``vertex_iter`` vertex updates; ``face_saliency``
+    defaults to :func:`saliency` with ``saliency_options`` (``method``, ``options``).
     """
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")

@@ -1,16 +1,4 @@
-"""Saliency of mesh animations with per-frame reuse (Section 6.1.2, Eq. 6.16).
-
-The first frame gets a full saliency map (:func:`spectrageo.saliency.saliency_components`). In each
-later frame ``l`` only the vertices whose first-ring area changed markedly since frame ``l - 1``,
-
-    d_i = |A(i, l) - A(i, l - 1)| / max(A(i, l), A(i, l - 1)) >= threshold   (Eq. 6.16, 0.1),
-
-are recomputed; the others keep their previous value. A recomputed vertex takes the mean of the
-current values of the faces around it (Eq. 6.14); those faces get new spectral values (exact, the
-measure is local) and new geometric values from an RPCA of their rows only (the reduced matrix
-``M'`` of the fast variant). Raw values are normalised with the bounds of the first frame and
-clipped to [0, 1], so that values of different frames share one scale.
-"""
+"""Saliency of mesh animations with per-frame reuse (Section 6.1.2, Eq. 6.16)."""
 
 from __future__ import annotations
 
@@ -19,26 +7,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import as_faces, check_positive
+from .._validation import as_faces, check_positive, options_with_legacy
 from ..geometry.primitives import face_areas, vertex_face_matrix
 from ..graph.adjacency import knn
 from ._common import check_k, mesh_normals
-from .combined import _check_weights, saliency_components
+from ._options import SaliencyOptions
+from .combined import saliency_components
 from .geometric import geometric_face_values
 from .spectral import spectral_face_values
 
 
 @dataclass(frozen=True)
 class AnimationSaliency:
-    """Result of :func:`animation_saliency`.
-
-    Attributes
-    ----------
-    values : (T, n) float64
-        Per-vertex saliency of every frame, in [0, 1].
-    recomputed : (T, n) bool
-        Vertices recomputed in each frame (all of frame 0).
-    """
+    """Result of :func:`animation_saliency`: ``values`` (T, n) and ``recomputed`` (T, n) bool."""
 
     values: np.ndarray
     recomputed: np.ndarray
@@ -50,13 +31,13 @@ class AnimationSaliency:
 
 
 def first_ring_areas(V, F) -> np.ndarray:
-    """Total area of the faces around every vertex, ``A(i, l)`` of Eq. (6.16), shape (n,)."""
+    """Area of the faces around every vertex, ``A(i, l)`` of Eq. (6.16)."""
     V = np.asarray(V, dtype=np.float64)
     return np.asarray(vertex_face_matrix(F, V.shape[0]) @ face_areas(V, F)).ravel()
 
 
 def area_change(A_prev, A_cur) -> np.ndarray:
-    """Normalised first-ring area difference ``d`` of Eq. (6.16); 0 where both areas vanish."""
+    """``d = |A_cur - A_prev| / max(A_prev, A_cur)`` of Eq. (6.16); 0 where both vanish."""
     den = np.maximum(A_prev, A_cur)
     return np.divide(np.abs(A_cur - A_prev), den, out=np.zeros_like(den), where=den > 0)
 
@@ -71,29 +52,14 @@ def _norm(raw, lo, hi):
 def animation_saliency(
     frames,
     F,
+    options: SaliencyOptions | None = None,
     *,
     threshold: float = 0.1,
     method: str = "combined",
-    k: int = 25,
-    weights=(1.0, 1.0),
-    normals="guided",
-    **options,
+    **legacy,
 ) -> AnimationSaliency:
-    """Per-vertex saliency of every frame of a mesh animation, reusing unchanged areas (Eq. 6.16).
-
-    Parameters
-    ----------
-    frames : (T, n, 3) float
-    F : (m, 3) int
-        Shared connectivity.
-    threshold : float
-        Area-change threshold of Eq. (6.16) (thesis: 0.1); 0 recomputes every vertex of every frame.
-    method, k, weights, normals, **options
-        As in :func:`spectrageo.saliency.saliency` (``options`` go to the geometric part).
-
-    Returns
-    -------
-    :class:`AnimationSaliency`
+    """Per-vertex saliency (T, n) of every frame, recomputing only where ``d >= threshold``
+    (Eq. 6.16, thesis 0.1) with frame 0's bounds; ``options``, ``method`` as in :func:`saliency`.
     """
     X = np.asarray(frames, dtype=np.float64)
     if X.ndim != 3 or X.shape[2] != 3 or X.shape[0] < 1:
@@ -103,12 +69,12 @@ def animation_saliency(
     T, n, _ = X.shape
     F = as_faces(F, n, "F")
     check_positive(threshold, "threshold", allow_zero=True)
-    k = check_k(k, F.shape[0])
-    w1, w2 = _check_weights(weights)
-    comp = saliency_components(
-        X[0], F, method=method, k=k, weights=weights, normals=normals, **options
-    )
-    geo_opts = {key: options[key] for key in options if key != "fast"}
+    opts = options_with_legacy(options, legacy, SaliencyOptions, "animation_saliency")
+    k = check_k(opts.k, F.shape[0])
+    w1, w2 = opts.weights
+    normals = opts.normals
+    comp = saliency_components(X[0], F, opts, method=method)
+    geo_opts = opts.geometric()
     b2 = (comp.spectral_raw.min(), comp.spectral_raw.max())
     b1 = None
     if comp.geometric_raw is not None:

@@ -1,22 +1,4 @@
-"""Feature vertices, feature curves and curve similarity between models (Section 6.1.1, Eq. 6.1-6.7).
-
-Pipeline of Section 6.1.1:
-
-1. **Vertex saliency** (Eq. 6.1-6.4): for every vertex the normals of its ``patch`` nearest vertices
-   (itself included) form ``N_i`` and ``R_i = N_i^T N_i`` (Section 4.4); the saliency is the inverse
-   2-norm of the eigenvalues of ``R_i``, min-max normalised (:func:`vertex_spectral_saliency`).
-2. **Feature vertices**: the normalised saliency values are split into 5 classes by 1-D k-means; the
-   two lowest classes are non-features, the three highest are features (:func:`feature_vertices`).
-3. **Feature curves**: the mean curvature ``m_c`` of the feature vertices is clustered by k-means,
-   the number of clusters (1-5) chosen by the Calinski-Harabasz criterion (:func:`feature_curves`).
-4. **Similarity** (Eq. 6.5-6.7): a 20-bin descriptor ``q = [hist(s), hist(m_c)]`` per model or curve
-   and the correlation coefficient of two descriptors (:func:`curve_descriptor`,
-   :func:`curve_similarity`, :func:`similarity_matrix`).
-
-The k-means used here are 1-D and deterministic: Lloyd iterations started from evenly spaced
-quantiles of the data (the thesis notes that its randomly initialised k-means "may differ a little
-from run to run"; this version does not).
-"""
+"""Feature vertices, feature curves and model similarity (Section 6.1.1, Eq. 6.1-6.7)."""
 
 from __future__ import annotations
 
@@ -50,17 +32,7 @@ def _check_values(values, n: int | None, name: str) -> np.ndarray:
 
 
 def kmeans_1d(values, n_clusters: int, *, max_iter: int = 100) -> tuple[np.ndarray, np.ndarray]:
-    """Deterministic 1-D k-means: labels ordered by centre (0 = lowest) and sorted centres.
-
-    Lloyd iterations on sorted data, started from the ``(j + 0.5) / n_clusters`` quantiles; empty
-    clusters are dropped (fewer distinct values than clusters), so the result may have fewer
-    clusters than asked.
-
-    Returns
-    -------
-    labels : (n,) int64 in ``[0, n_found)``
-    centers : (n_found,) float64, ascending
-    """
+    """Deterministic 1-D k-means from quantiles: ``(labels, centers)`` by ascending centre."""
     x = _check_values(values, None, "values")
     n_clusters = check_int(n_clusters, "n_clusters")
     if x.size == 0:
@@ -86,11 +58,7 @@ def kmeans_1d(values, n_clusters: int, *, max_iter: int = 100) -> tuple[np.ndarr
 
 
 def calinski_harabasz_1d(values, labels) -> float:
-    """Calinski-Harabasz index of a 1-D clustering (between / within dispersion ratio).
-
-    ``CH = [B / (c - 1)] / [W / (n - c)]``; ``nan`` for one cluster or ``c >= n``; ``inf`` when the
-    clusters have no inner spread.
-    """
+    """``CH = [B / (c - 1)] / [W / (n - c)]``; nan for ``c < 2`` or ``c >= n``, inf if ``W = 0``."""
     x = np.asarray(values, dtype=np.float64)
     lab = np.asarray(labels)
     ids, inv = np.unique(lab, return_inverse=True)
@@ -107,25 +75,8 @@ def calinski_harabasz_1d(values, labels) -> float:
 
 
 def vertex_spectral_saliency(V, F=None, *, patch: int = 15, normals=None) -> np.ndarray:
-    """Normalised spectral saliency of every vertex (Section 6.1.1, Eq. 6.1-6.4).
-
-    ``N_i`` stacks the normals of the ``patch`` nearest vertices of ``v_i`` (itself included,
-    Section 4.4), ``R_i = N_i^T N_i`` and ``s_i = 1 / ||lambda(R_i)||_2`` (Eq. 6.3), then min-max
-    normalised (Eq. 6.4). Invariant to rotation, translation and uniform scale.
-
-    Parameters
-    ----------
-    V : (n, 3) float
-    F : (m, 3) int, optional
-        Needed for the default (area-weighted) vertex normals.
-    patch : int
-        Vertices per patch (default 15, as in the thesis' application).
-    normals : (n, 3) float, optional
-        Normals to analyse (required for a point cloud, ``F=None``).
-
-    Returns
-    -------
-    (n,) float64 in [0, 1].
+    """Per-vertex ``1 / ||lambda(N_i^T N_i)||_2`` over ``patch`` nearest vertices, min-max
+    normalised (Eq. 6.1-6.4); ``normals`` are required when ``F`` is None.
     """
     V = as_points(V, "V")
     n = V.shape[0]
@@ -153,19 +104,7 @@ def vertex_spectral_saliency(V, F=None, *, patch: int = 15, normals=None) -> np.
 
 @dataclass(frozen=True)
 class FeatureVertices:
-    """Result of :func:`feature_vertices`.
-
-    Attributes
-    ----------
-    mask : (n,) bool
-        Feature vertices (the three most salient of five classes).
-    classes : (n,) int64
-        Saliency class of every vertex, 0 (least salient) to 4.
-    centers : (c,) float64
-        Class centres (ascending; fewer than 5 when the map has fewer distinct values).
-    saliency : (n,) float64
-        The normalised saliency that was classified.
-    """
+    """Result of :func:`feature_vertices`: ``mask``, ``classes`` (0 least salient), ``centers``."""
 
     mask: np.ndarray
     classes: np.ndarray
@@ -174,29 +113,15 @@ class FeatureVertices:
 
     @property
     def indices(self) -> np.ndarray:
+        """Indices of the feature vertices."""
         return np.flatnonzero(self.mask)
 
 
 def feature_vertices(
     V, F=None, *, saliency=None, patch: int = 15, n_classes: int = 5, n_feature_classes: int = 3
 ) -> FeatureVertices:
-    """Feature vertices by k-means of the saliency into classes (Section 6.1.1).
-
-    Parameters
-    ----------
-    V : (n, 3) float
-    F : (m, 3) int, optional (needed unless ``saliency`` is given)
-    saliency : (n,) float, optional
-        Per-vertex saliency; default :func:`vertex_spectral_saliency` with ``patch``. It is
-        min-max normalised before clustering.
-    patch : int
-        Patch size of the default saliency.
-    n_classes, n_feature_classes : int
-        Classes of the 1-D k-means and how many of the highest are features (thesis: 5 and 3).
-
-    Returns
-    -------
-    :class:`FeatureVertices`. A constant map (e.g. a plane) has no features.
+    """Feature vertices: the top ``n_feature_classes`` of ``n_classes`` k-means classes of
+    the normalised saliency (default :func:`vertex_spectral_saliency`; thesis: 3 of 5).
     """
     V = as_points(V, "V")
     n = V.shape[0]
@@ -224,22 +149,7 @@ def feature_vertices(
 
 @dataclass(frozen=True)
 class FeatureCurves:
-    """Result of :func:`feature_curves`.
-
-    Attributes
-    ----------
-    labels : (n,) int64
-        Curve of every vertex, ``-1`` for non-feature vertices.
-    n_curves : int
-        Number of curves (clusters of mean curvature; 0 without feature vertices).
-    curvature : (n,) float64
-        Signed mean curvature of every vertex.
-    saliency : (n,) float64
-        Normalised vertex saliency used for the feature vertices.
-    features : FeatureVertices
-    scores : dict[int, float]
-        Calinski-Harabasz index of every tried cluster count >= 2.
-    """
+    """Result of :func:`feature_curves`: ``labels`` (-1 off features), ``n_curves``, ``scores``."""
 
     labels: np.ndarray
     n_curves: int
@@ -258,31 +168,8 @@ def feature_curves(
     max_curves: int = 5,
     connected: bool = False,
 ) -> FeatureCurves:
-    """Feature curves: clusters of the mean curvature of the feature vertices (Section 6.1.1).
-
-    The feature vertices (:func:`feature_vertices`) are grouped by 1-D k-means of their signed mean
-    curvature (cotangent Laplacian, :func:`spectrageo.geometry.mean_curvature`); the number of
-    clusters in ``1..max_curves`` maximises the Calinski-Harabasz criterion. That index is undefined
-    for one cluster, so a single curve is returned when no split of two or more clusters is a real
-    split (fewer than 3 feature vertices, or one distinct value); otherwise the best of 2..5 is used
-    (the behaviour of the criterion in common toolboxes).
-
-    Parameters
-    ----------
-    V, F : mesh
-    saliency : (n,) float, optional
-        Vertex saliency (default :func:`vertex_spectral_saliency`).
-    patch : int
-        Patch size of the default saliency.
-    max_curves : int
-        Largest number of clusters tried (thesis: 5).
-    connected : bool
-        Also split every curvature cluster into its connected pieces along mesh edges (the thesis
-        clusters the curvature values only; the split gives spatially connected curves).
-
-    Returns
-    -------
-    :class:`FeatureCurves`
+    """Feature curves: k-means clusters of the feature vertices' mean curvature, their number in
+    ``2..max_curves`` by the Calinski-Harabasz index (Section 6.1.1); optionally split by edges.
     """
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
@@ -322,15 +209,7 @@ def feature_curves(
 
 
 def curve_descriptor(saliency, curvature, *, bins: int = 10) -> np.ndarray:
-    """Descriptor ``q = [hist(s), hist(m_c)]`` of a model or curve (Eq. 6.5-6.6).
-
-    Both inputs are min-max normalised, then histogrammed into ``bins`` equal bins of [0, 1]; the
-    counts are divided by the number of values, so models of different resolution compare.
-
-    Returns
-    -------
-    (2 * bins,) float64
-    """
+    """Descriptor ``q = [hist(s), hist(m_c)]`` of normalised inputs per value (Eq. 6.5-6.6)."""
     s = _check_values(saliency, None, "saliency")
     m = _check_values(curvature, s.size, "curvature")
     bins = check_int(bins, "bins", minimum=2)
@@ -342,12 +221,7 @@ def curve_descriptor(saliency, curvature, *, bins: int = 10) -> np.ndarray:
 
 
 def curve_similarity(q_a, q_b) -> float:
-    """Correlation coefficient of two descriptors (Eq. 6.7); 1 = identical shape of histograms.
-
-    Eq. (6.7) prints the denominator without squares; the (standard) Pearson coefficient with
-    squared deviations is used, which is what bounds the value to [-1, 1]. Returns 0 when a
-    descriptor is constant.
-    """
+    """Pearson correlation of two descriptors (Eq. 6.7); 0 when one is constant."""
     a = np.asarray(q_a, dtype=np.float64).ravel()
     b = np.asarray(q_b, dtype=np.float64).ravel()
     if a.shape != b.shape:
@@ -360,7 +234,7 @@ def curve_similarity(q_a, q_b) -> float:
 
 
 def model_descriptor(V, F, *, patch: int = 15, bins: int = 10) -> np.ndarray:
-    """Descriptor (Eq. 6.5-6.6) of the feature vertices of a mesh (saliency and mean curvature)."""
+    """Descriptor (Eq. 6.5-6.6) of the feature vertices of a mesh."""
     fc = feature_curves(V, F, patch=patch)
     sel = fc.labels >= 0
     if not sel.any():  # no features: describe the whole surface
@@ -369,17 +243,7 @@ def model_descriptor(V, F, *, patch: int = 15, bins: int = 10) -> np.ndarray:
 
 
 def similarity_matrix(meshes, *, patch: int = 15, bins: int = 10) -> np.ndarray:
-    """Model-to-model similarity (Fig. 6.5): correlation of the feature descriptors of every pair.
-
-    Parameters
-    ----------
-    meshes : sequence of (V, F) pairs or objects with ``vertices`` and ``faces``
-
-    Returns
-    -------
-    (p, p) float64 symmetric with ones on the diagonal; ``1 - r`` is the dissimilarity of Fig. 6.5
-    (0 = identical).
-    """
+    """(p, p) correlation of the descriptors of ``meshes``; ``1 - r`` is Fig. 6.5's distance."""
     descs = []
     for i, m in enumerate(meshes):
         if hasattr(m, "vertices") and hasattr(m, "faces"):

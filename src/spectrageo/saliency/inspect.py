@@ -1,15 +1,4 @@
-"""Deviation inspection between a reference model and a scanned, scaled or aged copy (Eq. 6.17-6.19).
-
-Both models are normalised to the unit box (translation and uniform scale, "normalized models with
-values in the range [0-1]"), their per-vertex saliency maps are computed, and every vertex of the
-copy is described by ``q = [x, y, z, s]`` (Eq. 6.17). Its match in the reference is the vertex with
-the nearest ``q`` (Eq. 6.18-6.19) and the deviation is the saliency difference
-``s_copy - s_reference`` at the match. A scaled copy therefore compares as an exact one, and a
-local dent, crack or wear mark shows as a deviation. The plain geometric distance (Hausdorff-style
-nearest-vertex distance of the normalised models, Fig. 6.23-d) is returned too.
-
-The copy is assumed to be in the pose of the reference (register it first otherwise).
-"""
+"""Deviation inspection of a copy against a reference model (Eq. 6.17-6.19)."""
 
 from __future__ import annotations
 
@@ -25,19 +14,7 @@ from ._common import check_mesh
 
 @dataclass(frozen=True)
 class Inspection:
-    """Result of :func:`inspect`.
-
-    Attributes
-    ----------
-    deviation : (n2,) float64
-        Signed saliency difference ``s_copy - s_reference`` at the matched vertex (Eq. 6.17-6.19).
-    distance : (n2,) float64
-        Distance of every normalised copy vertex to the nearest normalised reference vertex.
-    match : (n2,) int64
-        Matched reference vertex (Eq. 6.18).
-    saliency_reference : (n1,) float64
-    saliency_copy : (n2,) float64
-    """
+    """Result of :func:`inspect`: per copy vertex ``deviation``, ``distance``, ``match``."""
 
     deviation: np.ndarray
     distance: np.ndarray
@@ -47,7 +24,7 @@ class Inspection:
 
     @property
     def heat(self) -> np.ndarray:
-        """``|deviation|``: 0 where the copy matches the reference (blue in a jet heatmap)."""
+        """``|deviation|``."""
         return np.abs(self.deviation)
 
 
@@ -70,21 +47,9 @@ def inspect(
     saliency_weight: float = 1.0,
     **saliency_options,
 ) -> Inspection:
-    """Saliency deviation of a copy against a reference model (Eq. 6.17-6.19).
-
-    Parameters
-    ----------
-    V_ref, F_ref : reference mesh (n1 vertices)
-    V_copy, F_copy : inspected mesh (n2 vertices; any resolution, scale and position)
-    saliency_ref, saliency_copy : (n1,), (n2,) float, optional
-        Per-vertex saliency maps in [0, 1]; default :func:`spectrageo.saliency.saliency` with
-        ``saliency_options`` (e.g. ``method="spectral"``, ``k=25``).
-    saliency_weight : float
-        Weight of the saliency coordinate in the distance of Eq. (6.19) (1 as printed).
-
-    Returns
-    -------
-    :class:`Inspection`
+    """Saliency deviation ``s_copy - s_ref`` of each copy vertex at its nearest ``[x, y, z, w s]``
+    in the reference, both in the unit box (Eq. 6.17-6.19); the copy must have the reference pose.
+    Maps default to :func:`saliency` with ``saliency_options`` (``method``, ``options``).
     """
     from .combined import saliency as _saliency
 

@@ -1,13 +1,4 @@
-"""Point-cloud saliency and multi-scale saliency features (Section 6.2.3, Eq. 6.30-6.36).
-
-* :func:`pointcloud_saliency`: PCA normals of every point (Eq. 6.31), the normals of the point and
-  its ``k`` nearest neighbours stacked into ``N_i`` (Eq. 6.30), ``C_i = N_i^T N_i`` (Eq. 6.32) and
-  ``s_i = 1 / ||lambda(C_i)||_2`` (Eq. 6.33). ``C_i`` does not depend on the sign of the normals, so
-  no orientation step is needed.
-* :func:`normalize_saliency_pair`: the exponential normalisation of two maps (Eq. 6.34).
-* :func:`multiscale_features`: mean saliency over the ``K, 2K, ..., 5K`` nearest neighbours
-  (Eq. 6.35) concatenated with the coordinates (Eq. 6.36).
-"""
+"""Point-cloud saliency and multi-scale features (Section 6.2.3, Eq. 6.30-6.36)."""
 
 from __future__ import annotations
 
@@ -24,24 +15,8 @@ from ._common import check_int, minmax
 def pointcloud_saliency(
     P, *, k: int = 20, normal_k: int = 10, normals=None, normalize: bool = True
 ) -> np.ndarray:
-    """Spectral saliency of a point cloud (Eq. 6.30-6.33).
-
-    Parameters
-    ----------
-    P : (n, 3) float
-    k : int
-        Neighbours in the normal patch ``N_i`` besides the point (thesis: 20).
-    normal_k : int
-        Neighbours of the PCA normal estimate (Eq. 6.31).
-    normals : (n, 3) float, optional
-        Given normals (skip Eq. 6.31).
-    normalize : bool
-        Min-max normalise to [0, 1] (Eq. 6.4); ``False`` returns the raw ``1 / ||lambda||`` values,
-        which lie in ``[1 / (k + 1), sqrt(3) / (k + 1)]`` (as Eq. 6.34 expects).
-
-    Returns
-    -------
-    (n,) float64; high on edges and corners, low on flat areas.
+    """Spectral saliency ``1 / ||lambda(N_i^T N_i)||_2`` over ``k`` neighbours (Eq. 6.30-6.33); PCA
+    normals of ``normal_k`` neighbours (Eq. 6.31) unless given; raw values if not ``normalize``.
     """
     P = as_points(P, "P")
     n = P.shape[0]
@@ -66,13 +41,8 @@ def pointcloud_saliency(
 
 
 def normalize_saliency_pair(s_t, s_q, *, K_s: float = 1000.0) -> tuple[np.ndarray, np.ndarray]:
-    """Joint exponential normalisation of a target and a query map (Eq. 6.34).
-
-    ``s' = 1 - exp(-K_s s) / s_max``. The printed ``s_max = max(max(s_t), max(s_q))`` of the
-    saliency does not map into [0, 1]; it is read here as the largest of the exponentials
-    (reached at the smallest saliency), so that ``s' = 1 - exp(-K_s (s - s_min))`` with the joint
-    minimum: 0 on the flattest point of both clouds, growing quickly to 1 (``K_s = 1000`` suits raw
-    values of :func:`pointcloud_saliency` with ``normalize=False``).
+    """Joint normalisation ``1 - exp(-K_s (s - s_min))`` of two maps (Eq. 6.34, read as in
+    docs/decisions.md#saliency-readings).
     """
     a = np.asarray(s_t, dtype=np.float64)
     b = np.asarray(s_q, dtype=np.float64)
@@ -86,14 +56,8 @@ def normalize_saliency_pair(s_t, s_q, *, K_s: float = 1000.0) -> tuple[np.ndarra
 
 
 def multiscale_features(P, saliency, *, K: int = 5, n_scales: int = 5) -> np.ndarray:
-    """Augmented feature vectors ``f = [v, a]`` (Eq. 6.35-6.36).
-
-    ``a_i[j] = mean of s over the (j + 1) K nearest neighbours of v_i`` (the point included),
-    ``j = 0..n_scales - 1``.
-
-    Returns
-    -------
-    (n, 3 + n_scales) float64
+    """``[v, a]`` (n, 3 + n_scales) with ``a_j`` the mean saliency of the ``(j + 1) K`` nearest
+    points (Eq. 6.35-6.36).
     """
     P = as_points(P, "P")
     n = P.shape[0]

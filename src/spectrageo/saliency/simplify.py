@@ -1,27 +1,4 @@
-"""Saliency-aware multiscale simplification (Section 6.1.3, Algorithm 15, Tables 6.2-6.4).
-
-Algorithm 15: the vertices are split into ``N`` saliency classes; each class keeps its own fraction
-of vertices, higher for more salient classes, so that the total matches the requested
-simplification; every removed vertex is then replaced, in all its edges, by its nearest remaining
-vertex, and the faces that collapse are dropped.
-
-Choices (documented, the thesis leaves them open):
-
-* **Classes**: equal-width bins of the min-max normalised saliency (``class_edges="uniform"``, as
-  the 64 jet classes of Table 6.1) or equal-count quantile bins (``"quantile"``).
-* **Keep fractions**: ``p_c = min(1, a * w_c)`` with the class weights ``w_c`` (default
-  ``2**c``: each class keeps about twice the share of the previous one, the progression of
-  Table 6.4, e.g. 0.1 / 0.25 / 0.39 / 0.76 for 4 classes) and ``a`` solved so that the kept total
-  is the requested one. Explicit per-class fractions (``keep_fractions``) bypass this.
-* **Which vertices of a class**: a random subset (``rng``) spreads them over the class's area;
-  ``within="top"`` keeps the most salient ones of the class (step 1 "sort by saliency").
-* **Nearest remaining vertex**: measured along the mesh edges (multi-source Dijkstra from the kept
-  vertices), so that a vertex never collapses onto the other side of a thin wall; every removed
-  vertex joins the region of one kept vertex, and faces spanning three regions survive.
-
-The output is a valid triangle mesh (indices in range, no degenerate or duplicate faces, no
-unreferenced vertices) with the orientation of the original faces.
-"""
+"""Saliency-aware multiscale simplification (Section 6.1.3, Algorithm 15, Tables 6.2-6.4)."""
 
 from __future__ import annotations
 
@@ -42,18 +19,8 @@ WITHIN = ("random", "top")
 
 @dataclass(frozen=True)
 class Simplified:
-    """Result of :func:`simplify`.
-
-    Attributes
-    ----------
-    vertices : (n', 3) float64
-    faces : (m', 3) int64
-    kept : (n',) int64
-        Index in the input mesh of every output vertex.
-    classes : (n,) int64
-        Saliency class of every input vertex (0 = least salient).
-    keep_fractions : (N,) float64
-        Fraction of each class that was kept.
+    """Result of :func:`simplify`: ``vertices``, ``faces``, the input index ``kept`` of every output
+    vertex, the ``classes`` of the input and the ``keep_fractions`` per class.
     """
 
     vertices: np.ndarray
@@ -75,11 +42,7 @@ def saliency_classes(saliency, n_classes: int, *, class_edges: str = "uniform") 
 
 
 def class_keep_fractions(counts, n_keep: int, *, weights=None) -> np.ndarray:
-    """Per-class keep fractions ``p_c = min(1, a w_c)`` whose kept total is ``n_keep``.
-
-    ``counts`` (N,) members per class, ``weights`` (N,) positive, increasing with saliency
-    (default ``2**c``). ``a`` is found by bisection (the total is monotone in ``a``).
-    """
+    """Keep fractions ``p_c = min(1, a w_c)`` (default ``w_c = 2**c``) keeping ``n_keep``."""
     counts = np.asarray(counts, dtype=np.float64)
     N = counts.size
     w = 2.0 ** np.arange(N) if weights is None else np.asarray(weights, dtype=np.float64)
@@ -116,32 +79,9 @@ def simplify(
     rng=None,
     **saliency_options,
 ) -> Simplified:
-    """Saliency-aware multiscale simplification (Algorithm 15).
-
-    Parameters
-    ----------
-    V : (n, 3) float
-    F : (m, 3) int
-    ratio : float in [0, 1)
-        Simplification percentage as in the thesis: the fraction of vertices *removed* (0.8 keeps
-        20 % of them). Ignored when ``keep_fractions`` is given.
-    saliency : (n,) float, optional
-        Per-vertex saliency; default :func:`spectrageo.saliency.saliency` (``saliency_options``
-        are passed to it, e.g. ``method="spectral"``, ``k=25``).
-    n_classes : int
-        Saliency classes (thesis: 4 or 8).
-    keep_fractions : (n_classes,) float in [0, 1], optional
-        Explicit fraction kept per class, least salient first (Tables 6.2-6.4).
-    weights : (n_classes,) float, optional
-        Relative keep weights of the classes (default ``2**c``), see the module docstring.
-    class_edges : {"uniform", "quantile"}
-    within : {"random", "top"}
-    rng : seed or Generator
-        For ``within="random"``.
-
-    Returns
-    -------
-    :class:`Simplified`
+    """Saliency-aware multiscale simplification (Algorithm 15): removes ``ratio`` of the vertices
+    (or per-class ``keep_fractions``), by default by :func:`saliency` with ``saliency_options``;
+    options in docs/decisions.md#saliency-simplify-choices. Returns a valid :class:`Simplified`.
     """
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
