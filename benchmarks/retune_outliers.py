@@ -74,18 +74,15 @@ SPACE = (
     ("RPCA_MIN_TAU", (0.3, 0.4, 0.5, 0.6)),
     ("CLUSTER_MIN", (4, 6, 8)),
 )
-#: Keyword arguments of ``rpca_scores`` (the rest are module constants, patched for a run).
+#: Fields of ``RPCAOptions`` (the rest are module constants, patched for a run).
 KWARGS = ("rho", "tol", "tangent_weight", "refine")
 
 
 def current_defaults() -> dict:
     """The values in the source now (the starting point of the search)."""
-    import inspect
+    from spectrageo.outliers import RPCAOptions, _clusters, rpca, static
 
-    from spectrageo.outliers import _clusters, rpca, static
-
-    sig = inspect.signature(rpca.rpca_scores).parameters
-    cfg = {name: sig[name].default for name in KWARGS}
+    cfg = {name: getattr(RPCAOptions(), name) for name in KWARGS}
     cfg["REFINE_MIN_TAU"] = rpca.REFINE_MIN_TAU
     cfg["RPCA_MIN_TAU"] = static.RPCA_MIN_TAU
     cfg["CLUSTER_MIN"] = _clusters.CLUSTER_MIN
@@ -95,10 +92,11 @@ def current_defaults() -> dict:
 @contextlib.contextmanager
 def patched(cfg: dict):
     """Set the module constants of ``cfg`` for the duration of a run (read at call time)."""
-    from spectrageo.outliers import _clusters, rpca, static
+    from spectrageo.outliers import _clusters, _rpca_core, _thresholds, static
 
     targets = (
-        (rpca, "REFINE_MIN_TAU"),
+        (_rpca_core, "REFINE_MIN_TAU"),
+        (_thresholds, "RPCA_MIN_TAU"),
         (static, "RPCA_MIN_TAU"),
         (_clusters, "CLUSTER_MIN"),
     )
@@ -133,14 +131,14 @@ def load_cases(data: Path) -> list[tuple]:
 
 
 def run_config(cfg: dict, cases: list[tuple]) -> list[dict]:
-    from spectrageo.outliers import remove_outliers
+    from spectrageo.outliers import RPCAOptions, remove_outliers
 
-    kw = {name: cfg[name] for name in KWARGS}
+    opts = RPCAOptions(**{name: cfg[name] for name in KWARGS})
     rows = []
     with patched(cfg):
         for label, pat, frac, Q, lab in cases:
             t0, c0 = time.perf_counter(), time.process_time()
-            r = remove_outliers(Q, method="rpca", k=10, return_points=False, **kw)
+            r = remove_outliers(Q, method="rpca", k=10, return_points=False, options=opts)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             rem = ~r.keep
             tp = int(np.count_nonzero(rem & lab))

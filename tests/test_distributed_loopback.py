@@ -211,9 +211,10 @@ def test_rpca_tiles_equal_untiled_against_loopback_scheduler(scheduler, tmp_path
 
     P = _cloud()
     np.save(tmp_path / "c.npy", P)
-    ref = outliers.remove_outliers(P, block_size=1600)
+    opts = outliers.RPCAOptions(block_size=1600)
+    ref = outliers.remove_outliers(P, options=opts)
     r = sgd.remove_outliers_tiled(
-        tmp_path / "c.npy", None, tile=1600, scheduler=scheduler, block_size=1600
+        tmp_path / "c.npy", None, sgd.TileOptions(1600, scheduler=scheduler), options=opts
     )
     assert r.n_tiles == 4 and r.info["n_workers"] == 2
     np.testing.assert_array_equal(r.scores, ref.scores)

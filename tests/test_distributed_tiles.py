@@ -22,6 +22,10 @@ from conftest import outlier_recall_precision  # noqa: E402
 THREADS = {"processes": False, "workers": 2}
 
 
+def _tiles(tile: int, **kw):
+    return distributed.TileOptions(tile, **THREADS, **kw)
+
+
 def _surface(n=16_000, n_out=0, seed=0):
     """A folded height field (a crease along x = 0.5, bumps) plus uniform outliers in the volume."""
     rng = np.random.default_rng(seed)
@@ -55,8 +59,7 @@ def test_saliency_tiled_equals_untiled(cloud, tmp_path):
     d, X = cloud
     ref = saliency.pointcloud_saliency(X, k=20)
     r = distributed.saliency_tiled(
-        d / "c.npy", tmp_path / "s.npy", tile=3000, k=20, chunk=2500, return_values=True,
-        **THREADS,
+        d / "c.npy", tmp_path / "s.npy", _tiles(3000, chunk=2500), k=20, return_values=True,
     )  # fmt: skip
     assert r.n_tiles >= 4
     assert r.info["halo_fraction_mean"] > 0
@@ -68,8 +71,8 @@ def test_saliency_tiled_raw_values_and_csv(cloud, tmp_path):
     d, X = cloud
     ref = saliency.pointcloud_saliency(X, k=12, normal_k=16, normalize=False)
     r = distributed.saliency_tiled(
-        d / "c.npy", tmp_path / "s.csv", tile=2000, k=12, normal_k=16, normalize=False,
-        return_values=True, **THREADS,
+        d / "c.npy", tmp_path / "s.csv", _tiles(2000), k=12, normal_k=16, normalize=False,
+        return_values=True,
     )  # fmt: skip
     assert r.n_tiles >= 8
     np.testing.assert_allclose(r.values, ref, rtol=1e-12, atol=0)
@@ -99,8 +102,8 @@ def test_robot_filter_tiled_equals_untiled(cloud, tmp_path):
     d, X = cloud
     ref = outliers.bilateral_point_filter(X, 7, n_iter=2)
     r = distributed.robot_denoise_tiled(
-        d / "c.npy", tmp_path / "r.npy", tile=3000, n_iter=2, outlier_removal=False,
-        chunk=2500, return_arrays=True, **THREADS,
+        d / "c.npy", tmp_path / "r.npy", _tiles(3000, chunk=2500), n_iter=2,
+        outlier_removal=False, return_arrays=True,
     )  # fmt: skip
     assert r.n_tiles >= 4 and r.n_kept == X.shape[0]
     assert len(r.info["sigma1"]) == 2
@@ -112,8 +115,8 @@ def test_robot_tiled_one_tile_equals_pipeline(cloud, tmp_path):
     d, X = cloud
     ref = outliers.robot_pipeline(X)
     r = distributed.robot_denoise_tiled(
-        d / "c.npy", tmp_path / "r.npy", tile=100_000, return_arrays=True, processes=False,
-        workers=1,
+        d / "c.npy", tmp_path / "r.npy",
+        distributed.TileOptions(100_000, processes=False, workers=1), return_arrays=True,
     )  # fmt: skip
     assert r.n_tiles == 1
     np.testing.assert_array_equal(r.keep, ref.keep)
@@ -127,7 +130,7 @@ def test_robot_tiled_many_tiles_close_to_pipeline(cloud, tmp_path):
     d, X = cloud
     ref = outliers.robot_pipeline(X)
     r = distributed.robot_denoise_tiled(
-        d / "c.npy", tmp_path / "r.npy", tile=3000, return_arrays=True, **THREADS
+        d / "c.npy", tmp_path / "r.npy", _tiles(3000), return_arrays=True
     )
     assert r.n_tiles >= 4
     # both runs find the outliers: measured on _surface(n_out=160, seed=0..11) recall 0.99-1.0
@@ -153,12 +156,11 @@ def test_robot_tiled_equals_pipeline_at_block_size(cloud, tmp_path, monkeypatch)
     # tiles the tiled run uses (tile >= block_size): same keep mask, points to rounding
     import spectrageo.outliers.rpca as rp
 
-    monkeypatch.setattr(rp, "BLOCK_SIZE", 3000)
-    monkeypatch.setitem(rp.rpca_scores.__kwdefaults__, "block_size", 3000)
+    monkeypatch.setattr(rp, "BLOCK_SIZE", 3000)  # the default of RPCAOptions(block_size=None)
     d, X = cloud
     ref = outliers.robot_pipeline(X)
     r = distributed.robot_denoise_tiled(
-        d / "c.npy", tmp_path / "r.npy", tile=5000, return_arrays=True, **THREADS
+        d / "c.npy", tmp_path / "r.npy", _tiles(5000), return_arrays=True
     )
     assert r.n_tiles == 8
     np.testing.assert_array_equal(r.keep, ref.keep)
@@ -231,8 +233,9 @@ def test_tiled_bad_arguments(tmp_path, func, kw, match):
     np.save(tmp_path / "c.npy", _surface(300))
     args = {"tile": 100, **kw}
     dst = tmp_path / args.pop("dst", "o.npy")
+    tiling = distributed.TileOptions(args.pop("tile"))
     with pytest.raises(InvalidInputError, match=match):
-        getattr(distributed, func)(tmp_path / "c.npy", dst, **args)
+        getattr(distributed, func)(tmp_path / "c.npy", dst, tiling, **args)
 
 
 def test_robot_tiled_las_round_trip(tmp_path):
@@ -242,8 +245,8 @@ def test_robot_tiled_las_round_trip(tmp_path):
     src = io.read(tmp_path / "c.las").points
     ref = outliers.bilateral_point_filter(src, 7)
     r = distributed.robot_denoise_tiled(
-        tmp_path / "c.las", tmp_path / "o.las", tile=1000, outlier_removal=False, chunk=700,
-        return_arrays=True, **THREADS,
+        tmp_path / "c.las", tmp_path / "o.las", _tiles(1000, chunk=700), outlier_removal=False,
+        return_arrays=True,
     )  # fmt: skip
     assert r.n_tiles >= 4
     np.testing.assert_allclose(r.points, ref, rtol=0, atol=1e-9)

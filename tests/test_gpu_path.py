@@ -23,7 +23,7 @@ from spectrageo import _device as devmod
 from spectrageo._device import resolve_backend, resolve_device
 from spectrageo._errors import InvalidInputError
 from spectrageo.cli.main import main
-from spectrageo.outliers import remove_outliers, rpca_scores
+from spectrageo.outliers import RPCAOptions, remove_outliers, rpca_scores
 
 from conftest import shared_file
 
@@ -106,10 +106,10 @@ def test_cpu_path_needs_no_torch():
         "import sys; sys.modules['torch'] = None\n"
         "import numpy as np\n"
         "from spectrageo._device import resolve_device\n"
-        "from spectrageo.outliers import rpca_scores\n"
+        "from spectrageo.outliers import RPCAOptions, rpca_scores\n"
         "assert resolve_device('auto') == 'cpu'\n"
         "P = np.random.default_rng(0).random((300, 3))\n"
-        "r = rpca_scores(P, device='auto', refine=False, clusters=False)\n"
+        "r = rpca_scores(P, options=RPCAOptions(refine=False, clusters=False), device='auto')\n"
         "assert np.isfinite(r.scores).all()\n"
         "print('ok')\n"
     )
@@ -151,9 +151,9 @@ def test_torch_path_matches_numba_on_bunny(bunny, pattern):
 @pytest.mark.parametrize(
     "opts, tol",
     [
-        (dict(smoothed=True, block_size=1000), TOL),
-        (dict(dtype="float64", rank_tol=0.0), TOL64),
-        (dict(refine=False, tangent_weight=1.0), TOL),
+        (dict(smoothed=True, options=RPCAOptions(block_size=1000)), TOL),
+        (dict(options=RPCAOptions(dtype="float64", rank_tol=0.0)), TOL64),
+        (dict(options=RPCAOptions(refine=False, tangent_weight=1.0)), TOL),
     ],
 )
 def test_torch_path_matches_numba_options(opts, tol):
@@ -172,8 +172,9 @@ def test_torch_path_degenerate_line():
     """Collinear points (rank-1 patches): both paths agree."""
     t = np.random.default_rng(0).random(200)
     P = np.column_stack([t, 2 * t, -t])
-    a = rpca_scores(P, workers=1, refine=False, clusters=False)
-    b = rpca_scores(P, workers=1, refine=False, clusters=False, device=TORCH_CPU)
+    opts = RPCAOptions(refine=False, clusters=False)
+    a = rpca_scores(P, options=opts, workers=1)
+    b = rpca_scores(P, options=opts, workers=1, device=TORCH_CPU)
     assert np.max(np.abs(a.scores - b.scores)) <= TOL
 
 
@@ -298,11 +299,12 @@ def test_cuda_matches_cpu_on_bunny(bunny, pattern):
 @needs_cuda
 def test_cuda_matches_cpu_options():
     P = _sheet()
-    opts = dict(smoothed=True, block_size=1000)
+    opts = dict(smoothed=True, options=RPCAOptions(block_size=1000))
     a = rpca_scores(P, **opts)
     b = rpca_scores(P, device="cuda", **opts)
     assert np.max(np.abs(a.scores - b.scores)) <= TOL
     assert np.max(np.abs(a.smoothed - b.smoothed)) <= TOL * a.spacing
-    c = rpca_scores(P, dtype="float64", rank_tol=0.0)
-    d = rpca_scores(P, dtype="float64", rank_tol=0.0, device="cuda")
+    exact = RPCAOptions(dtype="float64", rank_tol=0.0)
+    c = rpca_scores(P, options=exact)
+    d = rpca_scores(P, options=exact, device="cuda")
     assert np.max(np.abs(c.scores - d.scores)) <= TOL64

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from spectrageo import io, noise
-from spectrageo.outliers import remove_outliers, rpca_scores
+from spectrageo.outliers import RPCAOptions, remove_outliers, rpca_scores
 from spectrageo.outliers._clusters import cluster_outliers
 
 from conftest import shared_file
@@ -83,7 +83,7 @@ def test_rpca_scores_clusters_option_and_input_order():
     r = rpca_scores(Q, 10)
     assert r.clusters is not None and r.clusters.shape == (Q.shape[0],)
     assert _f1(r.clusters, lab) >= 0.9  # input order: the flags match the labels
-    assert rpca_scores(Q, 10, clusters=False).clusters is None
+    assert rpca_scores(Q, 10, RPCAOptions(clusters=False)).clusters is None
     # duplicates: every copy gets the flag of its position
     D = np.vstack([Q, Q[:50]])
     rd = rpca_scores(D, 10)
@@ -99,7 +99,7 @@ def test_blobs_on_a_real_scan(shared_data):
     assert clean.info["n_cluster_outliers"] <= 0.002 * P.shape[0]
     Q, lab = noise.corrupt_outliers(P, pattern="blobs", fraction=0.1, rng=0)
     on = remove_outliers(Q, return_points=False)
-    off = remove_outliers(Q, return_points=False, clusters=False)
+    off = remove_outliers(Q, return_points=False, options=RPCAOptions(clusters=False))
     f_on, f_off = _f1(~on.keep, lab), _f1(~off.keep, lab)
     assert f_on >= 0.93 and f_on >= f_off + 0.1
     assert on.info["n_cluster_outliers"] > 0 and off.info["n_cluster_outliers"] == 0

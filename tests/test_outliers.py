@@ -12,6 +12,7 @@ from spectrageo import noise
 from spectrageo._errors import InvalidInputError
 from spectrageo.geometry import PointCloud, PointCloudSequence
 from spectrageo.outliers import (
+    RPCAOptions,
     auto_threshold,
     bilateral_point_filter,
     clean_sequence,
@@ -87,24 +88,18 @@ def test_knn_patch_matrix_given_neighbours_and_errors():
 
 def test_rpca_scores_match_linalg_rpca():
     """The fused patch solver gives the decomposition of spectrageo.linalg.rpca on the explicit M."""
+    from spectrageo.linalg import RPCASolverOptions as LinalgOptions
     from spectrageo.linalg import rpca
 
     P, _ = noise.add_outliers(_sphere(400), fraction=0.05, kind="far", rng=1)
     k = 6
-    r = rpca_scores(
-        P,
-        k,
-        rho=1.5,
-        tol=1e-9,
-        max_iter=500,
-        block_size=10**6,
-        refine=False,
-        tangent_weight=1,
-        **EXACT,
+    opts = RPCAOptions(
+        rho=1.5, tol=1e-9, max_iter=500, block_size=10**6, refine=False, tangent_weight=1, **EXACT
     )
+    r = rpca_scores(P, k, opts)
     # explicit reference on the same normalised coordinates
     M = knn_patch_matrix((P - P.mean(axis=0)) / r.spacing, k)
-    ref = rpca(M, method="ialm", rho=1.5, tol=1e-9, max_iter=500)
+    ref = rpca(M, method="ialm", tol=1e-9, max_iter=500, options=LinalgOptions(rho=1.5))
     s_ref = np.linalg.norm(ref.sparse[:, 0].reshape(-1, 3), axis=1)
     np.testing.assert_allclose(r.scores, s_ref, atol=1e-5 * max(1.0, s_ref.max()))
 
@@ -112,6 +107,7 @@ def test_rpca_scores_match_linalg_rpca():
 def test_rpca_refinement_rebuilds_outlier_patches_and_subtracts_baseline():
     """Steps 5-6 of rpca_scores, recomputed independently from the plain scores of the pieces."""
     from spectrageo.graph import knn
+    from spectrageo.linalg import RPCASolverOptions as LinalgOptions
     from spectrageo.linalg import rpca
     from spectrageo.outliers import rpca as rp
 
@@ -120,8 +116,8 @@ def test_rpca_refinement_rebuilds_outlier_patches_and_subtracts_baseline():
     P = np.concatenate([_plane(25), rng.uniform([-0.5, -0.5, 0.3], [1.5, 1.5, 0.8], (100, 3))])
     k = 6
     kw = dict(tangent_weight=1, tol=1e-9, rho=1.5, max_iter=500, **EXACT)
-    plain = rpca_scores(P, k, refine=False, **kw)
-    r = rpca_scores(P, k, second_pass="full", **kw)
+    plain = rpca_scores(P, k, RPCAOptions(refine=False, **kw))
+    r = rpca_scores(P, k, RPCAOptions(second_pass="full", **kw))
     assert r.n_refined > 0 and plain.n_refined == 0
     # reference: flag, rebuild the patches made mostly of flagged points, rerun Algorithm 14
     s1 = plain.scores
@@ -136,7 +132,7 @@ def test_rpca_refinement_rebuilds_outlier_patches_and_subtracts_baseline():
         d[kept == i] = np.inf
         idx[i] = kept[np.argsort(d, kind="stable")[:k]]
     M = knn_patch_matrix((P - P.mean(axis=0)) / plain.spacing, k, neighbors=idx)
-    ref = rpca(M, method="ialm", rho=1.5, tol=1e-9, max_iter=500)
+    ref = rpca(M, method="ialm", tol=1e-9, max_iter=500, options=LinalgOptions(rho=1.5))
     s2 = np.linalg.norm(ref.sparse[:, 0].reshape(-1, 3), axis=1)
     expect = np.maximum(s2 - np.median(s1[idx], axis=1), 0.0)
     np.testing.assert_allclose(r.scores, expect, atol=1e-4 * max(1.0, expect.max()))
@@ -150,7 +146,7 @@ def test_rpca_refinement_rebuilds_outlier_patches_and_subtracts_baseline():
 
     assert best_f1(plain.scores) < 0.99 < best_f1(r.scores)
     # the default second pass (rebuilt rows replayed with Gram-corrected operators) agrees
-    rep = rpca_scores(P, k, **kw)
+    rep = rpca_scores(P, k, RPCAOptions(**kw))
     assert rep.n_refined == r.n_refined
     assert best_f1(rep.scores) > 0.99
     np.testing.assert_allclose(rep.scores, r.scores, atol=0.02 * max(1.0, r.scores.max()))
@@ -167,21 +163,24 @@ def _neighbour_normals(P, idx):
 def test_tangent_weighted_scores_match_reference(w):
     """Step 7 of rpca_scores against numpy: residual split along / across the neighbours' normal."""
     from spectrageo.graph import knn
+    from spectrageo.linalg import RPCASolverOptions as LinalgOptions
     from spectrageo.linalg import rpca
 
     P, _ = noise.add_outliers(_sphere(400), fraction=0.05, kind="far", rng=3)
     k = 6
     kw = dict(rho=1.5, tol=1e-9, max_iter=500)
-    r = rpca_scores(P, k, refine=False, tangent_weight=w, **kw, **EXACT)
+    r = rpca_scores(P, k, RPCAOptions(refine=False, tangent_weight=w, **kw, **EXACT))
     M = knn_patch_matrix((P - P.mean(axis=0)) / r.spacing, k)
-    S = rpca(M, method="ialm", **kw).sparse[:, 0].reshape(-1, 3)
+    opts = LinalgOptions(rho=kw["rho"])
+    res = rpca(M, method="ialm", tol=kw["tol"], max_iter=kw["max_iter"], options=opts)
+    S = res.sparse[:, 0].reshape(-1, 3)
     nrm = _neighbour_normals(P, knn(P, k)[0])
     sn = np.einsum("ij,ij->i", S, nrm)
     st = np.linalg.norm(S - sn[:, None] * nrm, axis=1)
     expect = np.hypot(sn, w * st)
     np.testing.assert_allclose(r.scores, expect, atol=1e-5 * max(1.0, expect.max()))
     if w == 0.0:  # weighting can only shrink the plain norm
-        plain = rpca_scores(P, k, refine=False, tangent_weight=1, **kw, **EXACT).scores
+        plain = rpca_scores(P, k, RPCAOptions(refine=False, tangent_weight=1, **kw, **EXACT)).scores
         assert np.all(r.scores <= plain + 1e-9) and np.any(r.scores < 0.5 * plain)
 
 
@@ -193,7 +192,7 @@ def test_tangent_weight_separates_normal_from_tangential_offsets():
     Q = P.copy()
     Q[i_n, 2] += 1.5 * h
     Q[i_t, 0] += 0.45 * h  # stays inside the sampling, only irregularity
-    plain = rpca_scores(Q, 8, tangent_weight=1).scores
+    plain = rpca_scores(Q, 8, RPCAOptions(tangent_weight=1)).scores
     weighted = rpca_scores(Q, 8).scores
     assert weighted[i_n] > 0.5
     # relative to the clean points' level, the weighted score singles out the normal offset more
@@ -202,9 +201,9 @@ def test_tangent_weight_separates_normal_from_tangential_offsets():
         plain[others], 99
     )
     with pytest.raises(InvalidInputError, match="tangent_weight"):
-        rpca_scores(Q, 8, tangent_weight=1.5)
+        RPCAOptions(tangent_weight=1.5)
     with pytest.raises(InvalidInputError, match="tangent_weight"):
-        rpca_scores(Q, 8, tangent_weight=-0.1)
+        RPCAOptions(tangent_weight=-0.1)
 
 
 def test_rpca_scores_invariances():
@@ -219,8 +218,8 @@ def test_rpca_scores_invariances():
 def test_rpca_blocks_bound_memory_and_agree():
     P, lab = noise.add_outliers(_sphere(3000), fraction=0.1, kind="far", rng=4)
     one = rpca_scores(P, 8)
-    many = rpca_scores(P, 8, block_size=700, partition="blocks")
-    tiles = rpca_scores(P, 8, block_size=700)  # partition="tiles": 2^3 k-d tiles with halos
+    many = rpca_scores(P, 8, RPCAOptions(block_size=700, partition="blocks"))
+    tiles = rpca_scores(P, 8, RPCAOptions(block_size=700))  # "tiles": 2^3 k-d tiles with halos
     assert many.n_blocks == 5 and one.n_blocks == 1 and tiles.n_blocks == 8
     # block-wise RPCA is a different (independent) decomposition but flags the same outliers
     for r in (one, many, tiles):
@@ -234,7 +233,7 @@ def test_rpca_tiles_with_many_copies():
     # positions (as the single-block path does) and gives every copy its position's score
     rng = np.random.default_rng(0)
     X = np.r_[np.zeros((3000, 3)) + 5.0, rng.random((200, 3))]
-    r = rpca_scores(X, 10, block_size=1000)
+    r = rpca_scores(X, 10, RPCAOptions(block_size=1000))
     assert np.isfinite(r.scores).all()
     assert np.ptp(r.scores[:3000]) == 0.0
     one = rpca_scores(X, 10)  # one block: the same deduplicated problem
@@ -251,17 +250,17 @@ def _plane_and_box(seed=0):
 
 
 def test_rpca_tiles_with_an_empty_tile():
-    from spectrageo.distributed._tiled import _memory_tiles
+    from spectrageo.outliers._tiles import memory_tiles
 
     X = _plane_and_box()
-    assert min(len(r) for r in _memory_tiles(X, 1000).spill.rows) == 0
-    r = rpca_scores(X, 10, block_size=1000)
+    assert min(len(r) for r in memory_tiles(X, 1000).spill.rows) == 0
+    r = rpca_scores(X, 10, RPCAOptions(block_size=1000))
     assert r.n_blocks == 4 and np.isfinite(r.scores).all()
 
 
 def test_rpca_threaded_ranges_match_single_thread(monkeypatch):
     """Splitting a block into point ranges on threads sums the same Gram matrices and residuals."""
-    import spectrageo.outliers.rpca as rp
+    import spectrageo.outliers._rpca_solver as rp
 
     P, _ = noise.add_outliers(_sphere(2500), fraction=0.1, kind="far", rng=6)
     one = rpca_scores(P, 8, workers=1, smoothed=True)
@@ -296,14 +295,14 @@ def test_rpca_smoothed_is_close_to_points():
 def test_rpca_nonconvergence_policies():
     P, _ = noise.add_outliers(_sphere(300), fraction=0.1, kind="far", rng=5)
     with pytest.warns(Warning, match="did not converge"):
-        rpca_scores(P, 8, max_iter=1)
+        rpca_scores(P, 8, RPCAOptions(max_iter=1))
     from spectrageo._errors import ConvergenceError
 
     with pytest.raises(ConvergenceError):
-        rpca_scores(P, 8, max_iter=1, on_nonconvergence="raise")
+        rpca_scores(P, 8, RPCAOptions(max_iter=1, on_nonconvergence="raise"))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        r = rpca_scores(P, 8, max_iter=1, on_nonconvergence="ignore")
+        r = rpca_scores(P, 8, RPCAOptions(max_iter=1, on_nonconvergence="ignore"))
     assert not r.converged and r.n_iter == 1
 
 
@@ -422,13 +421,13 @@ def test_malformed_inputs():
     with pytest.raises(InvalidInputError, match="threshold"):
         remove_outliers(_plane(5), threshold=-1.0)
     with pytest.raises(InvalidInputError, match="apply to method='rpca' only"):
-        remove_outliers(_plane(5), method="sor", rho=2.0)
+        remove_outliers(_plane(5), method="sor", options=RPCAOptions(rho=2.0))
     with pytest.raises(InvalidInputError, match="`k`"):
         remove_outliers(_plane(5), k=0)
     with pytest.raises(InvalidInputError, match="rho"):
-        rpca_scores(_plane(5), 4, rho=1.0)
+        RPCAOptions(rho=1.0)
     with pytest.raises(InvalidInputError, match="block_size"):
-        rpca_scores(_plane(5), 4, block_size=3)
+        rpca_scores(_plane(5), 4, RPCAOptions(block_size=3))
     with pytest.raises(InvalidInputError, match="nonfinite"):
         remove_outliers(_plane(5), nonfinite="keep")
 

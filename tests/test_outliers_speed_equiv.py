@@ -17,18 +17,19 @@ from scipy.spatial import cKDTree
 
 from spectrageo import noise
 from spectrageo._errors import InvalidInputError
+from spectrageo.outliers import RPCAOptions, remove_outliers, rpca_scores
 from spectrageo.outliers import _grid as grid
 from spectrageo.outliers import _kernels as kern
-from spectrageo.outliers import remove_outliers, rpca_scores
 from spectrageo.outliers._common import (
     SortedCloud,
     knn_chunked,
     knn_grid,
     morton_codes,
     sort_codes,
+    spacing_from,
 )
 
-EXACT = dict(dtype="float64", rank_tol=0.0, second_pass="full")
+EXACT = RPCAOptions(dtype="float64", rank_tol=0.0, second_pass="full")
 
 
 def _surface_with_outliers(n=3000, frac=0.1, seed=0):
@@ -210,8 +211,8 @@ def test_patch_median_and_flag_counts_match_numpy():
 def test_float32_state_matches_float64():
     """Same stopping rule, float32 state: scores within 1e-3 spacings of the float64 path."""
     Q, _ = _surface_with_outliers(3000, seed=10)
-    a = rpca_scores(Q, 10, dtype="float64", rank_tol=0.0)
-    b = rpca_scores(Q, 10, dtype="float32", rank_tol=0.0)
+    a = rpca_scores(Q, 10, RPCAOptions(dtype="float64", rank_tol=0.0))
+    b = rpca_scores(Q, 10, RPCAOptions(dtype="float32", rank_tol=0.0))
     assert a.n_iter == b.n_iter and a.n_refined == b.n_refined
     np.testing.assert_allclose(b.scores, a.scores, atol=1e-3, rtol=1e-3)
 
@@ -220,7 +221,7 @@ def test_float32_state_matches_float64():
 def test_default_fast_path_matches_reference(seed):
     """Default (float32, ranking stop) against the reference path: same decisions, same F1."""
     Q, lab = _surface_with_outliers(4000, seed=seed)
-    ref = remove_outliers(Q, return_points=False, **EXACT)
+    ref = remove_outliers(Q, return_points=False, options=EXACT)
     fast = remove_outliers(Q, return_points=False)
     assert fast.info["converged"] and fast.info["n_iter"] <= ref.info["n_iter"]
     # scores in spacing units: nearly all within a twentieth of a spacing
@@ -230,7 +231,7 @@ def test_default_fast_path_matches_reference(seed):
     f_ref, f_fast = _f1(~ref.keep, lab), _f1(~fast.keep, lab)
     assert f_fast > 0.8 and abs(f_fast - f_ref) < 0.01
     # and the opt-in valley rule on the same scores
-    v_ref = remove_outliers(Q, return_points=False, threshold_rule="valley", **EXACT)
+    v_ref = remove_outliers(Q, return_points=False, threshold_rule="valley", options=EXACT)
     v_fast = remove_outliers(Q, return_points=False, threshold_rule="valley")
     assert abs(_f1(~v_fast.keep, lab) - _f1(~v_ref.keep, lab)) < 0.01
 
@@ -239,8 +240,8 @@ def test_aggressive_rank_rule_keeps_the_decisions():
     """rank_tol = 0.05 (16x the default) stops the ALM two iterations early on a generated sheet;
     the keep mask and F1 stay those of the reference path."""
     Q, lab = _surface_with_outliers(4000, seed=11)
-    ref = remove_outliers(Q, return_points=False, **EXACT)
-    fast = remove_outliers(Q, return_points=False, rank_tol=0.05)
+    ref = remove_outliers(Q, return_points=False, options=EXACT)
+    fast = remove_outliers(Q, return_points=False, options=RPCAOptions(rank_tol=0.05))
     assert fast.info["n_iter"] < ref.info["n_iter"]
     assert np.quantile(np.abs(fast.scores - ref.scores), 0.99) < 0.05
     assert np.mean(fast.keep != ref.keep) < 0.002
@@ -257,7 +258,7 @@ def test_default_fast_path_on_real_scan(shared_data, pattern):
 
     P = io.read(shared_data / "scans/bunny/bun000.ply.gz", kind="points").points
     Q, lab = noise.corrupt_outliers(P, pattern=pattern, fraction=0.1, rng=0)
-    ref = remove_outliers(Q, return_points=False, **EXACT)
+    ref = remove_outliers(Q, return_points=False, options=EXACT)
     fast = remove_outliers(Q, return_points=False)
     assert fast.info["n_iter"] <= ref.info["n_iter"]
     diff = np.abs(fast.scores - ref.scores)
@@ -271,17 +272,17 @@ def test_default_fast_path_on_real_scan(shared_data, pattern):
 
 def test_rank_rule_never_needs_more_iterations_and_validates():
     Q, _ = _surface_with_outliers(2000, seed=13)
-    off = rpca_scores(Q, 10, rank_tol=0.0)
-    on = rpca_scores(Q, 10, rank_tol=0.05)
+    off = rpca_scores(Q, 10, RPCAOptions(rank_tol=0.0))
+    on = rpca_scores(Q, 10, RPCAOptions(rank_tol=0.05))
     assert on.n_iter <= off.n_iter and on.converged
     with pytest.raises(InvalidInputError, match="rank_tol"):
-        rpca_scores(Q, 10, rank_tol=1.0)
+        RPCAOptions(rank_tol=1.0)
     with pytest.raises(InvalidInputError, match="rank_tol"):
-        rpca_scores(Q, 10, rank_tol=-0.1)
+        RPCAOptions(rank_tol=-0.1)
     with pytest.raises(InvalidInputError, match="dtype"):
-        rpca_scores(Q, 10, dtype="float16")
+        RPCAOptions(dtype="float16")
     with pytest.raises(InvalidInputError, match="dtype"):
-        rpca_scores(Q, 10, dtype="not a dtype")
+        RPCAOptions(dtype="not a dtype")
 
 
 def test_workers_one_gives_the_same_scores():
@@ -298,7 +299,8 @@ def test_scores_do_not_depend_on_the_thread_count(dtype):
     when they did, float64 scores differed by 8e-9 here and float32 ones by 3e-5 on 1.1M
     points, enough to move the automatic threshold of a tiled run)."""
     Q, _ = _surface_with_outliers(45000, seed=16)
-    runs = [remove_outliers(Q, workers=w, dtype=dtype, return_points=False) for w in (1, 2, 3)]
+    opts = RPCAOptions(dtype=dtype)
+    runs = [remove_outliers(Q, workers=w, options=opts, return_points=False) for w in (1, 2, 3)]
     for r in runs[1:]:
         np.testing.assert_array_equal(r.scores, runs[0].scores)
         np.testing.assert_array_equal(r.keep, runs[0].keep)
@@ -309,15 +311,15 @@ def test_scores_do_not_depend_on_the_thread_count(dtype):
 def test_replay_of_unchanged_patches_reproduces_the_first_pass(dtype):
     """Step 5's replay on rows whose patches did not change gives their first-pass scores (the
     Gram correction is then zero and the recorded operators are reapplied)."""
-    from spectrageo.outliers import rpca as rp
+    from spectrageo.outliers import _rpca_solver as rp
 
     Q, _ = _surface_with_outliers(3000, seed=15)
     sc = SortedCloud.of(Q)
     nb = knn_grid(sc, 10)
-    h = rp.spacing_from(nb.dmean)
+    h = spacing_from(nb.dmean)
     record: list = []
     kw = dict(lam=None, rho=3.0, tol=1e-4, rank_tol=3e-3, max_iter=200, block_size=10**6)
-    scores, _, S, *_ = rp._solve_blocks(
+    scores, _, S, *_ = rp.solve_blocks(
         sc.points,
         h,
         nb.idx,
@@ -333,7 +335,7 @@ def test_replay_of_unchanged_patches_reproduces_the_first_pass(dtype):
     S2 = S.copy()
     S2[rows] = 0.0
     again[rows] = -1.0
-    rp._replay_blocks(
+    rp.replay_blocks(
         sc.points,
         h,
         nb.idx,

@@ -1,7 +1,8 @@
 """Outlier removal for point clouds and point-cloud sequences (thesis Section 5.4).
 
-* :func:`remove_outliers` -- Algorithm 14 (RPCA of the kNN patch matrix, Eq. 5.98-5.99) and the
-  statistical / radius baselines, one contract (``keep`` mask, ``scores``, kept ``points``).
+* :func:`remove_outliers` -- Algorithm 14 (RPCA of the kNN patch matrix, Eq. 5.98-5.99, options
+  :class:`RPCAOptions`) and the statistical / radius baselines, one contract (``keep`` mask,
+  ``scores``, kept ``points``).
 * :func:`robot_pipeline` -- Section 5.4.2: RPCA removal, k = 7 connectivity, bilateral filtering
   (Eq. 5.100-5.101).
 * :func:`clean_sequence` -- Section 5.4.3: spatio-temporal RPCA (Eq. 5.102-5.103) and weighted
@@ -9,7 +10,7 @@
 """
 
 from .robot import RobotResult, bilateral_point_filter, knn_triangles, robot_pipeline
-from .rpca import PatchRPCAResult, knn_patch_matrix, rpca_scores
+from .rpca import PatchRPCAResult, RPCAOptions, knn_patch_matrix, rpca_scores
 from .sequence import SequenceResult, clean_sequence, weighted_laplacian
 from .static import (
     OutlierResult,
@@ -23,6 +24,7 @@ from .static import (
 __all__ = [
     "OutlierResult",
     "PatchRPCAResult",
+    "RPCAOptions",
     "RobotResult",
     "SequenceResult",
     "auto_threshold",

@@ -1,44 +1,17 @@
-r"""Small volumetric clusters: outliers that gather into blobs away from the surface.
+r"""Small volumetric clusters: outliers that gather into blobs away from the surface (step 8 of
+:func:`spectrageo.outliers.rpca_scores`).
 
-Why. The RPCA score of Eq. (5.99) measures how far a point lies from the low-rank consensus of
-its own ``k``-nearest-neighbour patch, and the local baseline of
-:func:`spectrageo.outliers.rpca_scores` (step 6) subtracts the level of the patch around it.
-Both assume that a point's neighbours are mostly inliers. Outliers that come in clusters
-(spray, dust, reflections, a second return hitting a small object, the ``"blobs"`` pattern of
-:func:`spectrageo.noise.corrupt_outliers`) have only other outliers as neighbours: their patch is
-a small cloud of its own, its consensus is the cluster, and the score stays low (median 0.3-1.9
-spacings on the tuning scans with 10-30 % of blob points, against thresholds of 0.4-0.7).
-
-Rule. With ``h`` the point spacing of the RPCA (median over points of the mean distance to the
-``k`` nearest neighbours), link ``i`` and ``j`` when ``j`` is among the ``k`` nearest neighbours of
-``i`` and ``|v_i - v_j| <= a h`` (``a = radius``), and take the connected components of that graph
-(union-find over the ``n k`` kNN edges: ``O(n k)`` time, ``O(n)`` extra memory, no radius search).
-A component ``C`` is a cluster of outliers when
+Link ``i`` and ``j`` when ``j`` is among the ``k`` nearest neighbours of ``i`` and ``|v_i - v_j|
+<= a h`` (``h`` the point spacing), take the connected components (union-find over the kNN
+edges) and flag a component ``C`` when
 
 .. math::
 
     4 \le |C| \le \min(N_{max}, \lfloor n / 10 \rfloor) \quad\text{and}\quad
     \lambda_3(\Sigma_C) / \operatorname{tr}\Sigma_C > f,
 
-with ``Sigma_C`` the covariance of its points, ``lambda_3`` its smallest eigenvalue,
-``N_max = max_size`` and ``f = min_thickness``; the largest component is never flagged. The
-thickness test keeps small pieces of *surface* that the scan holds apart from the rest (a
-separate small object, a fragment beyond a gap: flat, ``lambda_3 / tr`` near 0) and flags
-volumetric blobs (an isotropic cluster has ``lambda_3 / tr`` near 1/3). Components of fewer than
-four points (isolated points and pairs farther than ``a h`` from everything) have no defined
-thickness; they are left to the RPCA score, which finds isolated far points on its own.
-Lower bound :data:`CLUSTER_MIN` = 4: chosen on the tuning split; see
-docs/decisions.md#outlier-rpca-constants.
-
-Constants: :data:`CLUSTER_RADIUS` = 3 and :data:`CLUSTER_MAX` = 150 were chosen on the tuning
-split of :mod:`spectrageo.evaluate.outliers` (``uniform``, ``halo`` and ``blobs`` on its four
-scans, 5/10/30 %; ``a`` in {2, 3, 4}, ``N_max`` in {60, 150, 400}); :data:`CLUSTER_THICKNESS` =
-0.05 was set once (a flat piece has a ratio near 0, an isotropic blob near 1/3) and not swept.
-With ``a = 3`` and ``N_max = 150`` the F1
-of ``rpca`` on blobs rose from 0.60-0.78 to 0.72-0.98, uniform and halo moved by -0.01 to
-+0.03, and 0.00-0.21 % of the points of the unmodified tuning scans fall in flagged components
-(``a = 2`` split the stereo scan's surface into pieces, 4 % flagged without the thickness test;
-``a = 4`` merged more blobs with the surface at 30 %).
+``Sigma_C`` the covariance of its points; the largest component is never flagged. Constants
+chosen on the tuning split; see docs/decisions.md#outliers-cluster-rule.
 """
 
 from __future__ import annotations

@@ -102,7 +102,7 @@ def morton_order(P: np.ndarray) -> np.ndarray:
     """Permutation sorting ``P`` along a Z-order (Morton) curve of 21 bits per axis.
 
     Visiting points in this order keeps spatial neighbours close in memory, which makes kd-tree
-    queries and the gathers of the patch matrix cache-friendly (3-4x faster kNN on shuffled clouds).
+    queries and the gathers of the patch matrix cache-friendly.
     """
     if P.shape[0] < 2:
         return np.arange(P.shape[0])
@@ -110,10 +110,9 @@ def morton_order(P: np.ndarray) -> np.ndarray:
 
 
 def sort_codes(codes: np.ndarray) -> np.ndarray:
-    """``np.argsort(codes, kind="stable")``, faster: numpy's quicksort of integers (vectorised,
-    several times faster than its stable sort here), then the stable order restored inside runs
-    of equal codes (points within one quantum of each other, rare), so the permutation is the
-    same on every machine whatever sorting kernel numpy dispatches to."""
+    """``np.argsort(codes, kind="stable")``, faster: numpy's quicksort of integers, then the
+    stable order restored inside runs of equal codes, so the permutation is the same on every
+    machine whatever sorting kernel numpy dispatches to."""
     order = np.argsort(codes)
     sc = codes[order]
     tie = sc[1:] == sc[:-1]

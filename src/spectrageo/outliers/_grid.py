@@ -1,27 +1,12 @@
 """Exact k-nearest-neighbour queries on a Morton-sorted cloud: a uniform grid, then an octree.
 
-The cloud is sorted along the Z-order curve of its 21-bit quantised coordinates
-(:func:`spectrageo.outliers._common.morton_codes`), so the points of every grid cell of side
-``2^L`` quanta (the cells whose codes agree above bit ``3L``) are one contiguous run of the sorted
-array, for every level ``L`` at once: a level is the list of its occupied cells (keys
-``code >> 3L`` and the starts of their runs), and the levels nest into an implicit octree built in
-O(n) (no tree nodes are stored beyond those lists).
-
-1. *Grid pass.* The first level ``L0`` is the finest whose cells hold, per point, about
-   :data:`TARGET_PER_CELL` points. A query in cell ``c`` scans the ``3 x 3 x 3`` cells around
-   ``c`` (copied once per cell to a contiguous buffer, nearest cells first) and keeps its ``k``
-   nearest points (itself excluded). Every point outside that block is farther
-   from the query than the distance ``m`` from the query to the block's faces, so the result is
-   *certified exact* when the ``k``-th distance found is below ``m``: most points of a densely
-   sampled surface, with a few dozen distances each.
-2. *Octree pass* for the other queries (isolated outliers, borders, sparse parts): a depth-first
-   branch-and-bound search over the octree of the levels above ``L0`` (children visited nearest
-   first, a cell skipped when its box is farther than the current ``k``-th distance, initially
-   the grid pass's), scanning a cell's points directly once it holds at most
-   :data:`SCAN_RUN` points or is a leaf.
-
-Both passes are exact: the neighbour lists equal those of a kd-tree
-(:class:`scipy.spatial.cKDTree`) up to the order of exactly equidistant points.
+On the Z-order of the 21-bit quantised coordinates the points of every cell of side ``2^L`` quanta
+are one contiguous run, for every level ``L``, so the levels nest into an implicit octree built in
+O(n). *Grid pass*: at the level ``L0`` of about :data:`TARGET_PER_CELL` points per cell, a query
+scans the ``3 x 3 x 3`` cells around its own and is certified exact when its ``k``-th distance is
+below the distance to the block's faces. *Octree pass* for the other queries (isolated points,
+borders): a nearest-first branch-and-bound over the levels above ``L0``. Both are exact: the
+lists equal a kd-tree's up to the order of equidistant points.
 """
 
 from __future__ import annotations
@@ -168,15 +153,9 @@ def _grid_pass(
 ):  # pragma: no cover - compiled
     """Grid pass at level ``L``: the ``k`` nearest data points ``X`` of every query ``Q``.
 
-    The queries are grouped by their level-``L`` cell (group ``g`` is
-    ``Q[gstart[g]:gstart[g+1]]``, cell key ``gkeys[g]``); ``ukeys`` / ``ustarts`` are the occupied
-    data cells and the starts of their runs in ``X``; ``w`` is the cell side and ``lo`` the origin
-    of the quantisation. ``self_idx[q]`` is excluded (``q`` itself when ``self_idx`` is empty:
-    self queries). Writes the neighbours (nearest first) and
-    distances (see :func:`_write`) of every certified query and sets ``bound[q] = -1``; for the others ``bound[q]``
-    is the squared ``k``-th distance found (``inf`` when fewer than ``k`` points were seen).
-    The block's points (at most :data:`BUFMAX`) are copied once per cell to contiguous buffers,
-    nearest cells first, so the distances of a query to all of them vectorise.
+    Queries are grouped by cell (``gstart``, ``gkeys``); ``ukeys`` / ``ustarts`` are the occupied
+    data cells and their runs. Certified queries get their neighbours and ``bound[q] = -1``; the
+    others keep in ``bound[q]`` the squared ``k``-th distance found, for the octree pass.
     """
     ng = gkeys.shape[0]
     maxc = (1 << (BITS - L)) - 1
@@ -500,17 +479,10 @@ def knn_sorted(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Exact kNN of Morton-sorted points by the grid and octree passes of this module.
 
-    ``X`` (n, 3) float64 sorted by ``codes`` (n,) uint64 (non-decreasing), quantised with origin
-    ``lo`` and ``scale`` quanta per unit (:func:`spectrageo.outliers._common.morton_codes`).
-    ``query`` (m, 3) sorted by ``qcodes`` (same quantisation; default: ``X`` itself) and
-    ``self_index[i]`` (or -1) the row of ``X`` that query ``i`` is, excluded from its neighbours
-    (default: ``i`` for self queries, none otherwise). Needs at least ``k`` data points
-    (``k + 1`` for self queries).
-
-    Returns ``(idx, dmean, dlast, dzero)``: ``idx`` (m, k) neighbour rows of ``X`` nearest
-    first (int32 when ``n < 2^31``), the mean and the ``k``-th distance of each query (m,) and
-    whether its nearest neighbour is at distance 0 (m,) bool; the distances themselves are not
-    kept (17 instead of ``8 k`` bytes per query).
+    ``X`` (n, 3) sorted by ``codes`` (quantised with ``lo`` and ``scale``); ``query`` (m, 3) sorted
+    by ``qcodes`` (default ``X``); ``self_index[i]`` the row excluded for query ``i`` (or -1).
+    Returns ``(idx, dmean, dlast, dzero)``: (m, k) neighbour rows nearest first (int32 when
+    ``n < 2^31``), mean and ``k``-th distances and whether the nearest is at distance 0.
     """
     n = X.shape[0]
     if query is None:

@@ -1,22 +1,12 @@
 """Fused numba kernels of the kNN-patch RPCA (Eq. 5.98-5.99) and of the point filters.
 
-The patch matrix ``M`` (``3n x (k+1)``) is never stored: its row ``3r + c`` is gathered from the
-points as ``[P[centers[r], c], P[nbrs[r, 0], c], ..., P[nbrs[r, k-1], c]]``. The solver state is a
-single array ``R = M - E + Y / mu`` with the entries of ``M``; the sparse part and the Lagrange
-multiplier follow from it (``S = R - clip(R, lam/mu)``, ``Y / mu = clip(R, lam/mu)``), as in the
-row-chunked engine of :func:`spectrageo.linalg.rpca`. One call of :func:`patch_ialm_pass` is one
-IALM iteration (Eq. 4.22) over the rows of a range of points: it forms the SVT argument, applies
-the low-rank operator ``W`` (``E = X W``), updates ``R``, and returns ``||M - E - S||_F^2`` and the
-Gram matrix of the next SVT argument over that range. The kernels are serial and release the GIL;
-the caller runs disjoint point ranges on threads and sums the partial results.
-
-Layout: rows are processed in tiles of ``TILE`` points (``3 TILE`` rows), each stored *column by
-column* (``K`` contiguous columns of ``3 nt`` entries, ``nt`` the tile's points), in the tile
-buffers and in ``R`` alike (``R`` is a flat array; the tile of the points ``s .. s + nt`` of a
-range occupies ``R[3 K s : 3 K (s + nt)]``). The two small products of an iteration, ``X W`` and
-the Gram matrix ``X^T X``, are then ``K^2`` (or ``2 K r`` for a rank-``r`` ``W``) axpys and
-``K (K + 1) / 2`` dot products over contiguous columns, which vectorise, instead of BLAS calls on
-``3 TILE x K`` operands (two to three times slower for ``K = 11``).
+``M`` (``3n x (k+1)``) is never stored: row ``3r + c`` is gathered from the points. The solver
+state is ``R = M - E + Y / mu`` (``S = R - clip(R, lam/mu)``, ``Y / mu = clip(R, lam/mu)``). One
+call of :func:`patch_ialm_pass` is one IALM iteration (Eq. 4.22) over a range of points: it forms
+the SVT argument, applies ``E = X W``, updates ``R`` and returns ``||M - E - S||_F^2`` and the
+next Gram matrix. Rows are processed in tiles of ``TILE`` points stored column by column, so
+``X W`` and ``X^T X`` are vectorised loops over contiguous columns. The kernels are serial and
+release the GIL; the caller runs disjoint ranges on threads.
 """
 
 from __future__ import annotations
@@ -78,19 +68,10 @@ def patch_ialm_pass(
 ):  # pragma: no cover - compiled
     """One IALM iteration (Eq. 4.22) over the patch rows of the points ``lo .. hi``.
 
-    ``W`` (K, K) is the singular value thresholding operator of the current SVT argument ``X``
-    (``D_{1/mu}(X) = X W``); when ``A`` (K, r) has ``r < K / 2`` columns, ``W = A B`` (``B``
-    (r, K)) is applied in that factored form. ``tp = lam / mu_prev`` and ``fp = mu_prev / mu``
-    decode the stored ``R`` into the current ``S`` and ``Y / mu``; ``t = lam / mu`` and
-    ``f1 = 1 + mu / mu_next`` encode the next SVT argument ``M - S + Y_new / mu_next``, whose
-    Gram matrix is written to ``G``. After the update, ``E0`` (m, 3) receives the first column of
-    ``E`` (the smoothed point, Eq. 5.99), ``S0`` (m,) the first-column score
-    ``||S[3r:3r+3, 0]||`` and ``V0`` (m, 3; skipped when it has no rows) the residual vector
-    ``S[3r:3r+3, 0]`` of every point. Returns the partial ``||M - E - S||_F^2``.
-
-    Precision: ``Pn``, ``R``, ``W`` and the scalars share one dtype (float32 or float64) for the
-    state, the elementwise steps and ``X W``; the Gram matrix of the next SVT argument is always
-    accumulated in float64 (its small eigenvalues decide the thresholding), as is the residual.
+    Forms the SVT argument, applies ``E = X W`` (factored ``X A B`` while ``W`` has low rank),
+    updates ``R`` with the scalars of the step and writes the next Gram matrix to ``G`` (float64).
+    ``E0`` (m, 3), ``S0`` (m,) and ``V0`` (m, 3, or no rows) receive the first column of ``E``, the
+    first-column score and residual vector of every point. Returns the partial ``||M - E - S||_F^2``.
     """
     K = nbrs.shape[1] + 1
     r = A.shape[1]

@@ -1,28 +1,11 @@
-"""PyTorch path of the patch RPCA of :func:`spectrageo.outliers.rpca_scores` (issue 21).
+"""PyTorch path of the patch RPCA of :func:`spectrageo.outliers.rpca_scores`.
 
-Same iteration as the fused numba kernel :func:`._kernels.patch_ialm_pass` (Eq. 4.22 on the
-``3m x (k+1)`` patch matrix of Eq. 5.98, state ``R = M - E + Y / mu``, ``S = R - clip(R, lam/mu)``,
-``Y / mu = clip(R, lam/mu)``), written as dense tensor operations that run on any torch device:
-
-* on the device: the gathered patch matrix ``M`` and the state ``R`` of the block (float32 or
-  float64, the dtype of the normalised points), the elementwise shrinkage and residual steps,
-  ``E = X W`` (in factored form ``X A B`` while ``W`` has rank ``r < K / 2``), the Gram matrix
-  ``X^T X`` of the next SVT argument and the residual ``||M - E - S||_F^2`` (both accumulated in
-  float64), the first-column scores and the level changes of the ranking stop rule;
-* on the host: the eigendecomposition of the ``K x K`` Gram matrix (the same
-  :func:`.rpca._svt_operator` as the numba path, so both paths threshold with identical
-  operators when their Gram matrices agree), the ``mu`` schedule and the stopping rules.
-
-Per iteration only the Gram matrix, the residual and the number of changed levels (``K^2 + 2``
-float64) go to the host and ``W``, ``A``, ``B`` (at most ``3 K^2`` numbers) to the device. Per
-block the normalised cloud and the block's neighbour lists go to the device once, and the scores,
-the residual vectors and (``smoothed=True``) the smoothed points come back.
-
-Memory on the device: ``M`` and ``R`` (``24 (k + 1)`` bytes per block point in float32) plus the
-neighbour lists and the float64 temporaries of one chunk of :data:`CHUNK` points.
-
-The float32 products run with TF32 disabled (on GPUs that have it, TF32 would round ``X W`` to
-10-bit mantissas and move scores by far more than the stated tolerance).
+The iteration of :func:`._kernels.patch_ialm_pass` (Eq. 4.22 on the patch matrix of Eq. 5.98) as
+dense tensor operations on any torch device: the gathered ``M``, the state ``R``, the elementwise
+steps, ``E = X W`` and the float64 Gram matrix and residual run on the device; the ``K x K``
+eigendecomposition (:func:`._svt.svt_operator`, shared with the numba path), the ``mu`` schedule
+and the stopping rules on the host. Per iteration about ``4 K^2`` numbers cross. Float32
+products run with TF32 disabled (it would round ``X W`` to 10-bit mantissas).
 """
 
 from __future__ import annotations
@@ -84,7 +67,7 @@ def patch_ialm_torch(
     device: Any,
     record: list | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None, int, bool, float]:
-    """:func:`.rpca._patch_ialm` on the torch device ``device`` (same arguments and returns).
+    """:func:`._rpca_solver.patch_ialm` on the torch device ``device`` (same arguments and returns).
 
     ``Pn`` (n, 3) float32 or float64: the normalised cloud (the dtype of the state); ``centers``
     (m,) and ``nbrs`` (m, k): the rows of the block's patch matrix. Returns ``(scores, E0,
@@ -94,7 +77,7 @@ def patch_ialm_torch(
     """
     import torch
 
-    from .rpca import RANK_BIN, RANK_FLOOR, _svt_operator
+    from ._svt import RANK_BIN, RANK_FLOOR, svt_operator
 
     dev = torch.device(device)
     m = int(centers.shape[0])
@@ -138,7 +121,7 @@ def patch_ialm_torch(
         converged, residual, it = False, np.inf, 0
         inv_width = 1.0 / RANK_BIN
         for it in range(1, max_iter + 1):  # noqa: B007 - `it` is returned
-            ops = [x.astype(np_dt) for x in _svt_operator(G, 1.0 / mu)]
+            ops = [x.astype(np_dt) for x in svt_operator(G, 1.0 / mu)]
             W, A, B = (torch.from_numpy(x).to(dev) for x in ops)
             low = 2 * A.shape[1] < K
             mu_next = min(mu * rho, mu_max)
@@ -149,7 +132,7 @@ def patch_ialm_torch(
                 np_dt(lam / mu),
                 np_dt(1.0 + mu / mu_next),
             )
-            if record is not None:  # the same step as :func:`.rpca._patch_ialm` records
+            if record is not None:  # the same step as :func:`._rpca_solver.patch_ialm` records
                 record.append((G, mu, (*ops, *scal)))
             tp, fp, t, f1 = (float(x) for x in scal)
             G_t.zero_()

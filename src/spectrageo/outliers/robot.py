@@ -1,8 +1,5 @@
-"""Outlier removal and consolidation of depth-camera clouds (thesis Section 5.4.2).
-
-Pipeline: RPCA outlier removal (Algorithm 14), connectivity from the ``k = 7`` nearest neighbours
-(with a triangulation read off the kNN graph) and bilateral filtering of the points along their
-normals (Eq. 5.100-5.101); the output is the consolidated cloud or a mesh.
+"""Outlier removal and consolidation of depth-camera clouds (thesis Section 5.4.2): RPCA removal,
+``k = 7`` connectivity and bilateral filtering along the normals (Eq. 5.100-5.101).
 """
 
 from __future__ import annotations
@@ -26,9 +23,8 @@ __all__ = ["RobotResult", "bilateral_point_filter", "knn_triangles", "robot_pipe
 def knn_triangles(P: Any, k: int = 7) -> np.ndarray:
     """Triangles of the kNN graph: every 3-clique ``(i, j, l)`` of the symmetrised kNN graph.
 
-    Section 5.4.2 connects each point with its ``k = 7`` nearest neighbours (the binary adjacency
-    ``C``) and creates a face from every three mutually connected vertices, giving ``n_f > n``
-    faces that overlap (the triangulation is a connectivity for filtering, not a manifold surface).
+    Section 5.4.2 connects each point with its ``k = 7`` nearest neighbours and makes a face of
+    every three mutually connected vertices (overlapping faces: a connectivity, not a manifold).
 
     Returns
     -------
@@ -71,38 +67,30 @@ def bilateral_point_filter(
     sigma2: float | None = None,
     n_iter: int = 1,
 ) -> np.ndarray:
-    r"""Bilateral filtering of points along their normals (Eq. 5.100-5.101).
+    """Bilateral filtering of points along their normals (Eq. 5.100-5.101).
 
-    For every point ``v_i`` with kNN cell ``Psi^k`` (``k`` nearest neighbours):
-
-    ``w_i = sum_j W1 W2 h_ij / sum_j W1 W2``, ``h_ij = <n_i, v_j - v_i>``,
-    ``W1 = exp(-||v_i - v_j||^2 / (2 sigma1^2))``, ``W2 = exp(-h_ij^2 / (2 sigma2^2))``,
-
-    then ``v_i <- v_i + w_i n_i`` (Eq. 5.101). ``n_i`` is the mean of the unit PCA normals
-    (:func:`spectrageo.geometry.pca_normals`) over the cell, as below Eq. 5.100. Eq. 5.100 prints
-    ``<n_i, v_i - v_j>`` together with the ``+`` of Eq. 5.101, which would push every point away
-    from its neighbours' tangent plane; the sign is taken from the cited bilateral filter
-    (Fleishman et al.), which moves the point towards it. The sign of the normals does not matter.
+    For every point with kNN cell ``Psi^k``: ``w_i = sum_j W1 W2 h_ij / sum_j W1 W2``,
+    ``h_ij = <n_i, v_j - v_i>``, ``W1 = exp(-||v_i - v_j||^2 / (2 sigma1^2))``,
+    ``W2 = exp(-h_ij^2 / (2 sigma2^2))``, then ``v_i <- v_i + w_i n_i``; ``n_i`` is the mean PCA
+    normal over the cell. The sign of ``h_ij`` follows Fleishman et al. (towards the tangent plane;
+    Eq. 5.100 prints the opposite).
 
     Parameters
     ----------
     P : (n, 3) array_like
     k : int
-        Neighbours per cell (7 in Section 5.4.2).
+        Neighbours per cell.
     normals : (n, 3) array_like, optional
         Point normals; default PCA normals over the same ``k`` neighbours.
-    sigma1 : float, optional
-        Spatial kernel width; default the mean distance to the ``k`` neighbours over the cloud.
-    sigma2 : float, optional
-        Range kernel width; default per point, the standard deviation of ``h_ij`` over its cell
-        (Fleishman et al.'s choice; a flat cell gets ``W2 = 1``).
+    sigma1, sigma2 : float, optional
+        Spatial width (default the mean kNN distance) and range width (default per point, the
+        standard deviation of ``h_ij`` over its cell).
     n_iter : int
         Filter passes (neighbourhoods recomputed each pass).
 
     Returns
     -------
     (n, 3) ndarray
-        Filtered points.
     """
     X = as_points(P, "P").copy()
     k = check_k(k, X.shape[0])
@@ -146,11 +134,8 @@ def bilateral_point_filter(
 
 @dataclass(frozen=True)
 class RobotResult:
-    """Result of :func:`robot_pipeline`.
-
-    ``keep`` (n,) bool mask of the points kept by the RPCA step (input order); ``scores`` (n,)
-    their RPCA scores; ``points`` the filtered kept points (PointCloud, colours/normals/attributes
-    carried); ``mesh`` the kNN triangulation of the filtered points when ``output="mesh"``.
+    """Result of :func:`robot_pipeline`: ``keep`` (n,) and ``scores`` (n,) of the RPCA step (input
+    order), ``points`` the filtered kept points, ``mesh`` their kNN triangulation (``output="mesh"``).
     """
 
     keep: np.ndarray = field(repr=False)

@@ -1,9 +1,6 @@
-"""Outlier removal and consolidation of dynamic point-cloud sequences (thesis Section 5.4.3).
-
-Per part of the cloud, the coordinates of its points over all frames form the spatio-temporal
-matrix of Eq. (5.102); RPCA splits it into a low-rank part (the coherent motion) and a sparse part
-(Eq. 5.103) whose entries flag outlying (point, frame) pairs. Removed points are refilled from the
-previous frame with motion vectors interpolated by a weighted graph Laplacian (Eq. 5.104-5.109).
+"""Outlier removal and consolidation of dynamic point-cloud sequences (thesis Section 5.4.3):
+RPCA of the spatio-temporal matrix of each part (Eq. 5.102-5.103) and refill of removed points by
+motion vectors interpolated with a weighted graph Laplacian (Eq. 5.104-5.109).
 """
 
 from __future__ import annotations
@@ -36,25 +33,13 @@ class SequenceResult:
     Attributes
     ----------
     frames : PointCloudSequence
-        Consolidated frames: every point, with removed ones refilled (fixed-size sequences), or
-        the kept points of each frame (``refill=False`` or sequences whose point count varies).
-    keep : list of (n_t,) bool ndarrays
-        Per frame, ``True`` for points not flagged as outliers (input order).
-    scores : list of (n_t,) ndarrays
-        Per frame, the outlier score of every point (``||s||_2`` of its sparse-part entries,
-        Eq. 5.103, in units of the sequence's bounding-box diagonal).
+        Consolidated frames, or the kept points of each frame.
+    keep, scores : list of (n_t,) ndarrays
+        Per frame: kept points and the scores ``||s||_2`` of Eq. 5.103 (input order).
     low_rank : (T, n, 3) ndarray or None
-        The low-rank reconstruction ``E`` of every frame (fixed-size sequences).
-    n_iter : int
-        Largest RPCA iteration count over the parts (or, for sequences whose point count varies,
-        over the frames).
-    converged : bool
-        Whether every part's (every frame's) RPCA met its tolerance before ``max_iter``.
-    residual : float
-        Largest final RPCA residual over the parts (frames).
-    n_unconverged : int
-        Number of parts (frames) whose RPCA stopped at ``max_iter``; reported as one
-        :class:`~spectrageo.ConvergenceWarning` per call (``on_nonconvergence="warn"``).
+        The low-rank reconstruction of every frame (fixed-size sequences).
+    n_iter, converged, residual, n_unconverged
+        RPCA figures over the parts (frames).
     """
 
     frames: PointCloudSequence = field(repr=False)
@@ -109,24 +94,13 @@ def _hops_to_known(C: sp.csr_matrix, known: np.ndarray) -> np.ndarray:
 def weighted_laplacian(
     C: Any, prev: np.ndarray, motion: np.ndarray, known: np.ndarray
 ) -> sp.csr_matrix:
-    r"""The weighted Laplacian ``L_w = D - C_w`` of Eq. (5.104)-(5.108).
+    """The weighted Laplacian ``L_w = D - C_w`` of Eq. (5.104)-(5.108).
 
-    ``C_w = W1 o W2 o W3 o C`` (Hadamard products) with
-
-    * ``W1_ij = 1 / ||v_i(t-1) - v_j(t-1)||^2`` (Eq. 5.104; coincident points use the smallest
-      positive squared distance of the graph; all ``W1`` are multiplied by the median squared
-      edge length, which leaves the interpolation unchanged and avoids overflow);
-    * ``W2_ij = 1 + cos(m_i, m_j)`` in ``[0, 2]`` (Eq. 5.105, shifted by +1 as the text says);
-      ``1`` when a motion vector is zero; floored at ``1e-3`` so that opposite motions do not
-      disconnect the graph (which would leave removed points undetermined);
-    * ``W3_ij = 4`` if ``v_j`` is known, else ``1 / (n_v + 1)`` with ``n_v`` the number of edges
-      from ``v_j`` to the nearest known vertex (Eq. 5.106),
-
-    and ``D_i = sum_j C_w[i, j]`` (Eq. 5.108). Eq. 5.106 writes the condition on ``v_i``; a
-    factor that depends on the row only cancels from the interpolation equations of the unknown
-    points (each is a weighted mean of its neighbours, see :func:`clean_sequence`), so the
-    prioritisation is applied to the neighbour ``v_j`` whose motion is borrowed: known neighbours
-    and neighbours close to known ones count more. ``C_w`` is therefore not symmetric.
+    ``C_w = W1 o W2 o W3 o C`` with ``W1_ij = 1 / ||v_i(t-1) - v_j(t-1)||^2`` (Eq. 5.104, scaled by
+    the median squared edge length), ``W2_ij = max(1 + cos(m_i, m_j), 1e-3)`` (Eq. 5.105) and
+    ``W3_ij = 4`` for a known ``v_j``, else ``1 / (n_v + 1)`` with ``n_v`` the hops from ``v_j`` to the
+    nearest known vertex (Eq. 5.106, applied to the neighbour whose motion is borrowed, so ``C_w`` is
+    not symmetric); ``D_i = sum_j C_w[i, j]`` (Eq. 5.108).
 
     Parameters
     ----------
@@ -137,6 +111,10 @@ def weighted_laplacian(
     motion : (n, 3) ndarray
         Motion vectors ``m_i`` (zero rows where unknown).
     known : (n,) bool ndarray
+
+    Returns
+    -------
+    (n, n) csr_matrix
     """
     C = sp.csr_matrix(C, dtype=np.float64)
     C.sort_indices()
@@ -174,40 +152,17 @@ def clean_sequence(
     rng: Any = 0,
     on_nonconvergence: str = "warn",
 ) -> SequenceResult:
-    r"""Remove outliers from a point-cloud sequence and consolidate it (Section 5.4.3).
+    """Remove outliers from a point-cloud sequence and consolidate it (Section 5.4.3).
 
-    For a sequence whose frames have the same number ``n`` of points in correspondence (point
-    ``j`` of every frame is the same surface point, e.g. an animation sampled as points):
-
-    1. Parts: the symmetrised ``k``-NN graph of the per-point temporal median position (robust to
-       outliers in a minority of frames) is split by METIS into overlapped parts of exactly
-       ``submesh_size`` points (:func:`spectrageo.spectral.overlapped_submeshes`; one part when
-       ``n <= submesh_size``).
-    2. Per part, ``M[i]`` (``3 n_m x T``, Eq. 5.102) of coordinates normalised to a unit bounding-box
-       diagonal (so that ``tau`` is scale-free), RPCA (:func:`spectrageo.linalg.rpca`,
-       ``method="ialm"``) gives ``E[i]`` and ``S[i]`` (Eq. 5.103).
-    3. The score of point ``j`` at frame ``t`` is the norm of its three entries of ``S`` (taken
-       from the part whose METIS core holds ``j``); it is an outlier when ``score >= tau``
-       (thesis: inliers ``< 1e-7``, outliers ``> 1e-3``, ``tau = 1e-4``).
-    4. Refill (``refill=True``): at the first frame removed points take their low-rank position
-       ``E``; at frame ``t > 1`` the motion vectors ``B = v(t) - v(t-1)`` of the kept points are
-       interpolated to the removed ones with the weighted Laplacian of Eq. 5.104-5.108 on the kNN
-       graph (:func:`weighted_laplacian`, :func:`spectrageo.linalg.laplacian_interpolation`) and
-       ``v_u(t) = v_u(t-1) + B_u`` (Eq. 5.109), using the already consolidated frame ``t - 1``.
-       The interpolation solves the Laplacian equations of the unknown points only
-       (``weights`` zero on the known rows of :func:`spectrageo.linalg.laplacian_interpolation`):
-       the least-squares form of Eq. 4.27 that also includes the known rows overshoots with the
-       non-symmetric ``L_w`` (measured on horse-gallop with 20 % outliers: ``|B_u|`` 7x the largest
-       known motion at the first refilled frame, diverging after five frames).
-       The motion vectors in ``W2`` are those of the known points at ``t`` and, for removed
-       points, their motion between the two previous consolidated frames.
-
-    Sequences whose point count varies between frames have no correspondences: each frame is
-    then cleaned on its own by Algorithm 14 (:func:`remove_outliers` with ``method="rpca"``,
-    ``k`` neighbours and the automatic threshold); ``tau`` is not used and nothing is refilled.
-
-    Non-convergence is never silent: the parts (frames) whose RPCA stopped at ``max_iter`` are
-    counted in ``n_unconverged`` and reported by ``on_nonconvergence``, once per call.
+    For frames of ``n`` corresponding points: the ``k``-NN graph of the per-point temporal median
+    is split into overlapped parts of ``submesh_size`` points
+    (:func:`spectrageo.spectral.overlapped_submeshes`); per part, RPCA of the ``3 n_m x T`` matrix
+    of Eq. 5.102 (unit-diagonal coordinates) gives ``E`` and ``S`` (Eq. 5.103); a (point, frame)
+    is an outlier when the norm of its entries of ``S`` is at least ``tau``. With ``refill``,
+    removed points take their low-rank position at the first frame and later move by the motion
+    vectors of the kept points interpolated with :func:`weighted_laplacian` (Eq. 5.104-5.109;
+    docs/decisions.md#outliers-sequence-lam). Sequences whose point count varies are cleaned
+    frame by frame by :func:`remove_outliers` (``tau`` unused, nothing refilled).
 
     Parameters
     ----------
@@ -215,26 +170,18 @@ def clean_sequence(
     k : int
         Neighbours of the connectivity graph.
     tau : float or "auto"
-        Outlier threshold on the sparse-part scores (unit-diagonal coordinates); ``"auto"``:
-        :func:`spectrageo.outliers.auto_threshold` over all scores.
+        Threshold on the sparse-part scores; ``"auto"``: :func:`auto_threshold` over all scores.
     submesh_size, overlap : int, float
         Part size ``n_m`` and overlap of the partition.
     lam, tol, max_iter
-        RPCA options. ``lam`` defaults to ``2 / sqrt(max(3 n_m, T))``, twice the PCP value:
-        animation trajectories are only approximately low rank, and with the PCP value the
-        sparse part also takes the non-low-rank motion of inliers (horse-gallop, 20 % outliers,
-        ``tau = 1e-4``: precision 0.34 with the PCP value, 0.94 with twice it, recall >= 0.997;
-        four times it lets most outliers into ``E``). Sequences whose point count varies pass
-        only ``max_iter`` on (to :func:`spectrageo.outliers.rpca_scores`, per frame).
+        RPCA options; ``lam`` defaults to ``2 / sqrt(max(3 n_m, T))``. Varying-size sequences pass
+        only ``max_iter`` on.
     refill : bool
-        Consolidate (refill removed points) or return only the kept points of each frame.
+        Consolidate, or return only the kept points of each frame.
     rng : int or Generator
         Seeds METIS.
     on_nonconvergence : {"warn", "raise", "ignore"}
-        Policy when the RPCA of some parts (or frames) stops at ``max_iter`` before its
-        tolerance: one :class:`~spectrageo.ConvergenceWarning` per call naming how many (the
-        command line prints it as one line), :class:`~spectrageo.ConvergenceError` carrying the
-        result as ``partial``, or nothing. The count is always in ``n_unconverged``.
+        Policy, once per call, when some parts (frames) stop at ``max_iter``.
 
     Returns
     -------
@@ -242,6 +189,7 @@ def clean_sequence(
     """
     from ..linalg import laplacian_interpolation, rpca
     from ..spectral import overlapped_submeshes
+    from ._rpca_types import RPCAOptions
     from .static import remove_outliers
 
     if isinstance(seq, PointCloudSequence):
@@ -267,18 +215,15 @@ def clean_sequence(
     check_choice(on_nonconvergence, "on_nonconvergence", ("warn", "raise", "ignore"))
 
     if not pcs.is_fixed_size():
+        frame_options = RPCAOptions(
+            on_nonconvergence="ignore", **({} if max_iter is None else {"max_iter": max_iter})
+        )
         keeps, scores, frames = [], [], []
         n_iter, residual, n_bad = 0, 0.0, 0
         for t, f in enumerate(pcs.frames):
             try:
                 # convergence is collected over the frames and reported once below
-                r = remove_outliers(
-                    f,
-                    method="rpca",
-                    k=k,
-                    on_nonconvergence="ignore",
-                    **({} if max_iter is None else {"max_iter": max_iter}),
-                )
+                r = remove_outliers(f, method="rpca", k=k, options=frame_options)
             except InvalidInputError as exc:
                 raise InvalidInputError(f"frame {t}: {exc}") from exc
             keeps.append(r.keep)

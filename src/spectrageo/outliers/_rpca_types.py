@@ -1,0 +1,161 @@
+"""Options and result of the patch RPCA (:func:`spectrageo.outliers.rpca_scores`)."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._errors import ConvergenceError, ConvergenceWarning, InvalidInputError
+from .._validation import check_choice, check_positive
+
+__all__ = ["PatchRPCAResult", "RPCAOptions"]
+
+#: Default ``rank_tol``: chosen on the tuning split; see docs/decisions.md#outliers-rank-tol.
+RANK_TOL = 3e-3
+
+
+@dataclass(frozen=True)
+class RPCAOptions:
+    """Options of the patch RPCA (:func:`spectrageo.outliers.rpca_scores`), validated on creation.
+
+    Parameters
+    ----------
+    lam : float, optional
+        Weight of ``||S||_1``; default ``1 / sqrt(3 m)`` for a block of ``m`` points.
+    rho, tol, max_iter
+        Growth factor of ``mu`` (``> 1``), relative residual at which the ALM stops, iteration cap.
+    block_size : int, optional
+        Points per RPCA block and largest tile; None is ``rpca.BLOCK_SIZE`` (2^22).
+    refine : bool
+        Steps 5-6 (rebuilt patches, local baseline).
+    tangent_weight : float
+        Weight in ``[0, 1]`` of the tangential residual (step 7).
+    rank_tol : float
+        Ranking stop rule, in ``[0, 1)``; 0 stops by ``tol`` only.
+    dtype : {"float32", "float64"}
+        Precision of the solver state.
+    clusters : bool
+        Step 8 (small volumetric clusters).
+    second_pass : {"replay", "full"}
+        How step 5 rescores the rebuilt patches.
+    partition : {"tiles", "blocks"}
+        A cloud above ``block_size``: k-d tiles with halos, or Morton blocks of one problem.
+    on_nonconvergence : {"warn", "raise", "ignore"}
+        Policy when a block reaches ``max_iter`` first.
+    """
+
+    lam: float | None = None
+    rho: float = 3.0
+    tol: float = 3e-4
+    max_iter: int = 200
+    block_size: int | None = None
+    refine: bool = True
+    tangent_weight: float = 0.5
+    rank_tol: float = RANK_TOL
+    dtype: str = "float32"
+    clusters: bool = True
+    second_pass: str = "replay"
+    partition: str = "tiles"
+    on_nonconvergence: str = "warn"
+
+    def __post_init__(self) -> None:
+        if self.lam is not None:
+            check_positive(self.lam, "lam")
+        check_positive(self.rho, "rho")
+        if self.rho <= 1:
+            raise InvalidInputError(f"`rho` must be > 1; got {self.rho!r}.")
+        check_positive(self.tol, "tol")
+        check_positive(self.max_iter, "max_iter", integer=True)
+        if self.block_size is not None:
+            check_positive(self.block_size, "block_size", integer=True)
+        check_choice(self.on_nonconvergence, "on_nonconvergence", ("warn", "raise", "ignore"))
+        check_choice(self.second_pass, "second_pass", ("replay", "full"))
+        check_choice(self.partition, "partition", ("tiles", "blocks"))
+        check_positive(self.tangent_weight, "tangent_weight", allow_zero=True)
+        if self.tangent_weight > 1:
+            raise InvalidInputError(
+                f"`tangent_weight` must be in [0, 1]; got {self.tangent_weight!r}."
+            )
+        check_positive(self.rank_tol, "rank_tol", allow_zero=True)
+        if self.rank_tol >= 1:
+            raise InvalidInputError(f"`rank_tol` must be in [0, 1); got {self.rank_tol!r}.")
+        try:
+            dt = np.dtype(self.dtype)
+        except TypeError as exc:
+            raise InvalidInputError(
+                f"`dtype` must be float32 or float64; got {self.dtype!r}."
+            ) from exc
+        if dt not in (np.float32, np.float64):
+            raise InvalidInputError(f"`dtype` must be float32 or float64; got {self.dtype!r}.")
+        object.__setattr__(self, "dtype", dt.name)
+
+    def solver_kwargs(
+        self, *, block_size: int, smoothed: bool, workers: int, device: Any
+    ) -> dict[str, Any]:
+        """The keyword arguments of the scoring pipeline (:mod:`._rpca_core`); ``device`` is
+        resolved where the scores are computed (:func:`spectrageo._device.resolve_backend`)."""
+        return dict(
+            device=device,
+            lam=self.lam,
+            rho=self.rho,
+            tol=self.tol,
+            max_iter=self.max_iter,
+            block_size=int(block_size),
+            smoothed=smoothed,
+            on_nonconvergence=self.on_nonconvergence,
+            workers=workers,
+            refine=self.refine,
+            tangent_weight=self.tangent_weight,
+            rank_tol=self.rank_tol,
+            dtype=np.dtype(self.dtype),
+            clusters=bool(self.clusters),
+            second_pass=self.second_pass,
+            partition=self.partition,
+            knn=None,
+        )
+
+
+@dataclass(frozen=True)
+class PatchRPCAResult:
+    """Result of :func:`spectrageo.outliers.rpca_scores` (arrays in input order).
+
+    Attributes
+    ----------
+    scores : (n,) ndarray
+        ``||s_i||_2`` of Eq. 5.99 in units of ``spacing``.
+    spacing : float
+        Point spacing ``h`` (input units).
+    smoothed : (n, 3) ndarray or None
+        First column of ``E`` in input coordinates, when requested.
+    n_iter, converged, residual, n_blocks, n_refined
+        Largest iteration count, whether all blocks converged, largest relative residual, number of
+        blocks (tiles), rebuilt patches.
+    clusters : (n,) bool ndarray or None
+        Points in small volumetric clusters (step 8).
+    """
+
+    scores: np.ndarray = field(repr=False)
+    spacing: float
+    smoothed: np.ndarray | None = field(default=None, repr=False)
+    n_iter: int = 0
+    converged: bool = True
+    residual: float = 0.0
+    n_blocks: int = 1
+    n_refined: int = 0
+    clusters: np.ndarray | None = field(default=None, repr=False)
+
+
+def report(res: PatchRPCAResult, policy: str, max_iter: int) -> None:
+    """Apply the ``on_nonconvergence`` policy to a result."""
+    if res.converged or policy == "ignore":
+        return
+    msg = (
+        f"RPCA of the kNN patch matrix did not converge in {max_iter} iterations "
+        f"(residual {res.residual:.3g}); increase `max_iter` or relax `tol`."
+    )
+    if policy == "raise":
+        raise ConvergenceError(msg, partial=res)
+    warnings.warn(msg, ConvergenceWarning, stacklevel=3)
