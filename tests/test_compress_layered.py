@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from spectrageo import InvalidInputError, compress
-from spectrageo.compress import _layered
+from spectrageo.compress import _layered, _layered_reconstruct
 from spectrageo.metrics import kg_error
 
 from conftest import icosphere
@@ -28,7 +28,7 @@ def anim():
 
 
 def _bfs_depth(F, n, known):
-    C, _ = _layered._rings(F, n)
+    C, _ = _layered_reconstruct._rings(F, n)
     reached = np.zeros(n, bool)
     reached[known] = True
     depth = 0
@@ -43,25 +43,25 @@ def _bfs_depth(F, n, known):
 def test_layer_order_is_a_spread_permutation(anim):
     A, F = anim
     n = A.shape[1]
-    order = _layered.layer_order(A, F)
+    order = _layered_reconstruct.layer_order(A, F)
     assert np.array_equal(np.sort(order), np.arange(n))
-    assert np.array_equal(order, _layered.layer_order(A, F))  # deterministic
+    assert np.array_equal(order, _layered_reconstruct.layer_order(A, F))  # deterministic
     # Eq. (5.57) spreads the layers: every vertex is within a few rings of layer n/10
     assert _bfs_depth(F, n, order[: n // 10]) <= 3
     # the temporal term (Eq. 5.58) keeps fast vertices longer: a vertex that moves a lot ranks
     # higher with the motion than without it
     fast = A.copy()
     fast[:, 5] += np.linspace(0, 1, A.shape[0])[:, None]
-    rank_with = int(np.flatnonzero(_layered.layer_order(fast, F) == 5)[0])
-    rank_without = int(np.flatnonzero(_layered.layer_order(A[:1], F) == 5)[0])
+    rank_with = int(np.flatnonzero(_layered_reconstruct.layer_order(fast, F) == 5)[0])
+    rank_without = int(np.flatnonzero(_layered_reconstruct.layer_order(A[:1], F) == 5)[0])
     assert rank_with < rank_without
 
 
 def test_coarse_reconstruction_is_exact_for_a_translation(anim):
     A, F = anim
     n = A.shape[1]
-    order = _layered.layer_order(A[:1], F)
-    rec = _layered.Reconstructor(F, n, order)
+    order = _layered_reconstruct.layer_order(A[:1], F)
+    rec = _layered_reconstruct.Reconstructor(F, n, order)
     rec.first(A[0])
     known = order[: n // 10]
     shift = np.array([0.1, -0.2, 0.05])

@@ -15,7 +15,7 @@ import pytest
 
 from spectrageo import InvalidInputError, UnsupportedFormatError, io
 from spectrageo.geometry import Mesh, MeshAnimation, PointCloud, PointCloudSequence
-from spectrageo.io import _api, _common
+from spectrageo.io import _common, _write
 
 from conftest import icosphere
 
@@ -843,7 +843,7 @@ def test_write_failure_midway_leaves_no_partial_file(tmp_path, mesh, monkeypatch
 def test_folder_write_failure_midway(tmp_path, mesh, monkeypatch):
     anim = MeshAnimation(np.stack([mesh.vertices] * 4), mesh.faces)
     calls = {"n": 0}
-    real = _api._serialise
+    real = _write._serialise
 
     def fail_third(*args, **kw):
         calls["n"] += 1
@@ -851,7 +851,7 @@ def test_folder_write_failure_midway(tmp_path, mesh, monkeypatch):
             raise OSError("disk full")
         return real(*args, **kw)
 
-    monkeypatch.setattr(_api, "_serialise", fail_third)
+    monkeypatch.setattr(_write, "_serialise", fail_third)
     with pytest.raises(OSError, match="disk full"):
         io.write(tmp_path / "anim", anim)
     assert sorted(os.listdir(tmp_path)) == []  # neither the target nor the staging folder
@@ -860,7 +860,7 @@ def test_folder_write_failure_midway(tmp_path, mesh, monkeypatch):
     io.write(tmp_path / "anim", MeshAnimation(np.stack([mesh.vertices] * 2), mesh.faces))
     before = {f: (tmp_path / "anim" / f).read_bytes() for f in os.listdir(tmp_path / "anim")}
     calls["n"] = 0
-    monkeypatch.setattr(_api, "_serialise", fail_third)
+    monkeypatch.setattr(_write, "_serialise", fail_third)
     with pytest.raises(OSError, match="disk full"):
         io.write(tmp_path / "anim", MeshAnimation(anim.frames * 2, anim.faces))
     after = {f: (tmp_path / "anim" / f).read_bytes() for f in os.listdir(tmp_path / "anim")}

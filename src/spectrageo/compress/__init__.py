@@ -1,30 +1,19 @@
-"""Compression of static triangle meshes into ``.sgc`` files (thesis Sections 5.2.1 and 5.2.3).
+"""Compression of triangle meshes (``.sgc``) and mesh animations (``.sga``), thesis Section 5.2.
 
-* :func:`encode` ``(V, F) -> bytes`` and :func:`decode` ``bytes -> (V, F)``; :func:`info` reads
-  the header (method, counts, bits per vertex, parameters) without decoding the geometry.
-* Methods: ``"spectral"`` (block spectral coding on overlapped submeshes with dictionaries that the
-  decoder recomputes from the connectivity by orthogonal iterations, Algorithms 6-8, Eq. 5.42-5.45;
-  progressive), ``"feature"`` (feature-aware high-pass quantisation, Algorithm 9, Eq. 5.53-5.54)
-  and ``"saliency"`` (saliency classes choose the delta coordinates that are sent, Algorithm 10).
-* Rate control: ``bpv=`` (whole file, connectivity included) or ``error=`` (RMS vertex error as
-  a fraction of the bounding-box diagonal); the quantisation step is found by bisection so that
-  the request is met within 5 %. ``feature`` and ``saliency`` also choose their level of detail
-  (the share of the vertices whose delta coordinates are sent, Algorithm 9 step 5, Algorithm 10
-  steps 4-5) unless ``feature_fraction`` / ``class_keep``, ``ratio`` or ``mask`` is given: the
-  level with the smallest RMS error for ``bpv=``, the smallest file for ``error=`` (see
+* :func:`encode` / :func:`decode` / :func:`info` for static meshes: ``"spectral"`` (block
+  spectral coding on overlapped submeshes, Algorithms 6-8, Eq. 5.42-5.45; progressive),
+  ``"feature"`` (feature-aware high-pass quantisation, Algorithm 9, Eq. 5.53-5.54) and
+  ``"saliency"`` (saliency classes choose the deltas sent, Algorithm 10).
+* :func:`encode_animation` / :func:`decode_animation` / :func:`info_animation`,
+  :class:`StreamEncoder` / :class:`StreamDecoder` for animations (Sections 5.2.2 and 5.2.4).
+* Rate control: ``bpv=`` / ``bpvf=`` (whole file) or ``error=``, met within 5 % by bisection of
+  the quantisation step; ``feature`` and ``saliency`` also choose their level of detail (see
   :mod:`spectrageo.compress._feature`).
-* The vertex order and the faces (order and corner order) are kept exactly unless
-  ``reorder=True``, which lets the codec renumber vertices and faces for a smaller connectivity
-  stream (:func:`info` then reports ``"reordered": true``).
+* Vertex and face order are kept exactly unless ``reorder=True`` (:func:`info` then reports
+  ``"reordered": true``).
 
-The container (magic, version, header, checksummed chunks) is described in
-:mod:`spectrageo.compress._container`; damaged, truncated or foreign data raise
-:class:`~spectrageo.InvalidInputError`.
-
-Determinism: the decoder recomputes the spectral dictionaries with the same code as the encoder
-(seeded METIS, seeded orthogonal iterations), so a file decodes to the same mesh with the same
-spectrageo version and numerical libraries; across platforms the result can differ at the level
-of floating-point rounding of the dictionaries.
+Damaged, truncated or foreign data raise :class:`~spectrageo.InvalidInputError`; decoders give
+the same bits on every machine (docs/decisions.md#deterministic-decoders).
 """
 
 from __future__ import annotations
@@ -36,7 +25,10 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_choice
-from . import _animation, _connectivity, _container
+from . import _connectivity, _container, _sga
+from ._rate import RATE_TOLERANCE as RATE_TOLERANCE
+from ._rate import STEP_MAX, STEP_MIN, bisect_step, error_step
+from ._sga_format import ALL_METHODS, is_animation
 
 __all__ = [
     "ANIMATION_METHODS",
@@ -53,10 +45,6 @@ __all__ = [
 
 METHODS = ("spectral", "feature", "saliency")
 TAG_CONNECTIVITY = 1
-#: relative tolerance of the rate control (the issue's contract is 5 %)
-RATE_TOLERANCE = 0.05
-_AIM = 0.03  # the bisection stops within 3 % to stay inside 5 % after rounding
-_STEP_MIN, _STEP_MAX = 1e-7, 4.0
 
 #: default quantisation step (fraction of the bounding-box diagonal) when no rate is requested
 DEFAULT_STEP = {"spectral": 1e-3, "feature": 4e-4, "saliency": 4e-4}
@@ -130,8 +118,8 @@ def encode(
     _check_rate(bpv, error)
     if step is not None and (bpv is not None or error is not None):
         raise InvalidInputError("`step` cannot be combined with `bpv` or `error`.")
-    if step is not None and not (isinstance(step, int | float) and _STEP_MIN <= step <= _STEP_MAX):
-        raise InvalidInputError(f"`step` must be in [{_STEP_MIN}, {_STEP_MAX}]; got {step!r}.")
+    if step is not None and not (isinstance(step, int | float) and STEP_MIN <= step <= STEP_MAX):
+        raise InvalidInputError(f"`step` must be in [{STEP_MIN}, {STEP_MAX}]; got {step!r}.")
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     if V.shape[0] > _container.MAX_COUNT or F.shape[0] > _container.MAX_COUNT:
@@ -179,7 +167,7 @@ def encode(
     for p in plans:
         try:
             if bpv is not None:
-                s, data = _bisect(
+                s, data = bisect_step(
                     lambda s, p=p: (8.0 * len(build(s, p)) / n, None),
                     float(bpv),
                     increasing=False,
@@ -187,7 +175,7 @@ def encode(
                 )
                 key = rms(p, s) if len(plans) > 1 else 0.0
             else:
-                s = _error_step(lambda s, p=p: rms(p, s), float(error), method)
+                s = error_step(lambda s, p=p: rms(p, s), float(error), method)
                 key = len(build(s, p)) if len(plans) > 1 else 0
         except InvalidInputError as exc:
             failure = exc  # the last level (uniform) reaches the widest range of requests
@@ -199,71 +187,8 @@ def encode(
     return build(best[2], best[1])
 
 
-def _error_step(measure, target: float, method: str) -> float:
-    """The quantisation step whose RMS error (``measure(step)``) is within 3 % of ``target``."""
-    floor = measure(None)
-    if floor > (1 - _AIM) * target:
-        raise InvalidInputError(
-            f"`error` = {target:g} is below what method {method!r} reaches with these options "
-            f"(about {floor:.3g} at the finest step); "
-            + (
-                "raise `k` or `submesh_size`."
-                if method == "spectral"
-                else "send more deltas (`feature_fraction`, `class_keep`) or give `ratio` >= 1."
-            )
-        )
-    s, _ = _bisect(lambda s: (measure(s), None), target, increasing=True, what="error")
-    return s
-
-
-def _bisect(measure, target: float, *, increasing: bool, what: str):
-    """Log-bisection on the quantisation step until ``measure(step)`` is within 3 % of target.
-
-    ``increasing``: the measure grows with the step (error) or falls with it (bpv).
-    """
-    lo, hi = math.log(_STEP_MIN), math.log(_STEP_MAX)
-    f_lo, d_lo = measure(math.exp(lo))
-    f_hi, d_hi = measure(math.exp(hi))
-    best = None
-    for f, s, d in ((f_lo, lo, d_lo), (f_hi, hi, d_hi)):
-        if abs(f - target) <= _AIM * target:
-            return math.exp(s), d
-    small, large = (f_lo, f_hi) if increasing else (f_hi, f_lo)
-    if target < small * (1 - RATE_TOLERANCE):
-        raise InvalidInputError(
-            f"`{what}` = {target:g} cannot be reached: the smallest value this method gives here "
-            f"is {small:.4g}" + (" (the connectivity and header alone)." if what == "bpv" else ".")
-        )
-    if target > large * (1 + RATE_TOLERANCE):
-        raise InvalidInputError(
-            f"`{what}` = {target:g} cannot be reached: the largest value this method gives here "
-            f"is {large:.4g}."
-        )
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        f, d = measure(math.exp(mid))
-        err = abs(f - target) / target
-        if best is None or err < best[0]:
-            best = (err, mid, d)
-        if err <= _AIM:
-            break
-        if (f < target) == increasing:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo < 1e-6:
-            break
-    err, s, d = best
-    if err > RATE_TOLERANCE:
-        raise InvalidInputError(
-            f"`{what}` = {target:g} could not be met within 5 % (closest: {err:.1%} away); the "
-            "rate of this mesh jumps at that point."
-        )
-    return math.exp(s), d
-
-
 def _parse(data, partial: bool):
-    if _animation.is_animation(data):
+    if is_animation(data):
         raise InvalidInputError(
             "this is a compressed animation (.sga); use spectrageo.compress.decode_animation."
         )
@@ -276,9 +201,8 @@ def _parse(data, partial: bool):
 def decode(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Decompress ``.sgc`` bytes into ``(V, F)``: (n, 3) float64 and (m, 3) int64.
 
-    ``partial=True`` accepts a prefix of a file (a progressive stream cut short): the geometry
-    layers that are complete are used and the missing ones taken as zero, which for the spectral
-    method gives a smoother, coarser mesh. Without it a truncated file is an error.
+    ``partial=True`` accepts a prefix of a progressive file: complete geometry layers are used, the
+    missing ones taken as zero (a smoother, coarser mesh); otherwise a truncated file is an error.
 
     Raises
     ------
@@ -328,7 +252,7 @@ def info(data) -> dict:
 
 # ----------------------------------------------------------------------------- animations (.sga)
 #: animation methods (thesis Section 5.2.2); see :mod:`spectrageo.compress._animation`
-ANIMATION_METHODS = _animation.ALL_METHODS
+ANIMATION_METHODS = ALL_METHODS
 
 
 def encode_animation(
@@ -343,13 +267,9 @@ def encode_animation(
 ) -> bytes:
     """Compress a mesh animation with fixed connectivity into ``.sga`` bytes (Section 5.2.2).
 
-    Delta coordinates projected on eigen-trajectories (Eq. 5.46-5.52; see
-    :mod:`spectrageo.compress._animation` for the methods and the file layout), the scalable
-    layered streaming codec of Section 5.2.4 (``method="layered"``, Algorithm 11; see
-    :mod:`spectrageo.compress._layered`), or ``"pca-spectral"``: eigen-trajectories of the
-    whole sequence with the partitioned GFT of Section 5.2.1 as the spatial transform (a
-    combination of the two sections, not a method of the thesis; see
-    :mod:`spectrageo.compress._pca_spectral`).
+    Delta coordinates projected on eigen-trajectories (Eq. 5.46-5.52, :mod:`._animation`), the
+    layered streaming codec (``"layered"``, Section 5.2.4, Algorithm 11, :mod:`._layered`), or
+    ``"pca-spectral"``, eigen-trajectories in the partitioned GFT basis (:mod:`._pca_spectral`).
 
     Parameters
     ----------
@@ -360,8 +280,7 @@ def encode_animation(
     bpvf : float, optional
         Target size of the whole file in bits per vertex per frame (met within 5 %).
     error : float, optional
-        Target KG error (Karni & Gotsman, in percent, :func:`spectrageo.metrics.kg_error`), met
-        within 5 %.
+        Target KG error (in percent, :func:`spectrageo.metrics.kg_error`), met within 5 %.
     step : float, optional
         Quantisation step of the delta-coordinate projections (fraction of the bounding-box
         diagonal; default 2e-4) when no target is given; for ``pca`` the number of kept
@@ -369,22 +288,19 @@ def encode_animation(
     **options
         ``block`` (frames per block of ``blocks``, 16), ``anchors`` (fraction of anchor vertices
         of pca-qs / pca-qp / blocks, 0.01), ``anchor_ratio`` (anchor step / step, 0.5),
-        ``weight`` (anchor weight in Eq. 5.51, 1), ``basis`` ("oi" orthogonal iterations started
-        from the previous block, or "exact"), ``n_iter`` (2), ``rd`` (row-dropping strength, 1).
-        ``pca-spectral`` uses none of them (they are accepted, as ``pca`` accepts ``block``);
-        its ``step`` is that of the GFT coefficients. ``layered`` takes ``layer`` (fraction of the vertices sent per frame, 0.1; ``bpvf``
-        chooses it per frame instead), ``refresh`` (a refresh frame every that many frames,
-        16; 0 = never) and ``fine`` (the RPCA/ISVD fine reconstruction, off); its ``step``
-        (default 1e-3) is a fraction of twice the first frame's diagonal; ``error`` bisects the
-        layer, or, below what every vertex sent at the default step gives, the step with every
-        vertex sent.
+        ``weight`` (anchor weight in Eq. 5.51, 1), ``basis`` ("oi" or "exact"), ``n_iter`` (2),
+        ``rd`` (row-dropping strength, 1); ``pca-spectral`` accepts and ignores them.
+        ``layered``: ``layer`` (fraction of the vertices sent per frame, 0.1), ``refresh`` (a
+        refresh frame every that many frames, 16; 0 = never) and ``fine`` (the RPCA/ISVD fine
+        reconstruction, off); its ``step`` (default 1e-3) is a fraction of twice the first
+        frame's diagonal.
 
     Returns
     -------
     bytes
         The ``.sga`` file content (stream header, one segment per block, frame index).
     """
-    return _animation.encode_animation(
+    return _sga.encode_animation(
         frames, F, method=method, bpvf=bpvf, error=error, step=step, **options
     )
 
@@ -397,33 +313,28 @@ def decode_animation(data, *, partial: bool = False) -> tuple[np.ndarray, np.nda
     :class:`StreamDecoder`, to know what is missing). Damaged data raise
     :class:`~spectrageo.InvalidInputError`.
     """
-    return _animation.decode_animation(data, partial=partial)
+    return _sga.decode_animation(data, partial=partial)
 
 
 def info_animation(data) -> dict:
     """Header summary of ``.sga`` bytes: method, frames, counts, bpvf, blocks, parameters."""
-    return _animation.info_animation(data)
+    return _sga.info_animation(data)
 
 
-class StreamEncoder(_animation.StreamEncoder):
-    """Streaming encoder (``blocks`` or ``layered``): :meth:`push` one frame at a time,
-    :meth:`close` at the end.
-
-    ``method="layered"`` (Section 5.2.4) emits one segment per frame -- the header and the whole
-    first frame with the first push, so the first frame decodes from the first packet -- and with
-    ``bpvf`` chooses every frame's layer for the rate (Algorithm 11 line 5); its layer order
-    then uses the first frame only (the temporal term needs frames not yet seen).
+class StreamEncoder(_sga.StreamEncoder):
+    """Streaming encoder (``blocks`` or ``layered``): :meth:`push` one frame at a time, then
+    :meth:`close`.
 
     ``StreamEncoder(F, *, method="blocks", step=None, bpvf=None, **options)``. Every call returns
-    the bytes ready to send: the stream header with the first frame, one block segment whenever
-    ``block`` frames have arrived, and from :meth:`close` the last short block and the frame
-    index. The concatenation of all returned bytes is a valid ``.sga`` file. With ``bpvf`` every
-    block is coded at the step that meets the rate on its own (per-block rate adaptation).
-    Memory is bounded by one block.
+    the bytes ready to send; their concatenation is a valid ``.sga`` file. ``blocks`` emits one
+    segment per ``block`` frames (with ``bpvf``, each block at the step that meets the rate) and
+    holds one block in memory. ``layered`` emits one segment per frame, the header and the whole
+    first frame with the first push; with ``bpvf`` it chooses every frame's layer (Algorithm 11
+    line 5) and its layer order uses the first frame only.
     """
 
 
-class StreamDecoder(_animation.StreamDecoder):
+class StreamDecoder(_sga.StreamDecoder):
     """Streaming decoder: :meth:`feed` bytes as they arrive; it returns the completed frames.
 
     ``n_frames`` counts the decoded frames, ``pending_bytes`` what is buffered of an incomplete

@@ -1,60 +1,24 @@
-"""Compression of mesh animations with fixed connectivity into ``.sga`` files (Section 5.2.2).
+"""Eigen-trajectory coding of mesh animations with fixed connectivity (Section 5.2.2).
 
-Delta coordinates projected on eigen-trajectories (Eq. 5.46-5.52). For every coordinate ``x``
-of a block of ``k_f`` frames, ``A_x`` (k_f, n) holds the trajectories; the eigenvectors ``U_x``
-of ``R_x = A_x A_x^T`` (Eq. 5.46) are the eigen-trajectories, ``delta_x = L A_x^T`` (Eq. 5.47,
-``L = D - C`` the binary, unnormalised mesh Laplacian) the delta coordinates and
-``U_x^T delta_x^T`` (Eq. 5.48) what is coded. The decoder rebuilds ``delta~ = U_x U^_x`` and solves
-the sparse least-squares system ``[L; I_a] A~^T = [delta~; Q(A_a^T)]`` (Eq. 5.50-5.51) with one
-factorisation of ``L^T L + I_a^T I_a`` for all frames. Every floating-point step of the decoder
-(dictionary QR, the product ``U_x U^_x``, the sparse Cholesky and its solves) runs in a fixed
-order without BLAS or LAPACK (:mod:`spectrageo.linalg._fixed`), so a file decodes to the same
-bits on every machine.
+For every coordinate ``x`` of a block of ``k_f`` frames with trajectories ``A_x`` (k_f, n), the
+eigenvectors ``U_x`` of ``R_x = A_x A_x^T`` (Eq. 5.46) multiply the delta coordinates
+``delta_x = L A_x^T`` (Eq. 5.47, ``L = D - C``) and ``U_x^T delta_x^T`` (Eq. 5.48) is coded. The
+decoder solves ``[L; I_a] A~^T = [delta~; Q(A_a^T)]`` (Eq. 5.50-5.51) with one fixed-order
+factorisation for all frames (:mod:`spectrageo.linalg._fixed`: the same bits on every machine).
 
-Methods (the thesis's variants, Section 5.2.2, Table 5.12):
-
-* ``pca``: the whole sequence is one block; the first ``k_l`` rows of ``U^_x`` (Eq. 5.49) are
-  stored at 16-bit fixed precision (the "lossless" quantisation Eq. 5.52 assumes), the rest
-  dropped. The rate knob is the number of kept coefficients (rows in order, the last one possibly
-  cut), so a rate target is met continuously. No anchors: one vertex per connected component
-  fixes the translation that ``L`` cannot see (Eq. 5.50).
-* ``pca-q``: as ``pca`` but every row is uniformly quantised with the step ``s`` and entropy coded
-  (quantised Laplace model per row, :mod:`._entropy`); a rate-distortion test drops the rows (and
-  their dictionary columns) that cost more bits than the error they remove.
-* ``pca-qs``: ``pca-q`` with anchor points (1 % of the vertices, farthest-point sampled on the
-  first frame), reconstructed *serially*: one least-squares solve per frame (Eq. 5.51).
-* ``pca-qp``: the same stream as ``pca-qs`` reconstructed in *parallel*: one multi-right-hand-side
-  solve for all frames (identical result up to rounding; faster).
-* ``blocks``: ``n_b`` blocks of ``k_f`` consecutive frames (default 16), the eigen-trajectories of
-  each block found by orthogonal iterations started from those of the previous block (the
-  coherence of consecutive blocks, Section 5.2.2 "Speed-up Process using OI"), anchors, parallel
-  reconstruction. Memory is bounded by the block size.
-
-Dictionaries ``U_x`` are quantised column by column with a step tied to the energy of the row
-they multiply, and orthonormalised again (QR) on both sides, so the coefficients are exact
-projections. Every block is coded independently (the thesis codes the difference of consecutive
-dictionaries; here every block stays decodable on its own, which the frame index needs).
-
-File layout (``.sga``): a sequence of :mod:`._container` segments, each the ordinary container
-(magic, version, header, checksummed chunks) with an animation method id:
-
-1. the stream header: kind 0, frame count, block size, step, anchors; chunks: connectivity
-   (:mod:`._connectivity`), anchor indices;
-2. one segment per block: kind 1, block number, first frame, frame count; chunks: dictionaries,
-   coefficients, anchor trajectories;
-3. the frame index (files, not live streams): kind 2; one chunk with the first frame, frame count,
-   byte offset and length of every block, so a decoder can start at any block.
-
-A truncated file decodes every complete block with ``partial=True``; corrupted or foreign bytes
-raise :class:`~spectrageo.InvalidInputError`.
+Methods (Table 5.12): ``pca`` (one block, the first ``k_l`` rows of ``U^_x`` at 16-bit
+precision, Eq. 5.49 and 5.52, one anchor per connected component), ``pca-q`` (rows quantised
+with the step ``s``, entropy coded, a rate-distortion test dropping rows), ``pca-qs`` /
+``pca-qp`` (``pca-q`` with 1 % farthest-point anchors, solved frame by frame or all at once) and
+``blocks`` (blocks of ``k_f`` frames, default 16, each basis found by orthogonal iterations from
+the previous block's). Dictionaries are quantised per column and re-orthonormalised on both
+sides, so the coefficients are exact projections; every block is coded on its own (the thesis
+codes dictionary differences) so the frame index can start at any block.
 """
 
 from __future__ import annotations
 
 import math
-import struct
-import zlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,21 +29,23 @@ from .._validation import as_faces, as_frames
 from . import _connectivity, _container
 from ._container import Reader, varint
 from ._entropy import decode_groups, encode_groups, zstd_compress, zstd_decompress
-
-METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral")
-#: with the scalable layered codec of Section 5.2.4 (:mod:`._layered`)
-ALL_METHODS = (*METHODS, "layered")
-#: method ids in the container's method byte; the animation ids start at 16, clear of the static
-#: codecs' ids (0-2) that share the container.
-METHOD_IDS = {m: _container.METHOD_IDS[m] for m in ALL_METHODS}
-
-TAG_CONNECTIVITY = 1
-TAG_ANCHOR_INDEX = 2
-TAG_BASIS = 3
-TAG_COEFF = 4
-TAG_ANCHOR_POS = 5
-TAG_INDEX = 6
-KIND_HEADER, KIND_BLOCK, KIND_INDEX = 0, 1, 2
+from ._sga_format import (
+    ALL_METHODS,
+    KIND_INDEX,
+    MAX_FRAMES,
+    METHODS,
+    TAG_ANCHOR_INDEX,
+    TAG_ANCHOR_POS,
+    TAG_BASIS,
+    TAG_COEFF,
+    TAG_CONNECTIVITY,
+    Params,
+    block_segment,
+    header_segment,
+    index_segment,
+    iter_segments,
+    parse_block_params,
+)
 
 #: default quantisation step (fraction of the bounding-box diagonal, delta-coordinate domain)
 DEFAULT_STEP = 2e-4
@@ -91,60 +57,6 @@ DEFAULT_ANCHORS = 0.01
 DEFAULT_ANCHOR_RATIO = 0.5
 #: fixed precision of ``pca`` coefficients and dictionaries (Eq. 5.52 counts 16 bits)
 PCA_BITS = 16
-_MAX_FRAMES = 1 << 24
-
-_HEAD = struct.Struct("<BIIIdffBBH")  # kind, T, block, n_anchors, step, ratio, weight, basis, it, -
-_BLOCK = struct.Struct("<BIIId")  # kind, block number, first frame, frame count, step
-_KIND = struct.Struct("<B")
-
-
-# ----------------------------------------------------------------------------- parameters
-@dataclass(frozen=True)
-class Params:
-    """Stream parameters stored in the header segment."""
-
-    method: str
-    n_frames: int  # 0: unknown (a live stream)
-    block: int
-    n_anchors: int
-    step: float  # pca: number of kept coefficients per coordinate (an integer)
-    anchor_ratio: float
-    weight: float
-    basis: int  # 0 exact eigen-decomposition, 1 orthogonal iterations
-    n_iter: int
-
-    def to_bytes(self) -> bytes:
-        return _HEAD.pack(
-            KIND_HEADER,
-            self.n_frames,
-            self.block,
-            self.n_anchors,
-            self.step,
-            self.anchor_ratio,
-            self.weight,
-            self.basis,
-            self.n_iter,
-            0,
-        )
-
-    @classmethod
-    def from_bytes(cls, method: str, b: bytes) -> Params:
-        if len(b) != _HEAD.size or b[0] != KIND_HEADER:
-            raise InvalidInputError(".sga stream header is malformed.")
-        _k, T, block, na, step, ratio, weight, basis, n_iter, _ = _HEAD.unpack(b)
-        if not (
-            1 <= block <= _MAX_FRAMES
-            and T <= _MAX_FRAMES
-            and math.isfinite(step)
-            and step > 0
-            and math.isfinite(ratio)
-            and ratio > 0
-            and math.isfinite(weight)
-            and weight > 0
-            and basis in (0, 1)
-        ):
-            raise InvalidInputError(".sga stream header has invalid parameters.")
-        return cls(method, T, block, na, step, ratio, weight, basis, n_iter)
 
 
 def _anchored(method: str) -> bool:
@@ -199,11 +111,9 @@ def choose_anchors(V0: np.ndarray, L: sp.csr_matrix, fraction: float) -> np.ndar
 class _Solver:
     """Factorisation of ``L^T L + w^2 I_a^T I_a`` for Eq. (5.51), reused for every frame.
 
-    The fixed-order sparse Cholesky of :mod:`spectrageo.linalg._fixed` (minimum-degree order,
-    supernodal factor, no BLAS or LAPACK), so that a file decodes to the same bits on every
-    machine. ``L`` is the binary ``D - C``: the matrix is formed exactly. Right-hand sides
-    are solved 64 columns at a time (each column's result does not depend on the others, so
-    the serial and parallel reconstructions agree bit for bit).
+    The fixed-order sparse Cholesky of :mod:`spectrageo.linalg._fixed`; right-hand sides are solved
+    64 columns at a time, each independent of the others, so serial and parallel reconstructions
+    agree bit for bit.
     """
 
     def __init__(self, L: sp.csr_matrix, anchors: np.ndarray, weight: float) -> None:
@@ -478,66 +388,7 @@ def decode_block(chunks, p: Params, nf: int, n: int, anchors: np.ndarray, step: 
     return deltas, apos
 
 
-# ----------------------------------------------------------------------------- segments
-def _segment_end(data: bytes, pos: int) -> int | None:
-    """End offset of the container segment starting at ``pos``; None when it is cut short.
-
-    The segment header's checksum is verified first, so a damaged length cannot pose as a cut.
-    """
-    fixed = _container._FIXED
-    if len(data) < pos + 4:
-        return None
-    if data[pos : pos + 4] != _container.MAGIC:
-        raise InvalidInputError(f".sga data is corrupted (no segment starts at byte {pos}).")
-    if len(data) < pos + fixed.size + 2:
-        return None
-    (plen,) = struct.unpack_from("<H", data, pos + fixed.size)
-    end = pos + fixed.size + 2 + plen
-    if len(data) < end + 4:
-        return None
-    (crc,) = struct.unpack_from("<I", data, end)
-    if zlib.crc32(data[pos:end]) != crc:
-        raise InvalidInputError(f".sga segment header at byte {pos} is corrupted.")
-    n_chunks = data[pos + 7]
-    p = end + 4
-    for _ in range(n_chunks):
-        if len(data) < p + _container._CHUNK.size:
-            return None
-        _tag, length, _crc = _container._CHUNK.unpack_from(data, p)
-        p += _container._CHUNK.size + length
-        if p > len(data):
-            return None
-    return p
-
-
-def _segment(method, n, m, origin, scale, params: bytes, chunks) -> bytes:
-    return _container.Container(method, n, m, origin, scale, params, False, chunks).to_bytes()
-
-
-def header_segment(method, n, m, origin, scale, p: Params, F, anchors) -> bytes:
-    conn = _connectivity.encode_faces(F)
-    a = np.diff(np.r_[-1, anchors]) - 1
-    idx = varint(anchors.size) + zstd_compress(a.astype("<u4").tobytes())
-    return _segment(
-        method,
-        n,
-        m,
-        origin,
-        scale,
-        p.to_bytes(),
-        [(TAG_CONNECTIVITY, conn), (TAG_ANCHOR_INDEX, idx)],
-    )
-
-
-def block_segment(method, n, m, origin, scale, b: int, t0: int, nf: int, step, chunks) -> bytes:
-    return _segment(method, n, m, origin, scale, _BLOCK.pack(KIND_BLOCK, b, t0, nf, step), chunks)
-
-
-def index_segment(method, n, m, origin, scale, entries) -> bytes:
-    body = varint(len(entries)) + b"".join(
-        varint(t0) + varint(nf) + varint(off) + varint(ln) for t0, nf, off, ln in entries
-    )
-    return _segment(method, n, m, origin, scale, _KIND.pack(KIND_INDEX), [(TAG_INDEX, body)])
+# ----------------------------------------------------------------------------- decoding
 
 
 @dataclass
@@ -612,36 +463,36 @@ def reconstruct_block(st: StreamState, chunks, nf: int, step: float, serial: boo
     return X * st.scale + st.origin
 
 
-def _parse_block_params(c: _container.Container, st: StreamState) -> tuple[int, int, int, float]:
-    if len(c.params) != _BLOCK.size or c.params[0] != KIND_BLOCK:
-        raise InvalidInputError(".sga block segment header is malformed.")
-    _k, b, t0, nf, step = _BLOCK.unpack(c.params)
-    if not (math.isfinite(step) and step > 0):
-        raise InvalidInputError(".sga block segment has an invalid step.")
-    if c.method != st.method or c.n_vertices != st.n or c.n_faces != st.m:
-        raise InvalidInputError(".sga block segment does not belong to this stream.")
-    if not 1 <= nf <= max(st.params.block, 1) or t0 > _MAX_FRAMES:
-        raise InvalidInputError(".sga block segment has an invalid frame count.")
-    return b, t0, nf, step
+def iter_blocks(st: StreamState, segs, partial: bool, serial: bool | None):
+    """Yield ``(t0, frames)`` for the block segments ``segs`` that follow the header ``st``."""
+    serial = st.method == "pca-qs" if serial is None else serial
+    expect = 0
+    seen_index = False
+    for _pos, _end, c in segs:
+        if seen_index:
+            raise InvalidInputError(".sga data continues after its frame index.")
+        if c.params[:1] == bytes([KIND_INDEX]):
+            seen_index = True
+            continue
+        _b, t0, nf, step = parse_block_params(c, st)
+        if t0 != expect:
+            raise InvalidInputError(
+                f".sga blocks are out of order (frame {t0}, expected {expect})."
+            )
+        yield t0, reconstruct_block(st, c.chunks, nf, step, serial)
+        expect += nf
+    if st.params.n_frames and expect != st.params.n_frames and not partial:
+        raise InvalidInputError(
+            f".sga data is truncated: {expect} of {st.params.n_frames} frames present."
+        )
 
 
-def iter_segments(data: bytes, partial: bool) -> Iterator[tuple[int, int, _container.Container]]:
-    """Parse consecutive segments; yields ``(offset, end, container)``."""
-    pos = 0
-    while pos < len(data):
-        end = _segment_end(data, pos)
-        if end is None:
-            if partial and pos > 0:
-                return
-            raise InvalidInputError(f".sga data is truncated (segment at byte {pos} is cut short).")
-        yield pos, end, _container.parse(data[pos:end])
-        pos = end
-
-
-def is_animation(data) -> bool:
-    """True when ``data`` starts with a container whose method is an animation method."""
-    b = bytes(data[:6]) if isinstance(data, bytes | bytearray | memoryview) else b""
-    return len(b) == 6 and b[:4] == _container.MAGIC and b[5] in METHOD_IDS.values()
+def decode(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Frames and faces of a complete ``.sga`` byte string of an eigen-trajectory method."""
+    segs = iter_segments(data, False)
+    st = read_header(next(segs)[2])
+    parts = [X for _t0, X in iter_blocks(st, segs, False, None)]
+    return np.concatenate(parts, axis=0), st.F
 
 
 # ----------------------------------------------------------------------------- encoder
@@ -728,7 +579,7 @@ class AnimationEncoder:
         return b"".join(out)
 
 
-# ----------------------------------------------------------------------------- public functions
+# ----------------------------------------------------------------------------- options and rate control
 def _check_options(method: str, options: dict) -> dict:
     allowed = {
         "block": DEFAULT_BLOCK,
@@ -862,7 +713,7 @@ def check_encode_args(frames, F, method: str, step, bpvf, error) -> tuple[np.nda
     A = as_frames(frames, "frames")
     F = as_faces(F, A.shape[1], "F")
     T, n = A.shape[:2]
-    if T > _MAX_FRAMES or n > _container.MAX_COUNT or F.shape[0] > _container.MAX_COUNT:
+    if T > MAX_FRAMES or n > _container.MAX_COUNT or F.shape[0] > _container.MAX_COUNT:
         raise InvalidInputError("the animation is too large for the .sga format.")
     fixed = method == "pca"
     if step is not None:
@@ -879,7 +730,7 @@ def check_encode_args(frames, F, method: str, step, bpvf, error) -> tuple[np.nda
 def encode_at_rate(build, A: np.ndarray, method: str, step, bpvf, error) -> bytes:
     """The file of a fixed ``step`` (default when None), or of the step meeting ``bpvf`` /
     ``error`` by bisection; ``build(step) -> bytes`` codes the whole file at one step."""
-    from . import _bisect
+    from ._rate import bisect_step
 
     T, n = A.shape[:2]
     fixed = method == "pca"
@@ -897,7 +748,7 @@ def encode_at_rate(build, A: np.ndarray, method: str, step, bpvf, error) -> byte
         from ..metrics import kg_error
 
         data = build(s)
-        rec, _F = decode_animation(data)
+        rec, _F = decode(data)
         return kg_error(rec, A), data
 
     if fixed:
@@ -909,394 +760,5 @@ def encode_at_rate(build, A: np.ndarray, method: str, step, bpvf, error) -> byte
             what="bpvf" if bpvf is not None else "error",
         )
     if bpvf is not None:
-        return _bisect(m_rate, float(bpvf), increasing=False, what="bpvf")[1]
-    return _bisect(m_err, float(error), increasing=True, what="error")[1]
-
-
-def encode_animation(
-    frames, F, *, method: str = "blocks", bpvf=None, error=None, step=None, **options
-) -> bytes:
-    """See :func:`spectrageo.compress.encode_animation`."""
-    if method == "layered":
-        from . import _layered
-
-        if bpvf is not None and error is not None:
-            raise InvalidInputError("give at most one of `bpvf` and `error`.")
-        return _layered.encode(frames, F, step=step, bpvf=bpvf, error=error, **options)
-    A, F = check_encode_args(frames, F, method, step, bpvf, error)
-    enc = make_encoder(A, F, method, options)
-    return encode_at_rate(enc.build, A, method, step, bpvf, error)
-
-
-def _parse_stream(data, partial: bool):
-    segs = iter_segments(data, partial)
-    try:
-        _p, _e, head = next(segs)
-    except StopIteration:
-        raise InvalidInputError(".sga data is empty.") from None
-    if head.method == "layered":
-        from ._layered import LayeredState
-
-        return LayeredState(head), segs
-    st = read_header(head)
-    return st, segs
-
-
-def iter_decode(data, *, partial: bool = False, serial: bool | None = None, _state=None):
-    """Yield ``(t0, frames_block)`` for every block of an ``.sga`` byte string, in order.
-
-    ``_state``: a dict that receives the stream state under ``"st"`` (its faces, parameters).
-    """
-    if isinstance(data, memoryview | bytearray):
-        data = bytes(data)
-    if not isinstance(data, bytes):
-        raise InvalidInputError(f"`data` must be bytes; got {type(data).__name__}.")
-    if not is_animation(data):
-        raise InvalidInputError("not a spectrageo compressed animation (.sga).")
-    st, segs = _parse_stream(data, partial)
-    if _state is not None:
-        _state["st"] = st
-    if st.method == "layered":
-        yield from _iter_layered(st, segs, partial)
-        return
-    serial = st.method == "pca-qs" if serial is None else serial
-    expect = 0
-    seen_index = False
-    for _pos, _end, c in segs:
-        if seen_index:
-            raise InvalidInputError(".sga data continues after its frame index.")
-        if c.params[:1] == bytes([KIND_INDEX]):
-            seen_index = True
-            continue
-        _b, t0, nf, step = _parse_block_params(c, st)
-        if t0 != expect:
-            raise InvalidInputError(
-                f".sga blocks are out of order (frame {t0}, expected {expect})."
-            )
-        yield t0, reconstruct_block(st, c.chunks, nf, step, serial)
-        expect += nf
-    if st.params.n_frames and expect != st.params.n_frames and not partial:
-        raise InvalidInputError(
-            f".sga data is truncated: {expect} of {st.params.n_frames} frames present."
-        )
-
-
-def _iter_layered(st, segs, partial: bool):
-    seen_index = False
-    for _pos, _end, c in segs:
-        if seen_index:
-            raise InvalidInputError(".sga data continues after its frame index.")
-        if c.params[:1] == bytes([KIND_INDEX]):
-            seen_index = True
-            continue
-        t = st.expect
-        yield t, st.frame(c)[None]
-    if st.n_frames and st.expect != st.n_frames and not partial:
-        raise InvalidInputError(
-            f".sga data is truncated: {st.expect} of {st.n_frames} frames present."
-        )
-
-
-def decode_animation(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """See :func:`spectrageo.compress.decode_animation`."""
-    state: dict = {}
-    parts = [X for _t0, X in iter_decode(data, partial=partial, _state=state)]
-    if not parts:
-        raise InvalidInputError(".sga data holds no complete frame.")
-    return np.concatenate(parts, axis=0), state["st"].F
-
-
-def info_animation(data) -> dict:
-    """Header summary of ``.sga`` bytes without decoding the geometry."""
-    if isinstance(data, memoryview | bytearray):
-        data = bytes(data)
-    st, segs = _parse_stream(data, False)
-    if st.method == "layered":
-        return _info_layered(data, st, segs)
-    n_blocks = 0
-    frames = 0
-    conn = len(_container.parse(data[: _segment_end(data, 0)]).chunks[0][1])
-    has_index = False
-    for _p, _e, c in segs:
-        if c.params[:1] == bytes([KIND_INDEX]):
-            has_index = True
-            continue
-        _b, _t0, nf, _s = _parse_block_params(c, st)
-        n_blocks += 1
-        frames += nf
-    p = st.params
-    parameters = {
-        ("kept_coefficients" if p.method == "pca" else "step"): p.step,
-        "block": p.block,
-        "n_anchors": p.n_anchors,
-        "anchor_ratio": p.anchor_ratio,
-        "basis": "oi" if p.basis else "exact",
-    }
-    return _info_dict(data, st, frames, conn, n_blocks, has_index, parameters)
-
-
-def _info_layered(data: bytes, st, segs) -> dict:
-    from ._layered import _parse_payload
-
-    conn = len(_container.parse(data[: _segment_end(data, 0)]).chunks[0][1])
-    layers = []
-    has_index = False
-    for _p, _e, c in segs:
-        if c.params[:1] == bytes([KIND_INDEX]):
-            has_index = True
-            continue
-        if not c.chunks:
-            raise InvalidInputError(".sga layered frame segment is malformed.")
-        layers.append(_parse_payload(c.chunks[0][1], st.n)[0])
-    frames = len(layers)
-    parameters = {
-        "step": st.step,
-        "refresh": st.refresh,
-        "mean_layer": float(np.mean(layers[1:])) / st.n if frames > 1 else 1.0,
-    }
-    return _info_dict(data, st, frames, conn, frames, has_index, parameters)
-
-
-def _info_dict(data, st, frames, conn, n_blocks, has_index, parameters) -> dict:
-    nvf = max(1, st.n * max(frames, 1))
-    return {
-        "format": "sga",
-        "version": _container.FORMAT_VERSION,
-        "method": st.method,
-        "n_frames": frames,
-        "n_vertices": st.n,
-        "n_faces": st.m,
-        "bytes": len(data),
-        "bpvf": 8.0 * len(data) / nvf,
-        "connectivity_bpvf": 8.0 * conn / nvf,
-        "n_blocks": n_blocks,
-        "frame_index": has_index,
-        "order_preserved": True,
-        "parameters": parameters,
-    }
-
-
-# ----------------------------------------------------------------------------- streaming
-class StreamEncoder:
-    """See :class:`spectrageo.compress.StreamEncoder`."""
-
-    def __init__(self, F, *, method="blocks", step=None, bpvf=None, **options) -> None:
-        self._lay = None
-        if method == "layered":
-            from ._layered import LayeredEncoder
-
-            bad = sorted(set(options) - {"layer", "refresh", "fine"})
-            if bad:
-                raise InvalidInputError(
-                    f"unknown option(s) {bad} for method 'layered'; use ['fine', 'layer', "
-                    "'refresh']."
-                )
-            self._lay = LayeredEncoder(F, step=step, bpvf=bpvf, **options)
-            return
-        if method != "blocks":
-            raise InvalidInputError(
-                f"streaming supports methods 'blocks' and 'layered' (the others need the whole "
-                f"sequence); got {method!r}."
-            )
-        if step is not None and bpvf is not None:
-            raise InvalidInputError("give at most one of `step` and `bpvf`.")
-        for name, v in (("step", step), ("bpvf", bpvf)):
-            ok = not isinstance(v, bool) and isinstance(v, int | float | np.integer | np.floating)
-            if v is not None and not (ok and math.isfinite(float(v)) and float(v) > 0):
-                raise InvalidInputError(f"`{name}` must be a positive number; got {v!r}.")
-        self.o = _check_options(method, options)
-        self.F_in = F
-        self.step = DEFAULT_STEP if step is None else float(step)
-        self.bpvf = None if bpvf is None else float(bpvf)
-        self.method = method
-        self.buf: list[np.ndarray] = []
-        self.prev = None
-        self.t = 0
-        self.b = 0
-        self.offset = 0
-        self.entries: list[tuple[int, int, int, int]] = []
-        self.started = False
-        self.closed = False
-        self.block_steps: list[float] = []
-
-    def _start(self, V0: np.ndarray) -> bytes:
-        n = V0.shape[0]
-        self.F = as_faces(self.F_in, n, "F")
-        self.n = n
-        lo, hi = V0.min(axis=0), V0.max(axis=0)
-        self.origin = 0.5 * (lo + hi)
-        diag = float(np.linalg.norm(hi - lo))
-        self.scale = 2.0 * diag if diag > 0 else 1.0  # room for motion beyond the first frame
-        self.L = _laplacian(self.F, n)
-        X0 = (V0 - self.origin) / self.scale
-        self.anchors = choose_anchors(X0, self.L, float(self.o["anchors"]))
-        self.p = Params(
-            self.method,
-            0,
-            int(self.o["block"]),
-            int(self.anchors.size),
-            self.step,
-            float(self.o["anchor_ratio"]),
-            float(self.o["weight"]),
-            1 if self.o["basis"] == "oi" else 0,
-            int(self.o["n_iter"]),
-        )
-        # the header carries the nominal step; blocks coded at another step (rate adaptation)
-        # carry theirs in their own segment parameters
-        head = header_segment(
-            self.method,
-            n,
-            self.F.shape[0],
-            tuple(self.origin),
-            self.scale,
-            self.p,
-            self.F,
-            self.anchors,
-        )
-        self.started = True
-        self.offset = len(head)
-        return head
-
-    def push(self, frame) -> bytes:
-        """Add one frame (n, 3); returns the bytes ready to send (possibly empty)."""
-        if self._lay is not None:
-            return self._lay.push(frame)
-        if self.closed:
-            raise InvalidInputError("the stream is closed.")
-        V = np.asarray(frame, dtype=np.float64)
-        if V.ndim != 2 or V.shape[1] != 3 or (self.started and V.shape[0] != self.n):
-            raise InvalidInputError(f"`frame` must have shape (n, 3); got {V.shape}.")
-        if not np.isfinite(V).all():
-            raise InvalidInputError("`frame` contains NaN or inf coordinates.")
-        out = b"" if self.started else self._start(V)
-        self.buf.append((V - self.origin) / self.scale)
-        if len(self.buf) == self.p.block:
-            out += self._flush()
-        return out
-
-    def _flush(self) -> bytes:
-        if not self.buf:
-            return b""
-        X = np.stack(self.buf)
-        self.buf = []
-        o = self.o
-        plan = analyse_block(
-            X,
-            self.L,
-            self.anchors,
-            self.t,
-            self.prev,
-            int(o["n_iter"]) if o["basis"] == "oi" else 0,
-        )
-        self.prev = plan
-        m = self.F.shape[0]
-
-        def seg(s):
-            chunks = encode_block(plan, self.method, s, float(o["anchor_ratio"]), float(o["rd"]))
-            return block_segment(
-                self.method,
-                self.n,
-                m,
-                tuple(self.origin),
-                self.scale,
-                self.b,
-                self.t,
-                plan.nf,
-                s,
-                chunks,
-            )
-
-        if self.bpvf is None:
-            s, data = self.step, seg(self.step)
-        else:  # per-block rate adaptation: the block alone meets the target
-            from . import _bisect
-
-            nvf = float(self.n * plan.nf)
-            s, data = _bisect(
-                lambda s: (8.0 * len(seg(s)) / nvf, seg(s)),
-                self.bpvf,
-                increasing=False,
-                what="bpvf",
-            )
-        self.block_steps.append(s)
-        self.entries.append((self.t, plan.nf, self.offset, len(data)))
-        self.offset += len(data)
-        self.t += plan.nf
-        self.b += 1
-        return data
-
-    def close(self) -> bytes:
-        """Flush the last (short) block and append the frame index; returns the final bytes."""
-        if self._lay is not None:
-            return self._lay.close()
-        if self.closed:
-            return b""
-        self.closed = True
-        if not self.started:
-            raise InvalidInputError("the stream has no frame.")
-        out = self._flush()
-        return out + index_segment(
-            self.method, self.n, self.F.shape[0], tuple(self.origin), self.scale, self.entries
-        )
-
-
-class StreamDecoder:
-    """See :class:`spectrageo.compress.StreamDecoder`."""
-
-    def __init__(self) -> None:
-        self.buf = b""
-        self.state: StreamState | None = None
-        self.expect = 0
-        self.done = False
-        self.F: np.ndarray | None = None
-
-    def feed(self, data) -> list[np.ndarray]:
-        """Add received bytes; returns the frames (n, 3) completed by them, in order."""
-        if self.done and data:
-            raise InvalidInputError(".sga stream continues after its frame index.")
-        self.buf += bytes(data)
-        out: list[np.ndarray] = []
-        while self.buf:
-            end = _segment_end(self.buf, 0)
-            if end is None:
-                break
-            c = _container.parse(self.buf[:end])
-            self.buf = self.buf[end:]
-            if self.state is None:
-                if c.method == "layered":
-                    from ._layered import LayeredState
-
-                    self.state = LayeredState(c)
-                else:
-                    self.state = read_header(c)
-                self.F = self.state.F
-                continue
-            if c.params[:1] == bytes([KIND_INDEX]):
-                self.done = True
-                continue
-            if self.state.method == "layered":
-                out.append(self.state.frame(c))
-                self.expect += 1
-                continue
-            out.extend(self._block(c))
-        return out
-
-    def _block(self, c) -> list[np.ndarray]:
-        _b, t0, nf, step = _parse_block_params(c, self.state)
-        if t0 != self.expect:
-            raise InvalidInputError(
-                f".sga blocks are out of order (frame {t0}, expected {self.expect})."
-            )
-        X = reconstruct_block(self.state, c.chunks, nf, step, serial=False)
-        self.expect += nf
-        return list(X)
-
-    @property
-    def n_frames(self) -> int:
-        """Frames decoded so far."""
-        return self.expect
-
-    @property
-    def pending_bytes(self) -> int:
-        """Bytes received that do not yet form a complete segment (a cut stream's remainder)."""
-        return len(self.buf)
+        return bisect_step(m_rate, float(bpvf), increasing=False, what="bpvf")[1]
+    return bisect_step(m_err, float(error), increasing=True, what="error")[1]

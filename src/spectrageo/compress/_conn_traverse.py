@@ -1,45 +1,22 @@
 """Order-preserving connectivity coding by traversal: topology first, then the two orders.
 
-A file's face list carries three kinds of information: the *topology* (which vertices form
-triangles), the *vertex order* (which label each vertex has) and the *face order* with the corner
-rotation of every face. Coding ``(a, b, c)`` label triples directly spends about ``3 log2(n)``
-bits per face when the file's orders are not coherent (many shared meshes: ChineseDragon,
-armadillo, the CAD parts), while any order-preserving code needs only about
-``log2(m!) + log2(n!)`` bits for the two orders plus a few bits per face for the topology.
-This coder sends the three parts separately:
+Label triples cost about ``3 log2(n)`` bits per face when a file's orders are incoherent; an
+order-preserving code needs about ``log2(m!) + log2(n!)`` bits plus a few bits per face:
 
-1. **Topology** by a depth-first traversal of the faces over shared edges. The decoder numbers
-   vertices in the order the traversal meets them (canonical ids). From an open edge (one decoded
-   face) the encoder says whether an undecoded face lies across it, that face's orientation
-   relative to its neighbour, and its third vertex: *new* (the next canonical id), one of a short
-   candidate list both sides build from the decoded neighbours of the edge's end points (border
-   neighbours first, as in Edgebreaker's L/R cases) and the vertices up to :data:`WALK` border
-   edges further from each end point (most of Edgebreaker's S cases), another vertex of the
-   decoded region's border by the step from the gate's rank to its rank among the border
-   vertices (Elias-gamma), or, for non-manifold contacts only, an explicit id. Faces the
-   traversal cannot reach (other components, non-manifold and degenerate faces) are *seeds*
-   sent corner by corner in the file's face order.
-2. **Vertex labels**: the file label of every canonical vertex, as its rank among the labels not
-   yet used relative to the rank that would follow the previous vertex's label (0 for files whose
-   vertices are numbered along a traversal), Elias-gamma split into an entropy-coded length and
-   raw bits. A random numbering costs close to ``log2(n!)``, the minimum.
-3. **Face order**: the file's faces in their order, each named as the canonical face after the
-   previous one, one of the first three other not-yet-placed edge neighbours of the previous
-   one, or by its rank among the faces not yet placed (Elias-gamma as above); then each face's
-   rotation relative to "smallest label first".
+1. **Topology** by a depth-first traversal over shared edges, vertices numbered as met
+   (canonical ids). Across an open edge the encoder codes whether a face lies there, its
+   orientation and its third vertex: *new*, a candidate both sides list from the decoded
+   neighbourhood (Edgebreaker's L/R and most S cases, up to :data:`WALK` border edges away),
+   another border vertex by rank step (Elias-gamma), or an explicit id. Unreachable faces are
+   sent as *seeds*.
+2. **Vertex labels**: each file label as its rank step among the unused labels.
+3. **Face order**: each file face as the canonical successor, an unplaced edge neighbour of
+   the previous face, or its rank; then its rotation.
 
-:func:`canonical` gives the order in which all three parts are nearly free (the ``--reorder``
-option): vertices numbered as the traversal meets them, faces in traversal order, smallest label
-first.
-
-The third-vertex symbol is coded in one of 16 contexts, the classes (new, first candidate,
-second candidate, other) of the two symbols before it: Edgebreaker-like symbol sequences are
-strongly correlated (0.5-0.7 bits per vertex saved on the tuning meshes of
-``benchmarks/connectivity.py``). All symbol streams are
-coded with static categorical models (counts sent in the stream) by
-``constriction``'s ANS coder; raw bits are packed. Both sides run the same compiled state machine
-(:func:`_topology`), so the candidate lists cannot drift apart. Decoding validates every symbol
-and refuses malformed streams with :class:`~spectrageo.InvalidInputError`.
+:func:`canonical` is the order in which all three are nearly free (``--reorder``). Symbols use
+static categorical models with ``constriction``'s ANS coder, the third vertex in 16 contexts;
+both sides run one compiled state machine (:func:`_topology`). See
+docs/decisions.md#compress-connectivity and docs/decisions.md#compress-conn-contexts.
 """
 
 from __future__ import annotations

@@ -1,21 +1,14 @@
 """Lossless connectivity coding that keeps the face order and the corner order of every face.
 
-Two schemes; the encoder writes both and keeps the smaller, the first byte tells them apart:
+The encoder writes two schemes and keeps the smaller; the first byte tells them apart:
 
-- the traversal code of :mod:`._conn_traverse` (first byte ``0x40``): topology by a depth-first
-  traversal, then the file's vertex labels and face order as permutations; near the
-  ``log2(m!) + log2(n!)`` bits any order-preserving code must spend when a file's orders are
-  random, and a few bits per vertex when they follow a traversal;
-- the delta code (first byte 1-8, the index width; files written before the traversal code have
-  only this one): every face ``(a, b, c)`` becomes three integers: ``a`` minus the first corner
-  of the previous face, ``b - a`` and ``c - a`` (zigzag mapped to unsigned), split into byte
-  planes (all low bytes, then the next bytes, ...) and compressed with zstd. It wins on tiny
-  meshes and on some files whose faces and labels both follow one sweep.
+- the traversal code of :mod:`._conn_traverse` (first byte ``0x40``);
+- the delta code (first byte 1-8, the index width): each face ``(a, b, c)`` becomes ``a`` minus
+  the previous face's first corner, ``b - a`` and ``c - a`` (zigzag), split into byte planes and
+  compressed with zstd; it wins on tiny meshes and some files ordered by one sweep.
 
-:func:`reorder` is the ``--reorder`` option: vertices and faces in the traversal's own order
-(:func:`._conn_traverse.canonical`), each face rotated to start at its smallest index
-(orientation kept), where the traversal code spends only its topology part; or the input's
-order where that codes smaller.
+:func:`reorder` is the ``--reorder`` option: vertices and faces in the traversal's own order,
+each face rotated to start at its smallest index, or the input's order where that codes smaller.
 """
 
 from __future__ import annotations

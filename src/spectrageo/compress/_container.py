@@ -13,11 +13,10 @@ Layout (little endian)::
     crc32    u32 of everything above
     chunks   n_chunks x (tag u8, length u32, crc32 u32, payload)
 
-Chunk 0 is the connectivity; the following chunks hold the geometry, coarse to fine. Every
-length and checksum is verified before a byte of a payload is interpreted, so a truncated,
-corrupted or foreign file raises :class:`~spectrageo.InvalidInputError` and never reaches the
-numerical code with garbage. A prefix of a file can still be decoded with ``partial=True``: the
-complete chunks are used, the missing geometry layers are taken as zero (a coarser level).
+Chunk 0 is the connectivity, then the geometry coarse to fine. Every length and checksum is
+verified before a payload is interpreted, so damaged or foreign data raise
+:class:`~spectrageo.InvalidInputError`; with ``partial=True`` a prefix decodes from its complete
+chunks.
 """
 
 from __future__ import annotations

@@ -1,40 +1,15 @@
 """Dense linear algebra in a fixed order of operations, for the codec decoders (numba, no BLAS).
 
-A decoder must turn the same bytes into the same floating-point numbers on every machine. BLAS
-and LAPACK do not promise that: OpenBLAS picks its kernels by CPU (vector width, FMA, blocking),
-and a multithreaded BLAS splits sums by the thread count. The kernels here are written as plain
-loops and compiled by numba without ``fastmath``, so every result is the one sequence of IEEE 754
-operations the loops spell out: no reassociation, no fused multiply-add (LLVM contracts ``a * b +
-c`` only when allowed to), and vectorisation only across independent outputs, which does not
-change any single result. Square roots are IEEE correctly rounded; no other elementary function
-is called (:func:`hypot` is computed from a square root).
-
-Conventions: matrices are C-ordered float64; loops that accumulate run over the summation index
-in ascending order and keep the output row in the innermost loop (vectorised across columns,
-each column summed in the same order whatever the vector width). Column indices of such loops
-are cast to ``uint64``: numba then leaves out its negative-index handling, which otherwise
-keeps LLVM from vectorising them.
-
-Kernels
--------
-* :func:`tridiagonalise`: ``A = Q T Q^T`` by unblocked Householder reflections (the algorithm of
-  LAPACK's ``dsytd2``), with :func:`apply_q` / :func:`apply_qt`;
-* :func:`ql_rotations`: eigenvalues of the tridiagonal ``T`` by the implicit QL method with
-  Wilkinson shifts, the plane rotations recorded (:func:`rotate`, :func:`rotate_t` apply them);
-* :func:`eigh`, :func:`eigh_lowest`: symmetric eigendecomposition from the two, with cyclic
-  Jacobi (:func:`eigh_jacobi`) where the QL iteration does not converge; eigenvalues ascending,
-  each eigenvector signed so that its largest-magnitude entry (the first of equal ones) is
-  positive;
-* :func:`qr`: thin Householder QR; :func:`svd`: thin SVD by Householder QR and one-sided (Hestenes)
-  Jacobi rotations of ``R``, singular values descending;
-* :func:`matmul`, :func:`matmul_tn`: ``A B`` and ``A^T B``;
-* :func:`reverse_cuthill_mckee` (ties broken by index), :func:`envelope_cholesky`,
-  :func:`solve_power`: the shifted Laplacian solves of the orthogonal iteration (Eq. 5.42)
-  without ``fastmath``.
-
-numba caches a compiled function by its own source file only: after editing this module, delete
-the cached ``*.nbi``/``*.nbc`` of the modules whose kernels call these (``_spectral_fast``), or
-they keep the old code.
+Plain loops compiled without ``fastmath`` (no reassociation, no FMA, vectorised only across
+independent outputs), so a decoder turns the same bytes into the same numbers on every machine
+(docs/decisions.md#deterministic-decoders). Matrices are C-ordered float64; accumulations run
+over the summation index in ascending order (column indices cast to ``uint64`` so LLVM
+vectorises them). Kernels: :func:`tridiagonalise` (``dsytd2``) with :func:`apply_q` /
+:func:`apply_qt`; :func:`ql_rotations` (implicit QL, rotations recorded; :func:`rotate`,
+:func:`rotate_t`); :func:`eigh`, :func:`eigh_lowest` (Jacobi fallback :func:`eigh_jacobi`;
+ascending, largest entry positive); :func:`qr`, :func:`svd`; :func:`matmul`, :func:`matmul_tn`;
+:func:`reverse_cuthill_mckee`, :func:`envelope_cholesky`, :func:`solve_power` (Eq. 5.42).
+numba caches by source file: after editing this module, clear its callers' caches.
 """
 
 from __future__ import annotations
@@ -111,16 +86,11 @@ def _next_reflector(A, i, v, w, d, e, tau):
 def tridiagonalise(A):
     """``A = Q T Q^T`` in place for a symmetric ``A`` (n, n): returns ``(tau, d, e)``.
 
-    Unblocked Householder tridiagonalisation (the algorithm of LAPACK's ``dsytd2`` with
-    ``uplo="L"``, here on the whole symmetric matrix): step ``i`` reflects ``A[i+1:, i]`` (read
-    as row ``i``, ``A[i, i+1:]``) onto its first entry with ``H_i = I - tau_i v v^T`` and updates the
-    trailing block by ``A <- A - v w^T - w v^T``, ``w = tau (A v) - tau^2 (v^T A v) v / 2``, the
-    product ``A v`` summed over the rows in ascending order. ``Q = H_0 H_1 ... H_{n-2}``. On
-    return row ``i`` of ``A`` holds ``v[1:]`` in columns ``i+2..n-1`` (``v[0] = 1`` at column
-    ``i+1``); ``d`` (n,) and ``e`` (n,) are the diagonal and off-diagonal of ``T`` (``e[i] =
-    T[i, i+1]``, ``e[n-1] = 0``). The trailing block is kept symmetric bit for bit (both triangles
-    get the same two products). The update of step ``i`` and the product ``A v`` of step ``i+1``
-    are made in one pass over the rows (the same operations, in the same order, as two passes).
+    Unblocked Householder tridiagonalisation (LAPACK's ``dsytd2``): step ``i`` reflects
+    ``A[i, i+1:]`` onto its first entry with ``H_i = I - tau_i v v^T`` and updates the trailing block
+    by ``A <- A - v w^T - w v^T``, ``w = tau (A v) - tau^2 (v^T A v) v / 2``, both triangles alike.
+    ``Q = H_0 ... H_{n-2}``; row ``i`` of ``A`` then holds ``v[1:]`` in columns ``i+2..n-1``; ``d`` and
+    ``e`` are the diagonal and off-diagonal of ``T`` (``e[n-1] = 0``).
     """
     n = A.shape[0]
     d = np.empty(max(n, 1))
@@ -232,16 +202,13 @@ def apply_qt(A, tau, Y):
 
 @njit(nogil=True, cache=True)
 def ql_rotations(d, e, idx, cs, sn, z):
-    """Eigenvalues of the symmetric tridiagonal ``(d, e)`` by the implicit QL method with
-    Wilkinson shifts (in place into ``d``, unsorted), recording the plane rotations.
+    """Eigenvalues of the symmetric tridiagonal ``(d, e)`` by implicit QL with Wilkinson shifts
+    (in place into ``d``, unsorted; ``e`` destroyed), recording the plane rotations.
 
-    The eigenvectors are ``Z = G_1 G_2 ... G_M`` where ``G_t`` rotates coordinates ``(i_t, i_t + 1)``
-    by ``(c_t, s_t)``: ``(Z G)[:, i] = c Z[:, i] - s Z[:, i+1]``, ``(Z G)[:, i+1] = s Z[:, i] + c
-    Z[:, i+1]``. Returns ``(idx, cs, sn, M, info)``; ``info = 1`` if an eigenvalue needed more
-    than :data:`QL_ITERS` iterations. ``idx``, ``cs``, ``sn`` are the scratch arrays for the
-    rotations (grown and returned when too short). ``e`` is destroyed. A row vector ``z`` of
-    length ``n`` is multiplied by every rotation as it is made (``z <- z Z``, the operations of
-    :func:`rotate_t` on ``z^T``); pass an empty array to skip that.
+    ``Z = G_1 ... G_M``, ``G_t`` rotating coordinates ``(i_t, i_t + 1)`` by ``(c_t, s_t)``. Returns
+    ``(idx, cs, sn, M, info)``: the rotation arrays (grown when too short), their count and
+    ``info = 1`` if an eigenvalue needed more than :data:`QL_ITERS` iterations. A non-empty row
+    vector ``z`` is multiplied by every rotation as it is made (``z <- z Z``).
     """
     n = d.size
     track = z.size == n and n > 0
@@ -699,14 +666,10 @@ def matmul_tn(A, B):
 # ----------------------------------------------------------------------------- shifted solves
 @njit(nogil=True, cache=True)
 def reverse_cuthill_mckee(ptr, ind):
-    """Reverse Cuthill-McKee ordering of a symmetric sparsity pattern (CSR ``ptr``, ``ind``)
-    with every tie broken by the vertex index: ``perm`` (n,) int64.
+    """Reverse Cuthill-McKee ordering of a symmetric pattern (CSR ``ptr``, ``ind``): ``perm`` (n,).
 
-    The algorithm of :func:`scipy.sparse.csgraph.reverse_cuthill_mckee` (a breadth-first search
-    from each not yet visited vertex in order of increasing degree, the neighbours of every
-    visited vertex appended in order of increasing degree, the whole order reversed), with stable
-    sorts: SciPy sorts the degrees with numpy's default (unstable) argsort, whose order among
-    equal degrees depends on the CPU features numpy dispatches to.
+    The algorithm of :func:`scipy.sparse.csgraph.reverse_cuthill_mckee` with stable sorts, every tie
+    broken by the vertex index (SciPy's unstable argsort depends on the CPU features).
     """
     n = ptr.size - 1
     deg = np.empty(n, np.int64)

@@ -1,42 +1,18 @@
 """Feature-aware high-pass quantisation (Section 5.2.3, Algorithm 9, Eq. 5.53-5.54) and its
 saliency-driven multiscale variant (Algorithm 10).
 
-Encoder:
+Encoder: delta coordinates ``delta = L v`` (``L = D - C``, Eq. 4.13); a mask of the deltas sent
+finely (``feature``: the ``feature_fraction`` most salient vertices of the RPCA geometric
+saliency, Algorithm 9 steps 1-2; ``saliency``: the fractions ``class_keep`` of ``n_classes``
+classes, Algorithm 10 steps 2-5); anchors chosen from the connectivity alone (:func:`anchors`);
+uniform quantisation (Eq. 5.53) of anchors and masked deltas with ``step``, the other deltas with
+``ratio * step`` (0: zero) in a second layer. Under rate control the encoder also tries the
+shares :data:`LEVELS` of sent deltas and keeps the best (docs/decisions.md#compress-levels,
+docs/decisions.md#compress-feature-levels-why).
 
-1. the delta coordinates ``delta = L v`` with the binary Laplacian ``L = D - C`` (Eq. 4.13);
-2. a per-vertex mask of the deltas that are sent finely: ``feature`` takes the
-   ``feature_fraction`` most salient vertices of the RPCA geometric saliency of the guided normals
-   (Algorithm 9 steps 1-2, :func:`spectrageo.saliency.geometric_saliency`); ``saliency`` splits the
-   vertices into ``n_classes`` classes of the combined saliency map and keeps the fractions
-   ``class_keep`` of each class, most salient first (Algorithm 10 steps 2-5);
-3. anchors ``v_a``: ``anchor_fraction`` of the vertices (1 % in Algorithm 9, 10 % in
-   Algorithm 10), spread over the mesh by farthest-point sampling in hops (files written before
-   the anchor-scheme byte: one vertex per METIS part; :func:`anchors`), plus one per connected
-   component; they are chosen from the connectivity alone, so their indices are not sent;
-4. uniform quantisation (Eq. 5.53) of the anchors and the masked deltas with ``step``; the other
-   deltas are quantised with ``ratio * step`` (``ratio = 0``: set to zero, as in Eq. 5.53), and
-   sent in a second layer (the progressive refinement of Algorithm 9, step 5).
-
-Level of detail under rate control (``feature`` with ``bpv=`` or ``error=`` and none of
-``feature_fraction``, ``ratio``, ``mask`` given; ``saliency`` likewise without ``class_keep``,
-``ratio``, ``mask``, its per-class shares scaled to each level): Algorithm 9 sends the feature deltas first and
-then, level by level, those of more vertices "in order" (step 5). The encoder tries the levels
-:data:`LEVELS` -- the share of the vertices, most salient first, whose deltas are sent, the rest
-set to zero as in Eq. (5.53); ``1`` sends every delta, i.e. uniform high-pass quantisation -- finds
-for each the step that meets the request, and keeps the one with the smallest RMS vertex error
-(``bpv=``) or the smallest file (``error=``). Setting the non-feature deltas to zero leaves a
-membrane between the features, which at a few bits per vertex is closer to the surface than
-quantising every delta coarsely (whose rounding noise the solve of Eq. 5.54 turns into
-low-frequency drift); at higher rates sending every delta wins, so the choice moves to ``1``.
-The grid was chosen on the compression tuning split (fandisk, partLp) only.
-
-Decoder: the sparse least-squares system ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54) through its
-normal equations ``(L^T L + I_a^T I_a) v = L^T delta + I_a^T v_a``, factorised once by the
-fixed-order sparse Cholesky of :mod:`spectrageo.linalg._fixed` (no BLAS or LAPACK), so that the
-same file decodes to the same bits on every machine; the encoder's rate control uses the same
-solver.
-
-The uniform (feature-unaware) baseline of Fig. 5.69-5.70 is ``feature_fraction=1``.
+Decoder: ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54) through its normal equations and the
+fixed-order sparse Cholesky of :mod:`spectrageo.linalg._fixed`. ``feature_fraction=1`` is the
+uniform baseline of Fig. 5.69-5.70.
 """
 
 from __future__ import annotations
@@ -88,25 +64,13 @@ ANCHOR_SCHEME = 1
 
 def anchors(F: np.ndarray, n: int, fraction: float, seed: int, scheme: int = ANCHOR_SCHEME):
     """Anchor vertices from the connectivity alone (sorted, unique): about ``fraction * n``
-    vertices spread over the mesh, plus the smallest index of every connected component
-    without one.
+    vertices spread over the mesh, plus the smallest index of every connected component.
 
-    ``scheme=0`` (files coded before the scheme byte existed): METIS splits the graph into one
-    part per anchor (seeded by ``seed``) and each part gives its smallest index. METIS's time
-    grows with the number of parts: 44k parts (10 % of the 437k-vertex dragon) took 17-18 s at
-    each end of the codec.
-    ``scheme=1``: farthest-point sampling on the graph with hop distances: every connected
-    component first gets its smallest index, then ``n_a`` more anchors follow, each the vertex
-    farthest (in hops) from every anchor so far, ties to the smallest index (``seed`` is not
-    used). The components' own anchors are not counted in ``n_a``: scans hold many tiny pieces
-    and unused vertices (the Stanford bunny: 1114 components, 1113 of them single vertices),
-    each of which needs an anchor, and a run that counted them spent the bunny's 360 anchors
-    on them and left its surface with one. Splitting ``n_a`` between the components by size
-    instead left long thin pieces of the dragon with too few (its Hausdorff error 4.4e-3
-    against 1.8e-3). On the dragon at 10 % it takes about 2 s
-    (scheme 0: 17 s); the mean Euclidean distance from a vertex to its nearest anchor is 0.00044
-    (scheme 0: 0.00051) and the largest 0.0043 (0.0031); at 1 %: 0.0015 and 0.0063 (0.0017 and
-    0.0074). Hops ignore edge lengths, which the decoder does not know when it chooses them.
+    ``scheme=1``: farthest-point sampling in hops (:func:`_farthest_points`): every component first
+    gets its smallest index, then ``n_a`` more anchors follow, each the vertex farthest in hops
+    from all anchors so far, ties to the smallest index (``seed`` unused; hops because the decoder
+    does not know edge lengths). ``scheme=0`` (older files): one METIS part per anchor (seeded by
+    ``seed``), each giving its smallest index. See docs/decisions.md#compress-anchors.
     """
     from ..graph import adjacency_matrix
     from ..spectral.partition import _metis, _split
@@ -139,12 +103,10 @@ def anchors(F: np.ndarray, n: int, fraction: float, seed: int, scheme: int = ANC
 
 @numba.njit(cache=True)
 def _farthest_points(indptr, indices, seeds, n_a, out):  # pragma: no cover - jitted
-    """Farthest-point sampling in hops (scheme 1 of :func:`anchors`) from the anchors ``seeds``
-    (one per connected component): ``n_a`` more anchors, each the vertex farthest from every
-    anchor so far, ties to the smallest index. A heap of ``(-distance, vertex)`` gives the next
-    one (stale entries are skipped); the distances are updated by a breadth-first search from
-    each new anchor that stops where it improves nothing (the distance map obeys the triangle
-    inequality). Returns the number of anchors written to ``out``."""
+    """Farthest-point sampling in hops from the anchors ``seeds``: ``n_a`` more anchors, ties to
+    the smallest index, by a heap of ``(-distance, vertex)`` and breadth-first updates that stop
+    where they improve nothing. Returns the number of anchors written to ``out``.
+    """
     n = indptr.size - 1
     far = n + 1
     dist = np.full(n, far, dtype=np.int64)
@@ -188,12 +150,10 @@ def _farthest_points(indptr, indices, seeds, n_a, out):  # pragma: no cover - ji
 
 
 class _Solver:
-    """Factorised normal equations of ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54):
-    ``(L^T L + I_a^T I_a) v = L^T delta + I_a^T v_a`` with the fixed-order sparse Cholesky
-    (:class:`spectrageo.linalg._fixed.SparseCholesky`), so that the encoder's rate control
-    and every decoder compute the same bits. ``L`` is the binary ``D - C``: the matrix has
-    integer entries and is formed exactly; the right-hand side is a sparse product (no BLAS).
-    SPD because every connected component holds an anchor."""
+    """Normal equations of ``[L; I_a] v = [delta; v_a]`` (Eq. 5.54), formed exactly (``L`` is the
+    binary ``D - C``) and factorised by the fixed-order sparse Cholesky of
+    :mod:`spectrageo.linalg._fixed`; SPD because every component holds an anchor.
+    """
 
     def __init__(self, L: sp.csr_matrix, a: np.ndarray) -> None:
         from ..linalg._fixed import SparseCholesky
@@ -229,11 +189,11 @@ def _mask_from_rank(rank: np.ndarray | None, n: int, fraction: float) -> np.ndar
 def _saliency_classes(V, F, n_classes: int, seed: int):
     """Combined saliency and its quantile classes (Algorithm 10 steps 2-3); ``None`` on meshes
     too small for patches."""
-    from ..saliency import saliency, saliency_classes
+    from ..saliency import SaliencyOptions, saliency, saliency_classes
 
     if F.shape[0] < _MIN_FACES:
         return None
-    s = saliency(V, F, k=min(25, F.shape[0] - 1), rng=seed)
+    s = saliency(V, F, SaliencyOptions(k=min(25, F.shape[0] - 1), rng=seed))
     return s, saliency_classes(s, n_classes, class_edges="quantile")
 
 
@@ -289,11 +249,10 @@ class FeaturePlan:
         return self._solver_box[0]
 
     def levels(self) -> list[FeaturePlan]:
-        """The plans of :data:`LEVELS` (same anchors, Laplacian and factorisation, made once for
-        all of them when first needed; masks from the same saliency ranking or classes), for the
-        rate control. ``saliency``: every class keeps
-        ``min(1, a * class_keep[c])`` of its vertices, ``a`` set so that the share of the level
-        is kept (Algorithm 10 steps 4-5: the ratios per class follow the scenario's total)."""
+        """The plans of :data:`LEVELS` for the rate control, sharing anchors, Laplacian and
+        factorisation; ``saliency`` keeps ``min(1, a * class_keep[c])`` of every class, ``a`` giving the
+        level's share (Algorithm 10 steps 4-5).
+        """
         import copy
 
         from ..saliency.simplify import class_keep_fractions

@@ -1,41 +1,14 @@
 """``pca-spectral``: eigen-trajectories coded in the partitioned graph Fourier basis.
 
-Not a method of the thesis: a combination of two of its parts. Section 5.2.2 compacts an
-animation in time with eigen-trajectories and codes the projections as delta coordinates
-(``pca-q`` ... ``blocks``, :mod:`._animation`); Section 5.2.1 codes a static mesh with the
-partitioned GFT whose dictionaries the decoder recomputes from the connectivity
-(:mod:`._spectral`). Here the temporal part is a principal component analysis of the whole
-sequence and the spatial part is the partitioned GFT:
+Not a method of the thesis: Section 5.2.2's temporal PCA with Section 5.2.1's spatial transform,
 
     (P1)  X_t = M + sum_j U_tj G_j,   G_j = S_j v_j reshaped to (n, 3)
 
-with ``M`` the mean frame, ``D = [X_t - M]_t = U S V^T`` (thin SVD of the (T, 3n) matrix) and
-``v_j`` the rows of ``V^T``. ``M`` and every ``G_j`` are analysed in the dictionaries of
-:func:`spectrageo.compress._spectral.dictionaries` (300-vertex submeshes, 10 % overlap, complete
-bases, seed 0: fixed, not stored) and their coefficients quantised with the one step ``s`` (the
-rate knob; with orthonormal ``U`` the squared error of the frames is the sum of the coefficient
-errors, ``T`` times the mean's, so one step for all is the mean-squared-error choice). A
-component whose coefficients all quantise to zero is not sent. The temporal coefficients
-``U_tj`` of the sent components are quantised with ``c s sqrt(n) / ||G~_j||`` (``c`` =
-:data:`U_FACTOR`, chosen on the tuning animation horse-gallop only), so each adds an error of
-about ``c s`` per vertex. Entropy coding: quantised Laplace models per (signal, octave band) for
-the coefficients and per component for ``U`` (:mod:`._entropy`).
-
-Against ``pca-qp`` at Draco-12's KG error (``spectrageo evaluate compress-animation``, both by
-their ``error=`` rate control; horse-gallop is the animation ``U_FACTOR`` was chosen on):
-horse-gallop 6.10 bpvf (7.54), crane 8.08 (9.57), horse-collapse 6.68 (8.08), cat-poses 21.4
-(25.4), lion-poses 23.8 (27.6), chickenCrossing 5.59 (4.60: pca-qp does better on these 400
-frames of a 3k-vertex mesh). The error is spread differently: at those points its STED (local
-edge-length deviation of Vasa & Skala, Section 4.9) is 3-6x pca-qp's and about that of
-Draco-12 (0.7-1.0x), since quantised GFT coefficients leave a fine, spatially white roughness
-where quantised delta coordinates leave a smooth, low-frequency drift.
-
-File layout: the ``.sga`` segments of :mod:`._animation` (stream header with the connectivity and
-one anchor per connected component, unused here; one block segment holding the whole sequence;
-the frame index). The block segment has two chunks: ``TAG_BASIS`` (``k`` as a varint, the ``k``
-float32 steps of ``U``, then the quantised ``U`` (T, k) column by column) and ``TAG_COEFF`` (the
-quantised coefficients of ``M`` and the ``k`` components, layer order of :mod:`._spectral`).
-Memory holds the whole sequence (as ``pca-qp``); long streams use ``blocks``.
+with ``M`` the mean frame and ``[X_t - M]_t = U S V^T``. ``M`` and each ``G_j`` are analysed in
+the dictionaries of :func:`._spectral.dictionaries` and quantised with one step ``s``; ``U_tj``
+with ``c s sqrt(n) / ||G~_j||`` (``c`` = :data:`U_FACTOR`). One block segment holds the whole
+sequence: chunks ``TAG_BASIS`` (``k``, the steps and the quantised ``U``) and ``TAG_COEFF``.
+See docs/decisions.md#compress-pca-spectral and docs/decisions.md#compress-pca-spectral-results.
 """
 
 from __future__ import annotations

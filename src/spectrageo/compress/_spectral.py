@@ -1,34 +1,17 @@
 """Block spectral coding on overlapped submeshes (Section 5.2.1, Algorithms 6-8, Eq. 5.42-5.45).
 
-Encoder and decoder build the same dictionaries from the connectivity alone: METIS parts grown to
-overlapped submeshes of ``submesh_size`` vertices (seeded, so deterministic), and for each submesh
-the ``k`` lowest eigenvectors of its binary Laplacian ``L = D - C``: by subspace tracking with
-orthogonal iterations (``basis="oi"``, Algorithm 6, ``T^zeta U`` with ``T = (L + delta I)^-1``,
-Eq. 5.42), by a dense decomposition (``"exact"``) or with per-submesh sizes (``"doi"``, below).
-When ``k`` is at least the size of a submesh (the default ``k = submesh_size``), the orthogonal
-iteration runs on the whole space and its Rayleigh-Ritz step is the complete eigendecomposition of
-the submesh Laplacian, whatever the starting subspace; that decomposition is then computed directly
-and independently per submesh, in parallel threads, and coding and decoding apply it without
-forming ``U`` (only the rate control by ``error`` forms the bases, once;
-:mod:`spectrageo.compress._spectral_fast`). Such files carry the :data:`DIRECT_FULL` flag in their
-parameters; files without it (coded before the flag existed) are decoded with the orthogonal
-iterations they were coded with. With ``k`` below the submesh size the subspace tracking of
-Algorithm 6 runs submesh after submesh.
-The encoder sends the feature vectors ``U^T v`` (Eq. 5.45) quantised with one uniform step
-``step`` (the rate knob) and entropy coded per frequency octave and coordinate; the decoder forms
-``U c`` per submesh and averages the overlapping copies with the degree weights of Algorithm 8.
-Every dictionary and product is computed by the fixed-order kernels of :mod:`._dense_fixed`
-(no BLAS or LAPACK), so a file decodes to the same coordinates, bit for bit, on every machine.
-
-The geometry is split into layers by frequency (the first ``k/16`` coefficients of every submesh,
-then up to ``k/4``, then the rest), each in its own checksummed chunk: a prefix of the file that
-holds only the first layers decodes to a smoother, coarser mesh.
-
-``basis="doi"``: Algorithm 7 adapts the subspace size of every submesh to the signal, and its
-added directions (Eq. 5.44) are residuals of the coordinates, which a decoder does not have. The
-decodable reading used here keeps the OI dictionary and lets the encoder choose, per submesh, the
-smallest size ``n_l`` whose relative low-pass residual (Eq. 5.43, Frobenius norm) is at most
-``eps``; the sizes are sent (zstd) and the coefficients beyond them are not.
+Both ends build the dictionaries from the connectivity alone: seeded METIS parts grown to
+overlapped submeshes of ``submesh_size`` vertices, each with the ``k`` lowest eigenvectors of its
+binary Laplacian by orthogonal iterations (``"oi"``, Algorithm 6, Eq. 5.42), a dense
+decomposition (``"exact"``) or per-submesh sizes (``"doi"``). With ``k`` at least the submesh
+size (the default) the complete decomposition is computed directly and applied without forming
+``U`` (:mod:`._spectral_fast`, flag :data:`DIRECT_FULL`; docs/decisions.md#compress-direct-bases).
+``U^T v`` (Eq. 5.45) is quantised with one step and entropy coded per octave and coordinate; the
+decoder averages the overlapping ``U c`` with the weights of Algorithm 8, all in the fixed-order
+kernels of :mod:`._dense_fixed`. Frequency layers (``k/16``, ``k/4``, the rest) sit in separate
+chunks, so a prefix decodes to a coarser mesh. ``"doi"``: Algorithm 7's added directions
+(Eq. 5.44) are unknown to a decoder, so the OI dictionary is kept and each submesh's smallest
+size with relative residual (Eq. 5.43) at most ``eps`` is sent.
 """
 
 from __future__ import annotations
@@ -178,12 +161,8 @@ class _Explicit:
 
 
 class _Full:
-    """Complete eigenbases of every submesh Laplacian, applied without forming them.
-
-    Should the compiled decomposition fail on a submesh (an eigenvalue of the QL iteration not
-    converging; a property of the connectivity, so encoder and decoder fail alike), every submesh
-    falls back to the dense decomposition of ``basis="exact"`` (:func:`_fixed_bases`, which turns
-    to Jacobi rotations where the QL iteration fails).
+    """Complete eigenbases of every submesh Laplacian, applied without forming them; should the
+    compiled decomposition fail on a submesh, every submesh uses :func:`_fixed_bases`.
     """
 
     def __init__(self, C, subs) -> None:
@@ -229,17 +208,12 @@ class _Full:
 
 
 def _fixed_bases(C, subs, k: int, method: str, zeta: int, n_iter: int, seed) -> list[np.ndarray]:
-    """The dictionaries of :func:`spectrageo.spectral.submesh_eigenbases` (binary Laplacian,
-    ``method`` ``"oi"`` or ``"exact"``, subspace tracking from the previous submesh, Rayleigh-Ritz
-    step, signs by the largest-magnitude entry) computed with the fixed-order kernels of
-    :mod:`._dense_fixed` instead of BLAS and LAPACK, so that every machine gets the same bases.
+    """The dictionaries of :func:`spectrageo.spectral.submesh_eigenbases` (``"oi"`` or ``"exact"``)
+    with the fixed-order kernels of :mod:`._dense_fixed`, so every machine gets the same bases.
 
     ``"exact"`` and the first submesh of ``"oi"``: the ``k`` lowest eigenvectors of the dense
-    submesh Laplacian (:func:`._dense_fixed.eigh_lowest`). The other submeshes of ``"oi"``:
-    ``n_iter`` orthogonal iterations (Algorithm 6) started from the previous submesh's basis:
-    ``T^zeta U`` with ``T = (L + delta I)^-1`` by ``zeta`` envelope-Cholesky solves (Eq. 5.42),
-    orthonormalised by a Householder QR (Eq. A.3-A.4), then the Ritz vectors ``Q W`` of
-    ``Q^T L Q = W diag(theta) W^T`` in ascending order.
+    submesh Laplacian. Later submeshes of ``"oi"``: ``n_iter`` orthogonal iterations (Algorithm 6,
+    Eq. 5.42) from the previous basis, Householder QR (Eq. A.3-A.4), then the Ritz vectors.
     """
     from .._validation import as_rng
     from ..spectral.orthogonal import DELTA_REL, _nb_permuted_laplacian, _SubmeshSystems
@@ -289,11 +263,10 @@ def _fixed_bases(C, subs, k: int, method: str, zeta: int, n_iter: int, seed) -> 
 
 
 def _carry_over(U: np.ndarray, n: int, k: int, gen) -> np.ndarray:
-    """The previous submesh's basis as the start of a submesh of ``n`` vertices and ``k``
-    columns: rows cut or padded with random rows (then re-orthonormalised), columns cut or padded
-    with random columns, as in :func:`spectrageo.spectral.submesh_eigenbases`. The submeshes of
-    the codec all have the same size (and the same ``k``), so there the basis is passed on
-    unchanged and the random generator is never drawn from."""
+    """The previous submesh's basis as the start of one of ``n`` vertices and ``k`` columns, cut or
+    padded with random rows and columns as in :func:`spectrageo.spectral.submesh_eigenbases` (the
+    codec's equal-sized submeshes pass it on unchanged).
+    """
     from ._dense_fixed import qr
 
     if U.shape[0] > n:

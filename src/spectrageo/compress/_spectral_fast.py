@@ -1,30 +1,11 @@
 """Full eigenbases of submesh Laplacians applied without forming them (spectral codec kernels).
 
-When the dictionary size ``k`` is at least the number of vertices ``n_i`` of a submesh, the
-orthogonal iteration of Algorithm 6 runs on the whole space: ``T^zeta U`` spans ``R^{n_i}``, and
-its Rayleigh-Ritz step is the eigendecomposition of the submesh Laplacian ``L = D - C`` itself,
-whatever the starting subspace. That decomposition is computed here directly, per submesh:
-
-* ``L = Q T Q^T``, unblocked Householder tridiagonalisation
-  (:func:`spectrageo.compress._dense_fixed.tridiagonalise`);
-* ``T = Z diag(w) Z^T`` by the implicit QL method with Wilkinson shifts, ``Z`` being the product of
-  the plane rotations of the iteration, which are recorded instead of accumulated into a matrix;
-* the basis is ``U = Q Z P S``: ``P`` orders the eigenvalues ascending (stable sort) and ``S``
-  scales every column so that its entry on the first vertex of the submesh is non-negative (the
-  first row of ``U`` is the first row of ``Z`` because ``Q`` leaves the first coordinate alone);
-  with a connected submesh this makes the constant (DC) vector positive.
-
-``U`` is never formed for coding: the coefficients are ``U^T x = S P^T Z^T (Q^T x)`` and the
-synthesis ``U c = Q (Z (P S c))``, where ``Q`` is applied by its ``n_i - 1`` reflectors and ``Z`` by
-its rotations, ``O(n_i^2)`` per coordinate instead of the ``O(n_i^3)`` of forming ``Q Z``.
-
-Every step is a compiled loop of :mod:`spectrageo.compress._dense_fixed` (no BLAS or LAPACK, no
-``fastmath``), so the encoder and every decoder, on any CPU, compute the same basis bit for bit.
-The submeshes are independent, so they are processed in chunks by a pool of threads (the kernels
-release the GIL); every submesh is computed by the same sequence of operations whatever the
-number of threads, so the result does not depend on it. :func:`overlapped_submeshes` is the
-submesh construction of :mod:`spectrageo.spectral.partition` with its breadth-first growth
-compiled (same result).
+When ``k`` covers a submesh, ``L = Q T Q^T`` (Householder), ``T = Z diag(w) Z^T`` (implicit QL,
+rotations recorded) and ``U = Q Z P S`` (``P`` sorts ascending, ``S`` makes the first vertex's
+entry non-negative); ``U^T x`` and ``U c`` apply the reflectors and rotations in ``O(n_i^2)``.
+Every step is a loop of :mod:`._dense_fixed`; a thread pool runs the submeshes, each computed
+the same way whatever the thread count. :func:`overlapped_submeshes` is
+:mod:`spectrageo.spectral.partition`'s construction with its growth compiled.
 """
 
 from __future__ import annotations

@@ -35,38 +35,26 @@ folder/     numbered frames (``frame_000.obj`` ...,       MeshAnimation, PointCl
 ==========  ============================================  ==========================================
 
 Policies
-    * Order and counts are preserved exactly: no reader merges, drops or reorders vertices or faces
-      (ground-truth pairs and animations rely on it), with one exception: triangle soups (STL, and
-      any mesh whose faces share no vertex) are welded by default, merging vertices within 1e-6 of
-      the bounding-box diagonal (``weld=False`` keeps the raw soup; :func:`read_with_report` says how
-      many were merged). Degenerate faces, duplicate (seam) and unreferenced vertices are otherwise
-      kept; repairs are explicit with :func:`spectrageo.geometry.clean_mesh`.
-    * Quads and polygons are triangulated as fans ``(v0, vi, vi+1)``, each polygon's triangles in
-      place, so face order follows the file; PLY face properties are repeated on a polygon's triangles.
-    * Bad input raises :class:`~spectrageo.InvalidInputError` naming the file (missing file, malformed
-      or truncated content, NaN coordinates, indices out of range, empty geometry, wrong shapes);
-      unknown extensions raise :class:`~spectrageo.UnsupportedFormatError` listing supported ones.
-      Library exceptions are caught and re-raised as these errors.
-    * NaN points: an error, except in PCD files whose organized clouds use NaN for "no measurement";
-      those points are dropped by default (``nan_points=``), their original indices kept in the
-      ``source_index`` attribute (and in :class:`ReadReport`), so per-point outputs can be mapped
-      back to every input row.
-    * Every write is atomic (:func:`atomic_write`): a failure leaves no partial file and no temporary.
-      Temporaries are named ``.NAME.spectrageo-tmp-XXXXXXXX.EXT`` (those of killed writes older than
-      an hour are removed on the next write); an existing target keeps its permission bits, a
-      symbolic link is written through to its target, and a FIFO/device or read-only target is
-      refused with a clear error.
-    * Hostile or corrupted files: every size a file declares (element and point counts, array
-      shapes, VLRs, chunk tables, compressed and decompressed sizes) is checked against the bytes
-      present and against a memory cap before anything is allocated or handed to native code
-      (lazrs, python-lzf); gzip is inflated in a bounded stream. The cap is the environment
-      variable ``SPECTRAGEO_MAX_BYTES`` (bytes, or with a suffix ``K M G T``: ``16G``); default: the
-      smallest of 8 GiB, half the physical memory and a quarter of the address-space limit
-      (``ulimit -v``). Header/body disagreements are errors (see each reader's docstring), and so
-      is running out of memory on a file (``MemoryError`` becomes :class:`InvalidInputError`).
+    * Order and counts are preserved exactly: no reader merges, drops or reorders vertices or
+      faces, except that triangle soups (STL, and meshes whose faces share no vertex) are welded
+      by default (``weld=False`` keeps the soup; :func:`read_with_report` counts the merges).
+      Repairs are explicit (:func:`spectrageo.geometry.clean_mesh`); polygons are fanned
+      ``(v0, vi, vi+1)`` in place, PLY face properties repeated on a polygon's triangles.
+    * Bad input raises :class:`~spectrageo.InvalidInputError` naming the file; unknown extensions
+      :class:`~spectrageo.UnsupportedFormatError` listing the supported ones.
+    * NaN points are an error, except in PCD files (organized clouds), where they are dropped by
+      default (``nan_points=``) and the kept rows' indices stored in ``source_index``.
+    * Every write is atomic (:func:`atomic_write`): a failure leaves no partial file.
+    * Every size a file declares is checked against the bytes present and a memory cap
+      (``SPECTRAGEO_MAX_BYTES``, see :mod:`spectrageo.io._common`) before anything is allocated or
+      handed to native code; gzip is inflated in a bounded stream; a ``MemoryError`` while
+      reading becomes :class:`~spectrageo.InvalidInputError`.
+    * Formats of other packages (``.sgc``, ``.sga``) register through :func:`register_format`.
 """
 
-from ._api import (
+from ._api import register_format, supported_formats
+from ._common import atomic_write
+from ._read import (
     ReadReport,
     read,
     read_animation,
@@ -74,10 +62,8 @@ from ._api import (
     read_point_cloud,
     read_sequence,
     read_with_report,
-    supported_formats,
-    write,
 )
-from ._common import atomic_write
+from ._write import write
 
 __all__ = [
     "ReadReport",
@@ -88,6 +74,7 @@ __all__ = [
     "read_point_cloud",
     "read_sequence",
     "read_with_report",
+    "register_format",
     "supported_formats",
     "write",
 ]

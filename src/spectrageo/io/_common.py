@@ -1,15 +1,10 @@
 """Helpers shared by the format modules: paths, gzip, atomic writes, polygon fans, frame sorting,
-and the size limits every reader applies to what a file declares.
+and the memory cap that every reader applies to the sizes a file declares.
 
-Memory cap
-    Readers check the sizes a file declares (point and element counts, array shapes, decompressed
-    sizes) against the bytes actually present and against a cap on the memory one file may ask
-    for, *before* allocating or handing the bytes to a native library. The cap is read from the
-    environment variable ``SPECTRAGEO_MAX_BYTES`` (a number of bytes, optionally with a suffix
-    ``K``, ``M``, ``G`` or ``T``, powers of 1024: ``SPECTRAGEO_MAX_BYTES=16G``); by default it is the
-    smallest of 8 GiB, half of the physical memory and a quarter of the process's address-space
-    limit (``ulimit -v``) when one is set. A file whose decoding would exceed it is refused with
-    :class:`~spectrageo.InvalidInputError` naming the file, the field and the value.
+The cap (:func:`max_bytes`) is the environment variable ``SPECTRAGEO_MAX_BYTES`` (bytes, or with
+a suffix ``K M G T``); by default the smallest of 8 GiB, half the physical memory and a quarter
+of the address-space limit. A file whose decoding would exceed it is refused with
+:class:`~spectrageo.InvalidInputError` naming the file, the field and the value.
 """
 
 from __future__ import annotations
@@ -56,7 +51,7 @@ def _default_max_bytes() -> int:
 
 
 def max_bytes() -> int:
-    """Memory cap (bytes) for what one file may ask to allocate; see the module docstring.
+    """Memory cap (bytes) for what one file may ask to allocate (see the module docstring).
 
     Raises
     ------
@@ -83,10 +78,7 @@ def _fmt_bytes(n: int) -> str:
 
 
 def check_alloc(need: int, name: str, what: str) -> None:
-    """Refuse to allocate ``need`` bytes for ``what`` when it exceeds :func:`max_bytes`.
-
-    ``need`` is a Python int (exact, no overflow), e.g. ``count * record_size`` from a header.
-    """
+    """Refuse to allocate ``need`` bytes (an exact Python int) for ``what`` beyond :func:`max_bytes`."""
     cap = max_bytes()
     if need > cap:
         raise InvalidInputError(
@@ -115,11 +107,8 @@ def split_suffix(path: Path) -> tuple[str, bool]:
 
 
 def read_bytes(path: Path, gzipped: bool) -> bytes:
-    """Whole content of ``path``, gunzipped when ``gzipped``; errors become InvalidInputError.
-
-    Gzip data is inflated in a bounded stream (chunks of at most 16 MiB, stopping as soon as the
-    output would exceed :func:`max_bytes`), so a small "gzip bomb" cannot exhaust memory; several
-    concatenated gzip members are read as one stream, as ``gunzip`` does.
+    """Whole content of ``path``, gunzipped when ``gzipped`` in a bounded stream (16 MiB chunks, stopping
+    beyond :func:`max_bytes`; concatenated members read as one); errors become InvalidInputError.
     """
     try:
         st = path.stat()
@@ -272,18 +261,11 @@ def _resolve_target(path: str | os.PathLike) -> tuple[Path, os.stat_result | Non
 def atomic_write(path: str | os.PathLike) -> Iterator[Path]:
     """Context manager for an atomic file write.
 
-    Yields the path of a temporary file ``.NAME.spectrageo-tmp-XXXXXXXX.SUFFIX`` in the same folder
-    as ``path`` (same final suffix, so that libraries choosing a format from the name still do);
-    when the block exits normally the temporary file replaces ``path`` with :func:`os.replace`
-    (atomic on POSIX and Windows). When the block raises, the temporary file is removed and ``path``
-    is left untouched (absent or with its old content).
-
-    * An existing target keeps its permission bits; a new file gets ``0o666 & ~umask``.
-    * A symbolic link is written through: its target file gets the new content, the link stays.
-    * A FIFO, device or socket is refused (it would be silently replaced by a regular file), and
-      so is a read-only file (no write permission bit), with :class:`InvalidInputError`.
-    * Temporaries of writes that were killed (``.NAME.spectrageo-tmp-*`` older than one hour) are
-      removed from the folder before writing.
+    Yields a temporary ``.NAME.spectrageo-tmp-XXXXXXXX.SUFFIX`` next to ``path`` that replaces it
+    with :func:`os.replace` when the block exits normally; when it raises, the temporary is removed
+    and ``path`` left untouched. An existing target keeps its permission bits; a symbolic link is
+    written through; a FIFO, device, socket or read-only target is refused with
+    :class:`InvalidInputError`; temporaries of killed writes older than an hour are removed first.
 
     Examples
     --------
@@ -319,12 +301,9 @@ def atomic_write(path: str | os.PathLike) -> Iterator[Path]:
 
 @contextlib.contextmanager
 def atomic_dir(path: Path) -> Iterator[Path]:
-    """Stage a folder's content in a temporary sibling folder and move it to ``path`` on success.
-
-    When ``path`` does not exist, the staged folder is renamed to it (atomic). When it exists, the
-    staged files are moved into it one by one with :func:`os.replace` (each atomic). On failure the
-    staging folder is removed and ``path`` is untouched. The staging folder is named
-    ``.NAME.spectrageo-tmp-XXXXXXXX``; stale ones (older than one hour) are removed first.
+    """Stage a folder's content in a temporary sibling ``.NAME.spectrageo-tmp-XXXXXXXX`` and move it
+    to ``path`` on success (a rename, or one :func:`os.replace` per file into an existing folder);
+    on failure ``path`` is untouched. Stale staging folders older than an hour are removed first.
     """
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
@@ -372,20 +351,11 @@ def _check_int64(a: np.ndarray, where: str) -> None:
 
 
 def fan_triangulate(polygons: Any, where: str) -> tuple[np.ndarray, np.ndarray | None]:
-    """Triangulate polygons as fans ``(v0, vk, vk+1)``, keeping the file's face order.
+    """Triangulate polygons as fans ``(v0, vk, vk+1)`` in the file's face order.
 
-    Parameters
-    ----------
-    polygons : (m, k) int array or sequence of int sequences (ragged)
-    where : str
-        File name for error messages.
-
-    Returns
-    -------
-    faces : (t, 3) int64
-        Triangles; the fan of polygon ``i`` comes right after the fan of polygon ``i - 1``.
-    source : (t,) int64 or None
-        Index of the polygon each triangle comes from (None when every polygon was a triangle).
+    ``polygons``: (m, k) int array or ragged sequences; ``where``: file name for messages. Returns
+    ``(faces (t, 3) int64, source)``, ``source`` (t,) the polygon of each triangle, or None when
+    every polygon was a triangle.
     """
     if isinstance(polygons, np.ndarray) and polygons.dtype != object and polygons.ndim == 2:
         arr = polygons

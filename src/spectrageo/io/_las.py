@@ -1,38 +1,21 @@
 """LAS / LAZ point clouds through :mod:`laspy` (LAZ needs the ``lazrs`` backend); optional extra.
 
-Reading: scaled ``x y z`` -> points (float64); ``red green blue`` -> uint8 colours (LAS stores 16-bit
-channels; values above 255 are taken as 16-bit and shifted by 8 bits, otherwise the file holds 8-bit
-values in 16-bit fields, as many do, and they are kept); extra-bytes dimensions ``normal_x normal_y
-normal_z`` -> normals; the standard dimensions ``intensity, return_number, number_of_returns,
-classification, scan_angle_rank / scan_angle, user_data, point_source_id, gps_time`` (when the point
-format has them) and every other extra-bytes dimension -> attributes.
+Reading: scaled ``x y z`` -> points; ``red green blue`` -> uint8 colours (shifted by 8 bits when a
+value exceeds 255, else kept: 8-bit values in 16-bit fields); extra-bytes ``normal_x normal_y
+normal_z`` -> normals; the standard dimensions (intensity, returns, classification, scan angle,
+user data, point source id, gps time) and other extra-bytes dimensions -> attributes.
 
-Writing: LAS 1.2, point format 0 / 1 (with ``gps_time``) / 2 / 3 (with colours). Coordinates are
-stored as int32 with offset = minimum and a power-of-ten scale chosen so that the extent fits
-(resolution ``scale`` = 10**ceil(log10(extent / 2e9)), e.g. 1e-9 for a unit-size cloud), or the
-``las_scale`` given. Colours are written 16-bit (8-bit value x 257). Normals and attributes that are
-not standard dimensions go to extra-bytes dimensions ((n, k) attributes as ``name_0 ... name_k-1``).
+Writing: LAS 1.2, point format 0-3; int32 coordinates with offset = minimum and scale
+``10**ceil(log10(extent / 2e9))`` or ``las_scale``; colours 16-bit (x 257); normals and other
+attributes as extra-bytes dimensions (``name_0 ... name_k-1`` for (n, k)).
 
-Hostile input: before any byte reaches laspy or lazrs, the public LAS 1.0-1.4 header is parsed
-here (:func:`check_las`) and every size it declares is checked against the bytes present and the
-memory cap (:func:`spectrageo.io._common.max_bytes`): version 1.0-1.4, header size, offset to the
-point data, the number of VLRs and each VLR's length (walked within the bytes before the points),
-EVLRs (1.4), point format and record length, the point count (1.4: the 64-bit count, and the
-legacy 32-bit count must be 0 or equal), scales (finite and non-zero: a scale of 0 would collapse
-every point) and offsets (finite). Header and body must agree:
-
-* LAS: the point records must all be present (a file truncated at a record boundary is an error,
-  not a shorter cloud), and whole records beyond the declared count (before the EVLRs or the end
-  of the file) are an error too (a header count that is too small would silently drop points);
-  fewer than one record's worth of trailing bytes is tolerated (padding).
-* LAZ: the ``laszip encoded`` VLR must be present and well formed (its chunk size times the
-  record length within the memory cap: lazrs allocates a whole chunk), the chunk-table offset must
-  point inside the file, the chunk table must declare as many chunks as the point count implies
-  (fixed-size chunks) or chunks whose point counts add up to it (variable-size chunks), and the
-  chunks' byte counts must add up to the compressed data. These checks keep a duplicated or
-  shifted chunk from making lazrs allocate tens of gigabytes (a process abort, not an exception).
-  A count that is wrong by less than one chunk cannot be detected without decoding; lazrs
-  reports a short last chunk as an error.
+Hostile input: :func:`check_las` parses the public header before any byte reaches laspy or
+lazrs, and checks every declared size against the bytes present and the memory cap: version,
+header size, point offset, VLRs and EVLRs, point format and record length, counts (1.4: the
+legacy count 0 or equal), finite non-zero scales. LAS records must all be present with no whole
+record beyond the count; LAZ needs a well-formed ``laszip encoded`` VLR and a chunk table inside
+the file whose chunks match the point count and the compressed bytes, so a damaged table cannot
+make lazrs allocate gigabytes (a process abort, not an exception).
 """
 
 from __future__ import annotations
@@ -100,16 +83,13 @@ def _u(raw: bytes, fmt: str, off: int):
 
 
 def check_las(raw: bytes, name: str, *, compressed: bool) -> LasLayout:
-    """Parse and check the LAS/LAZ header of ``raw`` (see the module docstring for the rules).
-
-    ``compressed`` is what the extension says; the header's point format decides how the body is
-    checked (laspy reads a LAZ named ``.las`` too).
+    """Parse and check the LAS/LAZ header of ``raw`` (rules in the module docstring); the header's
+    point format, not ``compressed``, decides how the body is checked.
 
     Raises
     ------
     InvalidInputError
-        Naming the file, the header field and its value, when a declared size disagrees with the
-        bytes present, exceeds the memory cap, or a field is invalid.
+        Naming the file, the field and its value.
     """
     size = len(raw)
     if size < 4 or raw[:4] != b"LASF":
@@ -339,12 +319,8 @@ def _check_layers(raw: bytes, name: str, start: int, table, rec_len: int, n_laye
 
 @contextlib.contextmanager
 def _native_stderr_held():
-    """Hold what native code writes to file descriptor 2 while laspy/lazrs decode.
-
-    A Rust panic in lazrs prints a multi-line report on fd 2 before it reaches Python as an
-    exception, which the reader turns into one clear error. The report is kept in a temporary file
-    and written back to fd 2 when the block succeeds (nothing is lost), and dropped when it
-    fails (the error message replaces it).
+    """Hold what native code writes to fd 2 while laspy/lazrs decode (a lazrs panic prints a report
+    before becoming an exception): written back on success, dropped on failure.
     """
     try:
         fd = sys.stderr.fileno() if sys.stderr is not None else 2

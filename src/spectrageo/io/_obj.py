@@ -1,37 +1,23 @@
 """Wavefront OBJ: a vectorised reader and writer that keep the file's order and per-corner data.
 
-The reader is written here rather than taken from meshio or trimesh: meshio's OBJ reader drops the
-texture and normal indices of ``f v/vt/vn`` corners (and refuses files whose ``vt`` count differs from
-the ``v`` count, e.g. Crane's ``spot.obj``), and trimesh's loader splits vertices per texture
-coordinate and regroups faces by material/object, which would break the order guarantees of
+Written here because meshio drops the ``vt``/``vn`` indices of corners and trimesh splits
+vertices per texture coordinate and regroups faces, against the order guarantees of
 :func:`spectrageo.io.read`.
 
 Reading
-    * ``v x y z [w]``: w is ignored; ``v x y z r g b [a]`` (a common extension) gives vertex colours
-      (floats in [0, 1], or uint8 when the file writes integers 0-255). All ``v`` lines must have the
-      same number of values.
-    * Faces ``f a b c ...`` with corners ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``. Quads and polygons
-      are fan-triangulated, ``(c0, c1, c2), (c0, c2, c3), ...``, in file order; the per-corner
-      texture coordinates and normals follow the same fan.
-    * Texture coordinates (``vt u [v [w]]``, w ignored, a missing v is 0) are indexed per face corner,
-      independently of ``v``; they become the face attribute ``texcoord`` of shape (m, 6) float64,
-      ``u0 v0 u1 v1 u2 v2`` per triangle (MeshLab's PLY face property ``texcoord``). Corners without a
-      ``vt`` index get NaN (only when some faces have texture coordinates and others not).
-    * Normals (``vn``): when every vertex has one normal (each vertex's corners all point at the same
-      normal vector, which covers ``f 1//1 2//2 ...`` and per-vertex duplicates; vertices used by no
-      corner take the ``vn`` of the same index when there are as many ``vn`` as ``v`` lines), they
-      become vertex normals (n, 3). Otherwise (split normals at creases) they become the face
-      attribute ``corner_normals`` (m, 9) float64, NaN for corners without a ``vn`` index. A file
-      whose faces use no ``vn`` index gets vertex normals only when it has as many ``vn`` as ``v``
-      lines (the per-vertex layout of point-cloud OBJ files).
-    * Negative (relative) indices are resolved against the total count of ``v`` (resp. ``vt``,
-      ``vn``) lines, which is exact when they all come before the faces (the usual layout).
-    * Groups, objects, materials, smoothing groups, lines (``l``) and points (``p``) are ignored;
-      ``#`` starts a comment; a trailing ``\\`` continues a line.
+    * ``v x y z [w]`` (w ignored); ``v x y z r g b [a]`` gives vertex colours (uint8 when written
+      as integers 0-255). All ``v`` lines must have the same number of values.
+    * Faces ``f`` with corners ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``, fan-triangulated in file
+      order; per-corner data follow the fan.
+    * ``vt`` become the face attribute ``texcoord`` (m, 6), NaN for corners without one.
+    * ``vn`` become vertex normals when every vertex has one normal (or, with no ``vn`` index,
+      when there are as many ``vn`` as ``v`` lines), else the face attribute ``corner_normals``
+      (m, 9), NaN for corners without one.
+    * Negative indices count back from the total of ``v`` (``vt``, ``vn``) lines; groups,
+      materials, lines and points are ignored; ``#`` comments; a trailing ``\\`` continues a line.
 Writing
-    ``v`` lines with the shortest repr that reads back exactly; ``vn`` lines (vertex normals, or the
-    deduplicated ``corner_normals``), ``vt`` lines (deduplicated ``texcoord`` corners, in order of first
-    use), faces ``f a``, ``f a/b``, ``f a//c`` or ``f a/b/c``.
+    ``v`` lines with the shortest exact repr, ``vn`` (vertex or deduplicated corner normals),
+    ``vt`` (deduplicated corners, in order of first use) and ``f a[/b][/c]`` faces.
 """
 
 from __future__ import annotations
@@ -303,19 +289,9 @@ def write_obj(
     texcoord=None,
     corner_normals=None,
 ) -> bytes:
-    """Serialise to OBJ text.
-
-    Parameters
-    ----------
-    V : (n, 3) float
-    faces : (m, 3) int or None
-        None writes only ``v`` (and ``vn``) lines.
-    normals : (n, 3) float, optional
-        Vertex normals: one ``vn`` per vertex, faces ``f a//a`` (``f a/t/a`` with texture).
-    texcoord : (m, 6) float, optional
-        Per-corner texture coordinates (deduplicated ``vt`` lines; NaN corners get no ``vt``).
-    corner_normals : (m, 9) float, optional
-        Per-corner normals (deduplicated ``vn`` lines), used when ``normals`` is None.
+    """Serialise to OBJ text: ``faces`` None writes only ``v`` (and ``vn``) lines; ``normals`` (n, 3)
+    gives one ``vn`` per vertex; ``texcoord`` (m, 6) and ``corner_normals`` (m, 9, used without
+    ``normals``) give deduplicated ``vt`` / ``vn`` lines (NaN corners get none).
     """
     V = np.asarray(V, dtype=np.float64)
     out = ["# written by spectrageo\n", _fmt_rows("v", V)]

@@ -1,21 +1,11 @@
 """Object File Format (OFF, COFF, NOFF, CNOFF, STOFF...), read with numpy, written with meshio.
 
-The OFF readers of the libraries at hand do not fit: meshio's reads triangles only and rejects
-``COFF``; trimesh's drops vertex colours and regroups mixed triangle/quad faces (triangles first),
-which breaks per-face data. The format is three numbers per vertex line and ``k i1 ... ik`` per face
-line, so it is read here with :func:`numpy.loadtxt` on the vertex and face blocks (a per-line pass
-only for mixed polygon sizes), keeping vertex and face order exactly.
-
-Conventions: ``#`` starts a comment; the counts may sit on the keyword line (``OFF 8 6 0``); vertex
-colours of ``COFF`` become ``vertex_colors`` (uint8 when written as integers 0-255, floats otherwise);
-``OFF BINARY`` files are read by :func:`read_off_binary`;
-normals of ``NOFF`` become vertex normals; polygons are fan-triangulated in file order; per-face
-colours are ignored. ``4OFF``/``nOFF`` (other dimensions) are rejected.
-
-Header and body must agree (an error otherwise): the counts line must declare non-negative vertex
-and face counts, that many vertex and face lines must follow, and no further non-comment line may
-follow the faces (a counts line saying 0 faces above face lines would otherwise read as a point
-cloud). Face indices must lie in ``0 .. n_vertices - 1``; the message gives the index as written.
+Read here (meshio reads triangles only and rejects ``COFF``; trimesh drops colours and regroups
+faces) with :func:`numpy.loadtxt` on the vertex and face blocks, keeping both orders. ``#``
+comments; counts may sit on the keyword line; ``COFF`` colours -> ``vertex_colors``; ``NOFF``
+normals -> vertex normals; polygons fan-triangulated; face colours ignored; ``OFF BINARY`` by
+:func:`read_off_binary`; ``4OFF``/``nOFF`` rejected. Header and body must agree: non-negative
+counts, exactly that many vertex and face lines and nothing after them; indices in range.
 """
 
 from __future__ import annotations
@@ -129,21 +119,17 @@ def read_off(raw: bytes, name: str) -> RawGeometry:
 def read_off_binary(raw: bytes, name: str) -> RawGeometry:
     """Binary OFF (``OFF BINARY`` / ``NOFF BINARY`` / ``STOFF BINARY`` keyword line).
 
-    After the keyword line: int32 counts ``nv nf ne``, ``nv`` vertex records of float32 ``x y z``
-    (then ``nx ny nz`` for NOFF and ``s t`` for STOFF, read as normals and ignored respectively),
-    then per face an int32 vertex count ``k``, ``k`` int32 indices and, as Geomview writes it, an
-    int32 number of colour components followed by that many float32 (the colours are ignored);
-    faces without the colour count (as pmp-library writes them) are read too, the layout being
-    the one whose records fill the file exactly. Values are big-endian (the format's byte order);
-    little-endian files (older pmp-library) are recognised when the big-endian vertex count does
-    not fit the file. Polygons are fan-triangulated in file order, as in ascii OFF.
+    int32 counts ``nv nf ne``, ``nv`` float32 vertex records (plus NOFF normals, STOFF ``s t``
+    ignored), then per face ``k`` and ``k`` int32 indices, with (Geomview) or without (pmp-library)
+    a colour count and its float32 values (ignored): the layout whose records fill the file
+    exactly. Big-endian, or little-endian when the big-endian count does not fit the file.
 
     Raises
     ------
     InvalidInputError
-        Truncated data, face records that fill the file in neither layout, face sizes below 3,
-        indices out of range, no vertices. :class:`~spectrageo.UnsupportedFormatError` (a
-        subclass) for binary COFF, 4OFF and nOFF.
+        Truncated data, records that fill the file in neither layout, face sizes below 3, indices
+        out of range, no vertices; :class:`~spectrageo.UnsupportedFormatError` for binary COFF,
+        4OFF and nOFF.
     """
     end = raw.find(b"\n")
     if end < 0:

@@ -1,36 +1,20 @@
 """Point Cloud Data (PCD v0.5-0.7): ``DATA ascii``, ``binary`` and ``binary_compressed``.
 
-There is no well-kept standalone PCD library (PCL and Open3D embed their own readers), so the header
-is parsed here and the body decoded with numpy, vectorised for the three encodings:
+The header is parsed here and the body decoded with numpy: ``ascii`` by :func:`numpy.loadtxt`,
+``binary`` by one structured :func:`numpy.frombuffer`, ``binary_compressed`` (compressed and
+uncompressed sizes, then an LZF block holding the fields one after another) by python-lzf and
+one ``frombuffer`` per field.
 
-* ``ascii``: :func:`numpy.loadtxt` on the body;
-* ``binary``: one structured :func:`numpy.frombuffer` (records are packed, fields in header order);
-* ``binary_compressed``: two little-endian uint32 (compressed size, uncompressed size), then an LZF
-  block (decompressed with :func:`lzf.decompress` from python-lzf) holding the fields one after
-  another (structure of arrays): all x, then all y, ... each field a contiguous ``n * size * count``
-  byte run. Decoding is one ``frombuffer`` per field.
+Fields (names case-insensitive): ``x y z`` -> points; ``normal_x normal_y normal_z`` -> normals;
+``rgb`` (0x00RRGGBB) -> uint8 colours (n, 3); ``rgba`` -> (n, 4), or (n, 3) when every alpha is
+0; padding ``_`` dropped; others -> attributes. ``VIEWPOINT`` is not applied. NaN points of
+organized clouds are dropped by default (``nan_points``), their indices kept in
+``source_index``.
 
-Field mapping (names matched case-insensitively, so PDAL's ``X Y Z`` are the coordinates):
-``x y z`` -> points; ``normal_x normal_y normal_z`` -> normals; ``rgb`` (packed in a
-float32 or uint32 as 0x00RRGGBB) -> uint8 colours (n, 3); ``rgba`` (uint32 0xAARRGGBB) -> uint8 colours
-(n, 4), or (n, 3) when every alpha byte is 0 (PCL writes 0 for "unset"); padding fields named ``_``
-are dropped; every other field becomes an attribute of shape (n,) or (n, COUNT). ``VIEWPOINT`` (the
-sensor pose) is not applied: points are returned in the file's frame.
-
-Invalid points: organized clouds (HEIGHT > 1, e.g. Kinect frames) mark pixels without a measurement
-with NaN coordinates. The reader reports them to the public API, whose default policy for PCD is to
-drop them (``nan_points="drop"``) and to keep the original point index in the attribute
-``source_index`` so the image layout can be recovered; ``nan_points="raise"`` makes them an error as
-in the other formats. Normals that are NaN/inf in some rows are not read (with a warning; points
-kept), see :func:`spectrageo.io.read`.
-
-Header and body must agree (an error otherwise, naming the field and the value): POINTS must equal
-WIDTH*HEIGHT; ``ascii`` must have exactly POINTS data rows; ``binary`` exactly POINTS records
-(fewer than one record of trailing bytes is tolerated); ``binary_compressed`` must declare the
-uncompressed size the header implies, a compressed size present in the file, and an expansion LZF
-can produce (at most 88x: a header claiming millions of points over a small block is refused
-before python-lzf allocates its output). Declared sizes are also checked against the memory cap
-(``SPECTRAGEO_MAX_BYTES``).
+Header and body must agree: POINTS = WIDTH*HEIGHT; exactly POINTS rows (ascii) or records
+(binary, less than one record of trailing bytes tolerated); ``binary_compressed`` must declare
+the implied uncompressed size, a compressed size present in the file and an expansion LZF can
+produce (at most 88x). Declared sizes are checked against the memory cap.
 """
 
 from __future__ import annotations
@@ -373,17 +357,9 @@ def write_pcd(
 ) -> bytes:
     """Serialise a point cloud to PCD v0.7 bytes (``pcd_format`` in ascii/binary/binary_compressed).
 
-    Parameters
-    ----------
-    P : (n, 3) float
-    normals : (n, 3) float, optional
-    colors : (n, 3) or (n, 4) uint8 or float in [0, 1], optional
-    attributes : dict of name -> (n,) or (n, k) array, optional
-    pcd_format : {"ascii", "binary", "binary_compressed"}
-    dtype : numpy float dtype or None
-        Type of the coordinates (and of the normals). None: float32 (PCL's usual type) when every
-        coordinate round-trips through float32 exactly, else float64 (georeferenced clouds with
-        UTM-sized coordinates would move by up to 0.25 m in float32); normals are then float32.
+    ``dtype`` None writes float32 coordinates when every coordinate round-trips through float32
+    exactly, else float64 (UTM-sized coordinates would move by up to 0.25 m); normals then float32.
+    Colours: (n, 3) or (n, 4) uint8 or floats in [0, 1]; attributes (n,) or (n, k).
     """
     P = np.asarray(P)
     if dtype is None:

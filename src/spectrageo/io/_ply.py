@@ -1,50 +1,23 @@
 """PLY (ascii, binary little/big endian) through :mod:`plyfile`.
 
-Reading
-    The header is parsed by plyfile. Element bodies are then decoded with vectorised numpy for the
-    common layouts (every element in ascii when each row has the same number of tokens; in binary,
-    elements without lists or whose lists all have one fixed length, e.g. triangle faces); plyfile's
-    row-by-row reader is about 50x slower on the 437k-vertex dragon, so it is used only as the
-    fallback for the remaining layouts (variable-length lists such as mixed triangles and quads),
-    with identical results.
-Writing
-    The header comes from plyfile (:class:`plyfile.PlyData` / :meth:`plyfile.PlyElement.describe`);
-    bodies are written with numpy (one structured ``tobytes`` per element in binary, one
-    :func:`numpy.savetxt` per element in ascii), because plyfile writes list properties and ascii rows
-    one row at a time (3 s for the dragon's 871k faces against 0.1 s); a test checks the bytes are
-    identical to plyfile's.
+plyfile parses the header and writes it; bodies are read and written with vectorised numpy for
+the common layouts (plyfile's row-by-row reader, about 50x slower, is the fallback for
+variable-length lists; written bytes equal plyfile's, which a test checks).
 
-Element ``vertex`` gives the positions (``x y z``), normals (``nx ny nz``), colours
-(``red green blue [alpha]``) and any other property as a vertex attribute; element ``face`` gives
-``vertex_indices`` (or ``vertex_index``; polygons are fan-triangulated in file order) and any other
-property as a face attribute. Other elements (camera, range_grid, edge, ...) are ignored. A list
-property of fixed length ``k`` becomes an (n, k) attribute; variable-length lists other than the
-face indices are skipped.
+Element ``vertex`` gives positions (``x y z``), normals (``nx ny nz``), colours (``red green blue
+[alpha]``) and other properties as vertex attributes; ``face`` gives ``vertex_indices`` (or
+``vertex_index``; polygons fan-triangulated in file order) and other properties as face
+attributes; other elements are ignored. A fixed-length list becomes an (n, k) attribute; other
+variable-length lists are skipped. Triangle strips (element ``tristrips``): triangle ``j`` of a
+strip ``s`` is ``(s[j], s[j+1], s[j+2])``, swapped for odd ``j`` (one orientation, as MeshLab
+reads them); ``-1`` restarts the strip; triangles with a repeated index are skipped; strip
+triangles follow the ``face`` triangles, whose other properties are then dropped. MeshLab's
+per-corner ``property list uchar float texcoord`` is the (m, 6) face attribute ``texcoord``.
 
-Triangle strips
-    Element ``tristrips`` (``property list int vertex_indices``, written by Stanford/Cyberware range
-    scans and by vcglib) is turned into triangles: in each strip ``s``, triangle ``j`` is
-    ``(s[j], s[j+1], s[j+2])`` for even ``j`` and ``(s[j+1], s[j], s[j+2])`` for odd ``j`` (alternate
-    winding, so that all triangles of a strip keep one orientation, as vcglib/MeshLab read them); a
-    negative index (``-1``) ends the strip and starts a new one at the next index; each row is its own
-    strip; triangles with a repeated index (the degenerate ones strips use to swap parity) are
-    skipped. Strip triangles come after the triangles of a ``face`` element; when a file has both, the
-    ``face`` element's other properties are not kept (they would not cover the strip triangles).
-Texture coordinates
-    MeshLab's per-corner face property ``texcoord`` (``property list uchar float texcoord``, 6 values
-    ``u0 v0 u1 v1 u2 v2`` per triangle) is read as the face attribute ``texcoord`` (m, 6) float64, the
-    layout the OBJ reader gives (polygons: the values follow the fan, ``(c0, ck, ck+1)``); a (m, 6)
-    face attribute ``texcoord`` is written back as ``property list uchar float texcoord``.
-Header and body
-    Element counts are checked before any array is sized by them: negative counts are an error; in
-    ascii every row is one line, so the lines after the header must hold exactly the declared rows
-    (missing lines: truncated; non-blank lines left over: an error, since a count that is too
-    small would leave data unread); in binary every row needs at least its scalars and its list
-    length prefixes, so the declared counts must fit in the bytes present, and at least one row's
-    worth of bytes left over after the last element is an error too. List lengths must fit their
-    declared type (``uchar``: 0..255) and be non-negative; the ``face`` element's vertex indices
-    must be a list property. All of these raise :class:`~spectrageo.InvalidInputError` naming the
-    element, the property and the value.
+Header and body must agree, checked before any array is sized: counts non-negative; in ascii
+exactly the declared rows (missing lines: truncated; extra non-blank lines: an error); in binary
+the counts must fit the bytes present, with less than one row left over; list lengths within
+their type and non-negative. Errors name the element, the property and the value.
 """
 
 from __future__ import annotations
@@ -461,14 +434,8 @@ def read_ply(raw: bytes, name: str) -> RawGeometry:
 
 
 def strips_to_triangles(strips: Any, name: str) -> np.ndarray:
-    """Triangles (t, 3) int64 of PLY triangle strips (see the module docstring for the rules).
-
-    Parameters
-    ----------
-    strips : (r, L) int array or sequence of r int sequences (ragged)
-        One strip list per ``tristrips`` row; a negative index restarts the strip.
-    name : str
-        File name for error messages.
+    """Triangles (t, 3) int64 of PLY triangle strips (rules in the module docstring): ``strips`` one
+    int sequence per ``tristrips`` row, ``name`` the file name for messages.
     """
     if isinstance(strips, np.ndarray) and strips.dtype != object:
         rows = [np.asarray(r) for r in strips.reshape(strips.shape[0], -1)]

@@ -9,11 +9,7 @@ import numpy as np
 
 @dataclass
 class RawGeometry:
-    """What a single-file reader found.
-
-    ``faces`` is None when the file has no face element/section at all and an empty (0, 3) array when
-    it declares zero faces; both mean "points only".
-    """
+    """What a single-file reader found; ``faces`` None (no face element) or (0, 3) both mean points."""
 
     vertices: np.ndarray
     faces: np.ndarray | None = None

@@ -55,34 +55,16 @@ def _find_group(names: list[str], groups, width: int) -> list[int] | None:
 def read_xyz(raw: bytes, name: str) -> RawGeometry:
     """Delimited text of points, one per line: ``x y z`` and optional normals, colours, scalars.
 
-    A first line holding a single integer followed by rows of 3 or more values is a point count
-    (as some exporters write it) and is skipped; it must equal the number of data rows.
-
-    Separators: spaces/tabs, ``,`` or ``;`` (chosen from the first data line; with ``;`` a decimal
-    comma is accepted). Lines starting with ``#`` or ``//`` are comments; blank lines are skipped.
-
-    Column layout
-        With a header naming the columns (a first line of names such as ``X Y Z R G B``, or a comment
-        line right before the data whose first three names are x, y, z, e.g. CloudCompare's
-        ``//X,Y,Z,R,G,B,A``), the names decide: ``x y z``; ``nx ny nz`` (or ``normal_x``...) are
-        normals; ``r g b [a]`` (or ``red``...) colours (uint8 when they are integers above 1, else
-        floats in [0, 1]); every other column a float64 attribute of that name. Without a header the
-        columns after ``x y z`` are guessed, left to right: 3 columns whose finite rows all have unit
-        norm (within 1e-3) are normals; 3 columns of integers in 0..255 are colours (uint8), and a
-        4th such column right after them is alpha; this is repeated once for a normal block after
-        the colours (``x y z r g b nx ny nz``); all remaining columns become attributes ``scalar_0``,
-        ``scalar_1``, ... (float64). This covers ``x y z``, ``x y z nx ny nz``, ``x y z r g b``,
-        ``x y z r g b a`` (CloudCompare), ``x y z nx ny nz r g b``, ``x y z i`` and
-        ``x y z r g b i``.
-
-    Ambiguities of the guess (write a header line to settle them)
-        * An integer scalar in 0..255 right after ``r g b`` (``x y z r g b i`` with an 8-bit
-          intensity) is read as alpha.
-        * Three integer columns in 0..255 that are not colours (labels, counts) are read as colours.
-        * Normals that are not unit length (unnormalised or zero normals) are not recognised: they
-          become ``scalar_*`` attributes; axis-aligned unit rows such as ``0 0 1`` are normals even
-          if meant as colours.
-        * Columns ``x y z`` are always the first three.
+    An optional first line with one integer is a point count and must equal the data rows.
+    Separators: spaces/tabs, ``,`` or ``;`` (from the first data line; ``;`` allows a decimal
+    comma); ``#`` and ``//`` lines are comments. A header of column names (a first line such as
+    ``X Y Z R G B``, or CloudCompare's ``//X,Y,Z,R,G,B,A`` comment) decides the layout: ``nx ny nz``
+    (``normal_x``...) normals, ``r g b [a]`` (``red``...) colours, other columns float64
+    attributes. Without one, the columns after ``x y z`` are guessed left to right: 3 columns of
+    unit-norm rows are normals, 3 columns of integers 0..255 colours (uint8) with an optional 4th
+    as alpha (repeated once for ``x y z r g b nx ny nz``), the rest ``scalar_0``, ``scalar_1``...
+    A header settles the guess's ambiguities (an 8-bit intensity after ``r g b`` reads as alpha;
+    integer labels in 0..255 as colours; non-unit normals as scalars).
 
     Raises
     ------
@@ -301,16 +283,14 @@ def _xyz_by_names(table: np.ndarray, names: list[str], name: str) -> RawGeometry
 def read_pts(raw: bytes, name: str) -> RawGeometry:
     """Leica/PDAL point text (``.pts``): an optional point count line, then ``x y z [i] [r g b]``.
 
-    Rows have 3 values (``x y z``), 4 (``x y z intensity``), 6 (``x y z r g b``) or 7
-    (``x y z intensity r g b``), separated by spaces, tabs or commas; blank lines are skipped. The
-    intensity becomes the float64 attribute ``intensity``; colours must be integers in 0..255
-    (uint8). A count line, when present, must equal the number of rows.
+    Rows of 3, 4 (``intensity``, a float64 attribute), 6 or 7 values (colours integers 0..255),
+    separated by spaces, tabs or commas; a count line must equal the number of rows.
 
     Raises
     ------
     InvalidInputError
-        A count line that disagrees with the rows, rows of another width or of varying width,
-        non-numeric values, colours outside 0..255, no data rows.
+        Count mismatch, rows of another or varying width, non-numeric values, colours outside
+        0..255, no data rows.
     """
     try:
         text = raw.decode("utf-8-sig")
@@ -352,13 +332,9 @@ def write_xyz(P: np.ndarray, normals=None) -> bytes:
 
 # ------------------------------------------------------------------------------------------ NPY
 def parse_npy(raw: bytes, name: str) -> np.ndarray:
-    """The array of ``.npy`` bytes, with the header checked before anything is allocated.
-
-    The header (format version 1.0, 2.0 or 3.0) is parsed with :mod:`numpy.lib.format`; its shape
-    times the item size must equal the bytes that follow it exactly (fewer: truncated; more: the
-    header's shape is too small, an error too) and stay within the memory cap
-    (``SPECTRAGEO_MAX_BYTES``). Object arrays (pickles) are refused. The array is a read-only view
-    of ``raw``.
+    """The array of ``.npy`` bytes (a read-only view of ``raw``), its header checked first: shape
+    times item size must equal the bytes that follow and stay within the memory cap; object arrays
+    (pickles) are refused.
     """
     from numpy.lib import format as npf
 
@@ -409,11 +385,8 @@ def parse_npy(raw: bytes, name: str) -> np.ndarray:
 
 
 def read_npy(raw: bytes, name: str) -> RawGeometry:
-    """A (n, 3) numeric array saved with :func:`numpy.save`, or a 1-D structured array with fields
-    ``x y z`` (names matched case-insensitively, as pyntcloud saves clouds); the other numeric
-    scalar fields of a structured array become float64 attributes, the rest are ignored.
-
-    Pickles are refused; the header's shape must match the data, see :func:`parse_npy`.
+    """An (n, 3) numeric array, or a 1-D structured array with fields ``x y z`` (any case; other
+    numeric scalar fields become float64 attributes); pickles refused (:func:`parse_npy`).
     """
     arr = parse_npy(raw, name)
     if arr.dtype.names is not None:
@@ -467,11 +440,8 @@ def write_npy(P: np.ndarray) -> bytes:
 
 # ------------------------------------------------------------------------------------------ STL
 def read_stl(raw: bytes, name: str) -> RawGeometry:
-    """Binary or ascii STL through :func:`trimesh.exchange.stl.load_stl`.
-
-    Every triangle keeps its own three corners (3 m vertices, faces ``[[0,1,2],[3,4,5],...]``), in file
-    order; the public reader merges coincident corners only when asked (``weld=True``). Multiple
-    ``solid`` blocks of an ascii file are concatenated in file order.
+    """Binary or ascii STL through :func:`trimesh.exchange.stl.load_stl`: every triangle keeps its
+    own corners (3 m vertices) in file order, ascii ``solid`` blocks concatenated.
     """
     from trimesh.exchange import stl
 

@@ -1,33 +1,19 @@
 """Scene formats flattened into one mesh or point cloud: glTF 2.0 (``.glb``, ``.gltf``) and 3MF.
 
 glTF / GLB
-    Read with :func:`trimesh.load_scene` (``process=False``, so every primitive keeps its vertices
-    as stored, in order, without merging). The scene is flattened node by node in the order of
-    trimesh's scene graph (``scene.graph.nodes_geometry``): each instance's vertices are moved by the
-    node's world transform, its faces offset, and the pieces concatenated. A transform with a
-    negative determinant (mirroring) reverses the triangles' winding, as the glTF specification
-    asks, so that they keep facing outwards. Kept when every mesh has them: vertex normals stored
-    in the file (``NORMAL``; rotated with the inverse transpose and renormalised), vertex colours
-    (``COLOR_0``, uint8 RGBA) and texture coordinates (``TEXCOORD_0``), which become the per-corner
-    face attribute ``texcoord`` (m, 6) of the OBJ reader (``u0 v0 u1 v1 u2 v2``, in trimesh's
-    convention: v up, as in OBJ). Materials, textures, animations and skins are ignored. A scene
-    with only point primitives gives a point cloud (colours kept); point primitives in a scene that
-    also has triangles are appended after the mesh vertices as unreferenced vertices, so that
-    ``read(kind="points")`` still gives every point. Line primitives are ignored.
-
-    A ``.gltf`` whose buffers are separate files (``"uri": "model.bin"``) is read from a path with
-    the buffers next to it (inside its folder); from bytes alone (an upload) it is refused with a
-    clear error. Buffers embedded as ``data:`` URIs and ``.glb`` files are always read.
+    Read with :func:`trimesh.load_scene` (``process=False``: vertices as stored) and flattened in
+    the order of ``scene.graph.nodes_geometry``: each instance moved by its world transform (a
+    negative determinant reverses the winding), faces offset, pieces concatenated. Kept when
+    every mesh has them: ``NORMAL`` (rotated by the inverse transpose), ``COLOR_0`` (uint8 RGBA)
+    and ``TEXCOORD_0`` (face attribute ``texcoord`` (m, 6), v up). Point primitives give a point
+    cloud, or are appended as unreferenced vertices next to triangles; materials, animations,
+    skins and lines are ignored. A ``.gltf`` with separate buffer files is read from a path only.
 3MF
-    Read with the standard library (:mod:`zipfile`, :mod:`xml.etree.ElementTree`): trimesh's 3MF
-    loader needs ``lxml`` and ``networkx``, which are not dependencies of spectrageo. The root
-    model part is found through ``_rels/.rels`` (``3D/3dmodel.model`` when absent). Every build
-    ``item`` is expanded in file order: mesh objects give their vertices and triangles, component
-    objects their components recursively (``p:path`` references to other model parts of the
-    package, from the Production extension, are followed); the item's and components' ``transform``
-    matrices (3MF row-vector convention, ``p' = p @ M[:3] + M[3]``) are applied; a negative
-    determinant reverses the winding. Coordinates are in the model's ``unit`` (millimetres unless
-    the file says otherwise), unscaled. Materials, colours and beam lattices are ignored.
+    Read with :mod:`zipfile` and :mod:`xml.etree.ElementTree` (trimesh's loader needs ``lxml`` and
+    ``networkx``). The root model part comes from ``_rels/.rels``; build items are expanded in
+    file order, components recursively (``p:path`` references followed), ``transform`` matrices
+    applied (``p' = p @ M[:3] + M[3]``, a negative determinant reverses the winding).
+    Coordinates stay in the model's ``unit``; materials, colours and beam lattices are ignored.
 """
 
 from __future__ import annotations

@@ -1,12 +1,11 @@
-"""Compressed files of :mod:`spectrageo.compress` as inputs: ``.sgc`` meshes, ``.sga`` animations.
+"""Compressed files as inputs of :mod:`spectrageo.io`: ``.sgc`` meshes and ``.sga`` animations.
 
-Reading decodes the whole file (:func:`spectrageo.compress.decode` /
-:func:`~spectrageo.compress.decode_animation`), so every command, the viewer and the batch runner
-take a compressed file wherever they take a mesh or an animation. A file that was cut short is an
-error here; ``spectrageo decompress --partial`` (``decode(..., partial=True)``) decodes the
-complete part of a progressive file on purpose. Writing is not a format conversion: the codecs
-are lossy and take a rate (``spectrageo compress`` / :func:`spectrageo.compress.encode`), so
-:func:`spectrageo.io.write` refuses these extensions with that advice.
+:func:`register` is the ``spectrageo.formats`` entry point: io's format registry calls it the
+first time it meets an extension it does not know, so ``io`` never imports this package.
+Reading decodes the whole file; a file that was cut short is an error here
+(``spectrageo decompress --partial`` decodes the complete part on purpose). Writing is not a
+format conversion: the codecs are lossy and take a rate, so :func:`spectrageo.io.write` refuses
+these extensions with :data:`WRITE_ADVICE`.
 """
 
 from __future__ import annotations
@@ -15,13 +14,13 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ..geometry.data import MeshAnimation, PointCloud, PointCloudSequence
-from ._common import check_alloc
-from ._raw import RawGeometry
+from ..io import register_format
+from ..io._common import check_alloc
+from ..io._raw import RawGeometry
+from . import decode, decode_animation, info, info_animation
 
-#: decoder working memory per vertex, bytes, measured on the 437,645-vertex dragon at default
-#: settings (peak resident growth of a fresh process reading the file): ``spectral`` 0.9 KB,
-#: ``feature`` 3.6 KB (its factorised normal equations); with margin, used to refuse a file whose
-#: declared counts would need more than the memory cap before anything is decoded
+#: decoder working memory per vertex, bytes (peak resident growth of a fresh process decoding the
+#: 437,645-vertex dragon, with margin), checked against the memory cap before decoding
 _WORK_PER_VERTEX = {"spectral": 1500}
 _WORK_DEFAULT = 5000
 
@@ -33,6 +32,12 @@ WRITE_ADVICE = (
 )
 
 
+def register() -> None:
+    """Register the ``.sgc`` and ``.sga`` readers with :func:`spectrageo.io.register_format`."""
+    register_format(".sgc", read_sgc, write_advice=WRITE_ADVICE)
+    register_format(".sga", read_sga, whole=True, write_advice=WRITE_ADVICE)
+
+
 def _named(exc: InvalidInputError, name: str) -> InvalidInputError:
     text = str(exc)
     if "truncated" in text and "header" not in text:
@@ -42,17 +47,15 @@ def _named(exc: InvalidInputError, name: str) -> InvalidInputError:
 
 def read_sgc(data: bytes, name: str) -> RawGeometry:
     """A ``.sgc`` mesh, decoded (vertex and face order as coded)."""
-    from .. import compress
-
     try:
-        head = compress.info(data)
+        head = info(data)
     except InvalidInputError as exc:
         raise _named(exc, name) from exc
     n, m = int(head["n_vertices"]), int(head["n_faces"])
     work = _WORK_PER_VERTEX.get(str(head["method"]), _WORK_DEFAULT)
     check_alloc(n * (24 + work) + 24 * m, name, f"decoding {n} vertices and {m} faces")
     try:
-        V, F = compress.decode(data)
+        V, F = decode(data)
     except InvalidInputError as exc:
         raise _named(exc, name) from exc
     return RawGeometry(vertices=np.asarray(V, np.float64), faces=np.asarray(F, np.int64))
@@ -63,16 +66,14 @@ def read_sga(data: bytes, name: str, *, kind: str | None) -> MeshAnimation | Poi
     with ``kind="sequence"``."""
     if kind in ("mesh", "points"):
         raise InvalidInputError(f"{name}: a .sga file holds an animation, not a single {kind!r}.")
-    from .. import compress
-
     try:
-        head = compress.info_animation(data)
+        head = info_animation(data)
     except InvalidInputError as exc:
         raise _named(exc, name) from exc
     t, n, m = int(head["n_frames"]), int(head["n_vertices"]), int(head["n_faces"])
     check_alloc(2 * 24 * t * n + _WORK_DEFAULT * n + 24 * m, name, f"decoding {t} frames")
     try:
-        frames, F = compress.decode_animation(data)
+        frames, F = decode_animation(data)
     except InvalidInputError as exc:
         raise _named(exc, name) from exc
     frames = np.asarray(frames, np.float64)

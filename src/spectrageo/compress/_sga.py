@@ -1,0 +1,345 @@
+"""Public entry points of the ``.sga`` animation codecs: encoding, decoding and streaming.
+
+Dispatches between the eigen-trajectory methods (:mod:`._animation`) and the layered codec
+(:mod:`._layered`); both write the stream format of :mod:`._sga_format`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from .._validation import as_faces
+from . import _animation, _container, _layered
+from ._animation import (
+    DEFAULT_STEP,
+    StreamState,
+    _check_options,
+    _laplacian,
+    analyse_block,
+    check_encode_args,
+    choose_anchors,
+    encode_at_rate,
+    encode_block,
+    make_encoder,
+    read_header,
+    reconstruct_block,
+)
+from ._layered import LayeredEncoder, LayeredState
+from ._rate import bisect_step
+from ._sga_format import (
+    KIND_INDEX,
+    Params,
+    block_segment,
+    header_segment,
+    index_segment,
+    info_dict,
+    is_animation,
+    iter_segments,
+    parse_block_params,
+    segment_end,
+)
+
+
+def encode_animation(
+    frames, F, *, method: str = "blocks", bpvf=None, error=None, step=None, **options
+) -> bytes:
+    """See :func:`spectrageo.compress.encode_animation`."""
+    if method == "layered":
+        if bpvf is not None and error is not None:
+            raise InvalidInputError("give at most one of `bpvf` and `error`.")
+        return _layered.encode(frames, F, step=step, bpvf=bpvf, error=error, **options)
+    A, F = check_encode_args(frames, F, method, step, bpvf, error)
+    enc = make_encoder(A, F, method, options)
+    return encode_at_rate(enc.build, A, method, step, bpvf, error)
+
+
+def _parse_stream(data, partial: bool):
+    segs = iter_segments(data, partial)
+    try:
+        _p, _e, head = next(segs)
+    except StopIteration:
+        raise InvalidInputError(".sga data is empty.") from None
+    if head.method == "layered":
+        return LayeredState(head), segs
+    st = read_header(head)
+    return st, segs
+
+
+def iter_decode(data, *, partial: bool = False, serial: bool | None = None, _state=None):
+    """Yield ``(t0, frames_block)`` for every block of an ``.sga`` byte string, in order.
+
+    ``_state``: a dict that receives the stream state under ``"st"`` (its faces, parameters).
+    """
+    if isinstance(data, memoryview | bytearray):
+        data = bytes(data)
+    if not isinstance(data, bytes):
+        raise InvalidInputError(f"`data` must be bytes; got {type(data).__name__}.")
+    if not is_animation(data):
+        raise InvalidInputError("not a spectrageo compressed animation (.sga).")
+    st, segs = _parse_stream(data, partial)
+    if _state is not None:
+        _state["st"] = st
+    if st.method == "layered":
+        yield from _layered.iter_frames(st, segs, partial)
+        return
+    yield from _animation.iter_blocks(st, segs, partial, serial)
+
+
+def decode_animation(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """See :func:`spectrageo.compress.decode_animation`."""
+    state: dict = {}
+    parts = [X for _t0, X in iter_decode(data, partial=partial, _state=state)]
+    if not parts:
+        raise InvalidInputError(".sga data holds no complete frame.")
+    return np.concatenate(parts, axis=0), state["st"].F
+
+
+def info_animation(data) -> dict:
+    """Header summary of ``.sga`` bytes without decoding the geometry."""
+    if isinstance(data, memoryview | bytearray):
+        data = bytes(data)
+    st, segs = _parse_stream(data, False)
+    if st.method == "layered":
+        return _layered.info(data, st, segs)
+    n_blocks = 0
+    frames = 0
+    conn = len(_container.parse(data[: segment_end(data, 0)]).chunks[0][1])
+    has_index = False
+    for _p, _e, c in segs:
+        if c.params[:1] == bytes([KIND_INDEX]):
+            has_index = True
+            continue
+        _b, _t0, nf, _s = parse_block_params(c, st)
+        n_blocks += 1
+        frames += nf
+    p = st.params
+    parameters = {
+        ("kept_coefficients" if p.method == "pca" else "step"): p.step,
+        "block": p.block,
+        "n_anchors": p.n_anchors,
+        "anchor_ratio": p.anchor_ratio,
+        "basis": "oi" if p.basis else "exact",
+    }
+    return info_dict(data, st, frames, conn, n_blocks, has_index, parameters)
+
+
+class StreamEncoder:
+    """See :class:`spectrageo.compress.StreamEncoder`."""
+
+    def __init__(self, F, *, method="blocks", step=None, bpvf=None, **options) -> None:
+        self._lay = None
+        if method == "layered":
+            bad = sorted(set(options) - {"layer", "refresh", "fine"})
+            if bad:
+                raise InvalidInputError(
+                    f"unknown option(s) {bad} for method 'layered'; use ['fine', 'layer', "
+                    "'refresh']."
+                )
+            self._lay = LayeredEncoder(F, step=step, bpvf=bpvf, **options)
+            return
+        if method != "blocks":
+            raise InvalidInputError(
+                f"streaming supports methods 'blocks' and 'layered' (the others need the whole "
+                f"sequence); got {method!r}."
+            )
+        if step is not None and bpvf is not None:
+            raise InvalidInputError("give at most one of `step` and `bpvf`.")
+        for name, v in (("step", step), ("bpvf", bpvf)):
+            ok = not isinstance(v, bool) and isinstance(v, int | float | np.integer | np.floating)
+            if v is not None and not (ok and math.isfinite(float(v)) and float(v) > 0):
+                raise InvalidInputError(f"`{name}` must be a positive number; got {v!r}.")
+        self.o = _check_options(method, options)
+        self.F_in = F
+        self.step = DEFAULT_STEP if step is None else float(step)
+        self.bpvf = None if bpvf is None else float(bpvf)
+        self.method = method
+        self.buf: list[np.ndarray] = []
+        self.prev = None
+        self.t = 0
+        self.b = 0
+        self.offset = 0
+        self.entries: list[tuple[int, int, int, int]] = []
+        self.started = False
+        self.closed = False
+        self.block_steps: list[float] = []
+
+    def _start(self, V0: np.ndarray) -> bytes:
+        n = V0.shape[0]
+        self.F = as_faces(self.F_in, n, "F")
+        self.n = n
+        lo, hi = V0.min(axis=0), V0.max(axis=0)
+        self.origin = 0.5 * (lo + hi)
+        diag = float(np.linalg.norm(hi - lo))
+        self.scale = 2.0 * diag if diag > 0 else 1.0  # room for motion beyond the first frame
+        self.L = _laplacian(self.F, n)
+        X0 = (V0 - self.origin) / self.scale
+        self.anchors = choose_anchors(X0, self.L, float(self.o["anchors"]))
+        self.p = Params(
+            self.method,
+            0,
+            int(self.o["block"]),
+            int(self.anchors.size),
+            self.step,
+            float(self.o["anchor_ratio"]),
+            float(self.o["weight"]),
+            1 if self.o["basis"] == "oi" else 0,
+            int(self.o["n_iter"]),
+        )
+        # the header carries the nominal step; blocks coded at another step (rate adaptation)
+        # carry theirs in their own segment parameters
+        head = header_segment(
+            self.method,
+            n,
+            self.F.shape[0],
+            tuple(self.origin),
+            self.scale,
+            self.p,
+            self.F,
+            self.anchors,
+        )
+        self.started = True
+        self.offset = len(head)
+        return head
+
+    def push(self, frame) -> bytes:
+        """Add one frame (n, 3); returns the bytes ready to send (possibly empty)."""
+        if self._lay is not None:
+            return self._lay.push(frame)
+        if self.closed:
+            raise InvalidInputError("the stream is closed.")
+        V = np.asarray(frame, dtype=np.float64)
+        if V.ndim != 2 or V.shape[1] != 3 or (self.started and V.shape[0] != self.n):
+            raise InvalidInputError(f"`frame` must have shape (n, 3); got {V.shape}.")
+        if not np.isfinite(V).all():
+            raise InvalidInputError("`frame` contains NaN or inf coordinates.")
+        out = b"" if self.started else self._start(V)
+        self.buf.append((V - self.origin) / self.scale)
+        if len(self.buf) == self.p.block:
+            out += self._flush()
+        return out
+
+    def _flush(self) -> bytes:
+        if not self.buf:
+            return b""
+        X = np.stack(self.buf)
+        self.buf = []
+        o = self.o
+        plan = analyse_block(
+            X,
+            self.L,
+            self.anchors,
+            self.t,
+            self.prev,
+            int(o["n_iter"]) if o["basis"] == "oi" else 0,
+        )
+        self.prev = plan
+        m = self.F.shape[0]
+
+        def seg(s):
+            chunks = encode_block(plan, self.method, s, float(o["anchor_ratio"]), float(o["rd"]))
+            return block_segment(
+                self.method,
+                self.n,
+                m,
+                tuple(self.origin),
+                self.scale,
+                self.b,
+                self.t,
+                plan.nf,
+                s,
+                chunks,
+            )
+
+        if self.bpvf is None:
+            s, data = self.step, seg(self.step)
+        else:  # per-block rate adaptation: the block alone meets the target
+            nvf = float(self.n * plan.nf)
+            s, data = bisect_step(
+                lambda s: (8.0 * len(seg(s)) / nvf, seg(s)),
+                self.bpvf,
+                increasing=False,
+                what="bpvf",
+            )
+        self.block_steps.append(s)
+        self.entries.append((self.t, plan.nf, self.offset, len(data)))
+        self.offset += len(data)
+        self.t += plan.nf
+        self.b += 1
+        return data
+
+    def close(self) -> bytes:
+        """Flush the last (short) block and append the frame index; returns the final bytes."""
+        if self._lay is not None:
+            return self._lay.close()
+        if self.closed:
+            return b""
+        self.closed = True
+        if not self.started:
+            raise InvalidInputError("the stream has no frame.")
+        out = self._flush()
+        return out + index_segment(
+            self.method, self.n, self.F.shape[0], tuple(self.origin), self.scale, self.entries
+        )
+
+
+class StreamDecoder:
+    """See :class:`spectrageo.compress.StreamDecoder`."""
+
+    def __init__(self) -> None:
+        self.buf = b""
+        self.state: StreamState | None = None
+        self.expect = 0
+        self.done = False
+        self.F: np.ndarray | None = None
+
+    def feed(self, data) -> list[np.ndarray]:
+        """Add received bytes; returns the frames (n, 3) completed by them, in order."""
+        if self.done and data:
+            raise InvalidInputError(".sga stream continues after its frame index.")
+        self.buf += bytes(data)
+        out: list[np.ndarray] = []
+        while self.buf:
+            end = segment_end(self.buf, 0)
+            if end is None:
+                break
+            c = _container.parse(self.buf[:end])
+            self.buf = self.buf[end:]
+            if self.state is None:
+                if c.method == "layered":
+                    self.state = LayeredState(c)
+                else:
+                    self.state = read_header(c)
+                self.F = self.state.F
+                continue
+            if c.params[:1] == bytes([KIND_INDEX]):
+                self.done = True
+                continue
+            if self.state.method == "layered":
+                out.append(self.state.frame(c))
+                self.expect += 1
+                continue
+            out.extend(self._block(c))
+        return out
+
+    def _block(self, c) -> list[np.ndarray]:
+        _b, t0, nf, step = parse_block_params(c, self.state)
+        if t0 != self.expect:
+            raise InvalidInputError(
+                f".sga blocks are out of order (frame {t0}, expected {self.expect})."
+            )
+        X = reconstruct_block(self.state, c.chunks, nf, step, serial=False)
+        self.expect += nf
+        return list(X)
+
+    @property
+    def n_frames(self) -> int:
+        """Frames decoded so far."""
+        return self.expect
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes received that do not yet form a complete segment (a cut stream's remainder)."""
+        return len(self.buf)
