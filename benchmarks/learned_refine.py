@@ -28,7 +28,7 @@ from spectrageo.denoise import denoise  # noqa: E402
 from spectrageo.denoise._normals import fast_update_vertices  # noqa: E402
 from spectrageo.geometry import face_normals  # noqa: E402
 from spectrageo.learn.bm3d_cnn import BM3DCNNModel, bm3d_cnn  # noqa: E402
-from spectrageo.learn.train import TRAIN_MESHES, train_bm3d_cnn  # noqa: E402
+from spectrageo.learn.train import TRAIN_MESHES, BM3DCNNTrainOptions, train_bm3d_cnn  # noqa: E402
 from spectrageo.metrics import theta_deg  # noqa: E402
 
 
@@ -43,7 +43,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         w = Path(tmp) / "refine.npz"
         t0 = time.perf_counter()
-        train_bm3d_cnn(data, w, start=tsgsp, report=False, log=None)
+        train_bm3d_cnn(data, w, BM3DCNNTrainOptions(start=tsgsp, report=False), log=None)
         train_s = time.perf_counter() - t0
         model = BM3DCNNModel.load(w)
     rows = []

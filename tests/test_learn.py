@@ -19,7 +19,7 @@ from spectrageo.learn import _features as fe
 from spectrageo.learn import _nn
 from spectrageo.learn._weights import DEFAULT_WEIGHTS, load_weights, save_weights, unrotate_unit
 from spectrageo.learn.bm3d_cnn import bm3d_cnn
-from spectrageo.learn.dae import dae, dae_animation, train_frames_model
+from spectrageo.learn.dae import FramesTrainOptions, dae, dae_animation, train_frames_model
 
 from conftest import shared_file, skip_or_fail
 
@@ -391,13 +391,34 @@ def test_dae_animation_validation(noisy_fandisk):
     with pytest.raises(InvalidInputError, match="`train_frames` must be >= 7 without clean"):
         train_frames_model(A, F, train_frames=2)
     with pytest.raises(InvalidInputError, match="`train_frames` must be >= 3 without clean"):
-        train_frames_model(A, F, train_frames=2, temporal=0)
+        train_frames_model(A, F, FramesTrainOptions(temporal=0), train_frames=2)
     with pytest.raises(InvalidInputError, match="`clean` must hold at least 2 frames"):
         train_frames_model(A, F, train_frames=2, clean=A[:1])
     with pytest.raises(InvalidInputError, match="either `train_frames` or `weights`"):
         dae_animation(A, F, train_frames=2, weights="w.npz")
     with pytest.raises(InvalidInputError, match="`n_stages` must be > 0"):
         dae_animation(A, F, train_frames=2, n_stages=0)
+
+
+def test_training_options_validate_once_and_old_keywords_warn(noisy_fandisk):
+    from spectrageo.learn import BM3DCNNTrainOptions, DAETrainOptions
+
+    Vn, _, F = noisy_fandisk
+    A = np.stack([Vn, Vn])
+    with pytest.warns(DeprecationWarning, match="FramesTrainOptions"):
+        with pytest.raises(InvalidInputError, match="`train_frames` must be >= 3 without clean"):
+            train_frames_model(A, F, train_frames=2, temporal=0)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'tempral'"):
+        train_frames_model(A, F, train_frames=2, tempral=0)
+    with pytest.raises(InvalidInputError, match="`channels` must be 3, 6 or 9"):
+        BM3DCNNTrainOptions(channels=4)
+    with pytest.raises(InvalidInputError, match="`epochs` must be > 0"):
+        DAETrainOptions(epochs=0)
+    with pytest.raises(InvalidInputError, match="validation or benchmark shape"):
+        DAETrainOptions(meshes=["denoise/Block0.4/Noisy.obj"])
+    o = BM3DCNNTrainOptions(levels=[0.3])
+    assert (o.epochs, o.per_case, o.levels) == (4, 2500, (0.3,))
+    assert DAETrainOptions().meshes == DAETrainOptions(meshes=list(o.meshes)).meshes
 
 
 def test_local_rotations_recover_a_turn_and_auto_motion_follows_the_poses(noisy_fandisk):
@@ -413,7 +434,7 @@ def test_local_rotations_recover_a_turn_and_auto_motion_follows_the_poses(noisy_
     assert np.allclose(Q, Rt.T, atol=1e-9)
     assert np.allclose(rotation_angles(Q), np.degrees(np.arccos((np.trace(Rt) - 1) / 2)))
     with pytest.raises(InvalidInputError, match="`motion` must be one of"):
-        train_frames_model(np.stack([Vn] * 8), F, train_frames=8, motion="affine")
+        FramesTrainOptions(motion="affine")
     # a pose set (the whole shape turned by 90 degrees from frame to frame) is compensated, a
     # still one is not; the model records the choice
     rng = np.random.default_rng(0)
@@ -421,12 +442,13 @@ def test_local_rotations_recover_a_turn_and_auto_motion_follows_the_poses(noisy_
     poses = np.stack([V0 @ np.linalg.matrix_power(turn, t).T for t in range(8)])
     poses += rng.normal(0, 0.002, poses.shape)
     still = np.stack([V0] * 8) + rng.normal(0, 0.002, poses.shape)
-    kw = {"train_frames": 8, "epochs": 1, "max_rows": 3000}
+    kw = {"train_frames": 8, "options": FramesTrainOptions(epochs=1, max_rows=3000)}
     assert train_frames_model(poses, F, **kw)[0].meta["motion"] == "rigid"
     assert train_frames_model(still, F, **kw)[0].meta["motion"] == "none"
-    assert train_frames_model(still, F, motion="rigid", **kw)[0].meta["motion"] == "rigid"
+    rigid = FramesTrainOptions(motion="rigid", epochs=1, max_rows=3000)
+    assert train_frames_model(still, F, rigid, train_frames=8)[0].meta["motion"] == "rigid"
     # one clean training frame: no motion to measure
-    one = {"train_frames": 1, "clean": still[:1], "epochs": 1, "max_rows": 3000}
+    one = {"train_frames": 1, "clean": still[:1], "options": kw["options"]}
     assert train_frames_model(still, F, **one)[0].meta["motion"] == "none"
 
 
@@ -552,7 +574,7 @@ def test_training_start_replaces_the_noisy_inputs(tmp_path):
     pytest.importorskip("torch")
     from spectrageo import io
     from spectrageo.geometry import Mesh
-    from spectrageo.learn.train import train_bm3d_cnn
+    from spectrageo.learn.train import BM3DCNNTrainOptions, train_bm3d_cnn
 
     V, F = fandisk_small()
     (tmp_path / "meshes").mkdir()
@@ -564,9 +586,10 @@ def test_training_start_replaces_the_noisy_inputs(tmp_path):
         return V
 
     kw = dict(meshes=["meshes/piece.ply"], levels=[0.3], epochs=1, n_stages=1, threads=1,
-              report=False, log=None, per_case=500)  # fmt: skip
-    a = train_bm3d_cnn(tmp_path, tmp_path / "a.npz", start=clean, **kw)
-    b = train_bm3d_cnn(tmp_path, tmp_path / "b.npz", **kw)
+              report=False, per_case=500)  # fmt: skip
+    opts = BM3DCNNTrainOptions(start=clean, **kw)
+    a = train_bm3d_cnn(tmp_path, tmp_path / "a.npz", opts, log=None)
+    b = train_bm3d_cnn(tmp_path, tmp_path / "b.npz", BM3DCNNTrainOptions(**kw), log=None)
     assert len(seen) == 1 and seen[0] > 0  # called once per case, on the noisy input
     assert a["meta"]["start"] == "clean" and "start" not in b["meta"]
     assert a["loss"][0]["train"][-1] < 0.5 * b["loss"][0]["train"][-1]

@@ -1,32 +1,15 @@
-"""Evaluation of completion (thesis Section 5.3): inpainting, hole filling, animations, sequences.
+"""Evaluation of completion (thesis Section 5.3): ``spectrageo evaluate complete``.
 
-- static: the shared meshes with random or region-shaped (one contiguous region grown from a
-  random seed) unknown vertex sets at several known fractions; methods ``mc``, ``li``, ``lsm`` and
-  the trivial ``mean`` (unknown rows set to the mean of the known ones);
-- holes: every mesh of ``holes/`` closed by :func:`spectrageo.complete.fill_holes` (and by
-  trimesh's ``fill_holes`` / PyMeshLab's close-holes when installed): boundary edges left,
-  watertightness and, for the elephant, the symmetric Hausdorff distance to the clean elephant;
-- holes-cut: six holes cut into each of 29 clean meshes (:func:`cut_holes`; tuning split
-  :data:`HOLE_TUNING`, validation split :data:`HOLE_VALIDATION`), closed by ours and the peers,
-  Hausdorff distances to the clean mesh (also sampled over the surfaces, ``hd_surface``);
-- animations: the first frames of the shared animations with a random 30 % of the vertices known
-  per frame (frame 0 complete), ``motion``/``li``/``lia``/``mc``/``gmc`` and, on the same data
-  read as a point-cloud sequence (kNN graph), ``wrli`` and its per-frame baseline ``seq-li``;
-- sequence: the PCL grabber frames (real Kinect frames, pixel ``i`` = point ``i``), 30 % known
-  per frame after the first, ``wrli`` and ``seq-li``.
+Parts: static meshes with random or region-shaped unknown vertices (``mc``, ``li``, ``lsm``,
+``mean``); the meshes of ``holes/`` closed by :func:`spectrageo.complete.fill_holes` and the
+peers; six holes cut into clean meshes (:func:`cut_holes`, :data:`HOLE_TUNING` /
+:data:`HOLE_VALIDATION`); animations with 30 % of the vertices known per frame (``motion``,
+``li``, ``lia``, ``mc``, ``gmc``, and as sequences ``wrli``, ``seq-li``); the PCL grabber frames.
+Errors: RMS of the unknown vertices over the diagonal, NMSVE, theta, KG; times.
 
-Errors: ``rms`` = RMS error of the unknown vertices divided by the bounding-box diagonal, NMSVE
-(:func:`spectrageo.metrics.nmsve`), theta (degrees), KG (percent); times in seconds (per frame
-for animations).
-
-Split: the defaults of the methods (``k`` automatic, ALM ``tol``/``max_iter``/``rho``, the hole
-filler's ``li`` completion) were chosen on :data:`TUNING` (fandisk, seed 1); the tables report
-:data:`VALIDATION` (seed 0, every mesh). For animations, the motion method's ``sweeps`` and its
-per-frame switch were chosen on horse-gallop (25 frames, seed 1) and, for the switch's screen,
-the pose set cat-poses (looked at with seeds 1 and 0: its rows here are not held out); the
-switch's three held-out folds (a blend fitted on them, instead of one fold choosing one way)
-after looking at lion-poses with seed 0 as well, so neither pose set is held out for that
-choice; GMC's threshold on horse-gallop. Used by ``spectrageo evaluate complete``.
+Split: the defaults were chosen on :data:`TUNING` (fandisk, seed 1); the tables report
+:data:`VALIDATION` (seed 0). The animation defaults were chosen on horse-gallop and cat-poses
+(seed 1), with cat-poses and lion-poses consulted (docs/decisions.md#completion-switch).
 """
 
 from __future__ import annotations

@@ -1,32 +1,15 @@
 """``spectrageo evaluate compress``: rate-distortion of the .sgc codecs against Draco and zstd.
 
-For every mesh of :data:`SPLITS` and every rate point it reports the size of the whole file in
-bits per vertex (connectivity included), the RMS vertex error and the symmetric vertex-sampled
-Hausdorff distance (both as fractions of the bounding-box diagonal), NMSVE (Eq. 4.32), theta (mean
-face-normal angle, degrees; only where the vertex order is kept, since it compares faces one to
-one), whether the order was kept, and the encode / decode wall times.
+Per mesh of :data:`SPLITS` and rate point: bits per vertex of the whole file, RMS error and
+symmetric Hausdorff distance over the diagonal, NMSVE (Eq. 4.32), theta (order-keeping methods
+only), order kept, encode / decode times. Methods: ``spectral`` (:data:`STEPS`),
+``spectral-reorder``, ``feature`` and ``uniform-delta`` (Algorithm 9 and its baseline, at
+:data:`GEOMETRY_BPV` through the rate control), ``saliency`` (Algorithm 10); peers when installed:
+Draco (DracoPy, 8-16 bits, default and order-preserving) and quantisation + zstd.
 
-Methods (this package): ``spectral`` (quantisation steps :data:`STEPS`), ``spectral-reorder``
-(the same with ``reorder=True``, compared with Draco's reordering mode), ``feature`` and
-``uniform-delta`` (Algorithm 9 and its feature-unaware baseline, ``feature_fraction=1``; CAD parts
-and the tuning meshes only; both at the whole-file rates ``connectivity + g`` bits per vertex for
-``g`` in :data:`GEOMETRY_BPV`, through the rate control, so that the two are compared at equal
-rate and ``feature`` chooses its level of detail as a user's ``--bpv`` would), ``saliency``
-(Algorithm 10, at the same rates, its level chosen the same way; meshes up to 30k vertices).
-Peers, run in the same session when installed (``bench`` extra): Draco through DracoPy at 8-16
-quantisation bits with its default (reordering, compression level 7) and order-preserving
-(``preserve_order=True``) modes, and uniform quantisation of the coordinates + zstd (level 19) of
-vertices and faces.
-
-Splits are fixed in the split registry (:mod:`spectrageo.datasets.splits`, task ``compress``):
-:data:`TUNING_SPLIT` (fandisk, partLp), on which the defaults of the
-codecs (``submesh_size=300``, ``k=300``, ``overlap=0.1``; ``feature_fraction=0.15``,
-``ratio=4``; the delta codecs' levels :data:`spectrageo.compress._feature.LEVELS`) were chosen,
-and :data:`VALIDATION_SPLIT`, never used for the geometry codecs' choices. The connectivity coder's constants (:mod:`spectrageo.compress._conn_traverse`) were
-chosen on the tuning meshes of ``benchmarks/connectivity.py``, which include every mesh of both
-splits here, so the validation rows are not held out for the connectivity part. The full
-437k-vertex dragon is in :data:`LARGE` (registry split ``validation``, group ``large``; its rows
-are labelled ``large``) and runs only with ``large=True``.
+Splits (:mod:`spectrageo.datasets.splits`, task ``compress``): the codecs' defaults were chosen on
+:data:`TUNING_SPLIT`; :data:`VALIDATION_SPLIT` is held out for them but not for the connectivity
+coder (docs/decisions.md#compress-connectivity). :data:`LARGE` runs only with ``large=True``.
 """
 
 from __future__ import annotations

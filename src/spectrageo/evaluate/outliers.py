@@ -1,39 +1,19 @@
 """Outlier-removal evaluation on the shared real scans and animations (thesis Section 5.4).
 
-Static clouds: labelled synthetic outliers (:func:`spectrageo.noise.add_outliers`) are injected
-into real scans -- ``far`` (uniform in the enlarged bounding box) and ``near`` (a random scan point
-displaced along its PCA normal by 1-3 mean point spacings) at 5/10/20 % of the scan size -- and
-every method is scored by precision, recall and F1 of the removed points (positives = injected
-outliers; the scans' own artefacts count as inliers) and by its wall time. ``sor-grid`` is the best
-F1 of the statistical filter over ``k in {10, 20, 30}`` x ``std_ratio in {0.5, ..., 3}`` chosen
-with the labels (an oracle for the baseline); ``rpca-oracle`` is likewise the RPCA scores cut at the
-threshold of best F1 chosen with the labels (an upper bound for the automatic threshold of
-``rpca``, same scores and time). ``open3d-sor`` runs when ``open3d`` imports.
+Static clouds: ``far`` and ``near`` outliers (:func:`spectrageo.noise.add_outliers`) at 5/10/20 %
+of real scans; precision, recall and F1 of the removed points (the scans' own artefacts count as
+inliers) and wall time. ``sor-grid`` and ``rpca-oracle`` choose their threshold with the labels
+(oracles); ``open3d-sor`` runs when ``open3d`` imports.
 
-Outlier patterns (:func:`evaluate_splits`): the patterns of
-:func:`spectrageo.noise.corrupt_outliers` at 5/10/20/30 % on two splits fixed in code --
-:data:`TUNING_SPLIT` (``uniform``, ``halo``, ``blobs`` on bun000, milk, cloud_bin_0,
-table_scene_mug), on which the defaults of :func:`spectrageo.outliers.rpca_scores` are chosen, and
-:data:`VALIDATION_SPLIT` (``blobs``, ``flying``, ``lidar``, ``mixed`` on top2, cloud_bin_1,
-autzen, face000, b9), measured after a choice -- with ``rpca``, the per-case oracles of all three
-filters and Open3D's SOR / radius removal when it imports, plus the fraction of points flagged on
-the unmodified scans. Both splits come from :mod:`spectrageo.datasets.splits`, whose
-``consulted_by`` fields record which rules were designed after these validation scans had been
-looked at (so they are not held out for those rules; see docs/decisions.md#outliers-valley-clusters
-and docs/decisions.md#outliers-defaults-rechosen).
+Outlier patterns (:func:`evaluate_splits`): :func:`spectrageo.noise.corrupt_outliers` at 5-30 % on
+:data:`TUNING_SPLIT` (where :func:`spectrageo.outliers.rpca_scores`'s defaults are chosen) and
+:data:`VALIDATION_SPLIT`, with per-case oracles and the share flagged on the unmodified scans
+(docs/decisions.md#outliers-valley-clusters, docs/decisions.md#outliers-defaults-rechosen).
 
-Sequences: an animation's vertices as a point sequence, with 10-30 % of the points of every frame
-displaced by 1-5 % of the bounding-box diagonal in random directions; per-frame theta (degrees,
-face normals against the clean frame) and mean point-to-surface distance after consolidation
-(Figs. 5.125-5.128), for :func:`spectrageo.outliers.clean_sequence` and for the RPCA low-rank
-reconstruction (the thesis' comparison).
-
-Sequence patterns (:func:`evaluate_sequence_patterns`, method ``"sequence-patterns"``, opt-in):
-the outlier patterns of :func:`spectrageo.noise.corrupt_outliers` on sequences -- animations
-sampled as point sequences (outlier positions drawn by the generator replace that many vertices
-of every frame, so correspondences hold) and the shared Kinect frames (outliers appended) -- for
-the sequence cleaning of Section 5.4.3 and the robot pipeline of Section 5.4.2 run frame by frame:
-consolidated theta and F1 per pattern.
+Sequences: 10-30 % of an animation's points displaced per frame; per-frame theta and
+point-to-surface distance after :func:`spectrageo.outliers.clean_sequence` or RPCA (Figs.
+5.125-5.128). Sequence patterns (:func:`evaluate_sequence_patterns`, opt-in): the outlier
+patterns on sequences, for the cleaning of Section 5.4.3 and the robot pipeline of Section 5.4.2.
 """
 
 from __future__ import annotations

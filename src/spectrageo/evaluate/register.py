@@ -1,49 +1,20 @@
-"""Evaluation of rigid registration (thesis Section 6.2.2-6.2.5): ``spectrageo evaluate register``.
+"""Evaluation of rigid registration (thesis Sections 6.2.2-6.2.5): ``spectrageo evaluate register``.
 
-Data
-----
-- ``bunny``: the 10 Stanford bunny range scans of ``scans/bunny`` with the ``bun.conf`` ground
-  truth (``P_world = P @ R(q) + t``). Every unordered pair whose ground-truth overlap exceeds 0.3
-  is used once (source = the scan listed first in ``bun.conf``). Overlap = the smaller of the two
-  directional fractions of points (on a 1/100-diagonal voxel grid) that have a point of the other
-  scan within 1 % of the bounding-box diagonal after ground-truth alignment.
-- ``open3d``: the Open3D fragment pair ``cloud_bin_0`` -> ``cloud_bin_1``. The two files are
-  stored in a common frame: the ground truth is the identity (Open3D's point-to-plane ICP from
-  the identity moves them by 0.36 degrees and 0.5 % of the diagonal, far below the success
-  thresholds).
-- ``generated``: a shared CGAL mesh sampled twice (20,000 area-uniform points each, different
-  seeds), each sample cropped to a partial view by a random half-space keeping 65-85 % of it,
-  Gaussian noise of 0.2 % of the diagonal added.
+Data: the Stanford bunny scan pairs with ground-truth overlap above 0.3 (``bun.conf``); the
+Open3D fragment pair ``cloud_bin_0`` -> ``cloud_bin_1`` (identity ground truth); and generated
+pairs, a shared mesh sampled twice (20,000 points), each cropped to a partial view keeping
+65-85 % and given 0.2 % Gaussian noise. Every source is moved by a random rigid motion of the
+split's seed.
 
-For every pair the source is moved by a random rigid motion (uniform rotation, translation of up
-to half the diagonal) drawn from the split's seed, so that no method starts near the answer.
+Methods: ``spectrageo`` (:func:`spectrageo.register.register`) and, with :mod:`open3d`,
+``o3d_ransac_fpfh_icp`` (its global-registration tutorial's parameters, seed fixed), ``o3d_fgr``
+and ``o3d_icp``. Errors: rotation (Eq. 4.34, degrees) and translation over the target's diagonal
+(Eq. 4.35); success below 5 degrees and 5 %; wall time.
 
-Methods: ``spectrageo`` (:func:`spectrageo.register.register`, broad -> robustify -> narrow) and,
-when :mod:`open3d` imports, ``o3d_ransac_fpfh_icp`` (Open3D's RANSAC on FPFH features + point-to-
-plane ICP, the parameters of its global-registration tutorial: voxel = 1/50 of the diagonal, FPFH
-radius 5 voxels, RANSAC distance 1.5 voxels, 100,000 iterations, confidence 0.999; Open3D's random
-seed fixed), ``o3d_fgr`` (fast global registration on the same features) and ``o3d_icp`` (point-to-
-plane ICP from the identity, correspondence distance 5 % of the diagonal).
-
-Errors: rotation error in degrees (Eq. 4.34) and translation error divided by the target's
-bounding-box diagonal (Eq. 4.35); success = rotation error < 5 degrees and translation error <
-5 % of the diagonal; time in seconds (wall clock; our KD-tree queries use all cores, as
-Open3D's do).
-
-Splits (fixed in the split registry, :mod:`spectrageo.datasets.splits`): the defaults of :mod:`spectrageo.register` (voxel = 1/45 diagonal,
-kernel radius 3 voxels, 600 samples x 15 matches, 15 verified peaks, Tukey annealing down to 2
-spacings, Tukey start at 2 voxels after the broad phase) were chosen on :data:`TUNING`: the bunny
-pairs and the fragment pair moved by motions of seed 1, registration seed 1, and generated pairs
-of the ``armadillo``. The tables report :data:`VALIDATION`: the same scan pairs moved by other
-motions (seed 0), registration seed 0, and generated pairs of five other meshes (not looked at
-while tuning). The real scan pairs are thus in both splits, with different motions and seeds;
-only the generated meshes are disjoint. (The fragment pair failed in the tuning split with 400
-samples x 10 matches and passed with 600 x 15, which is why those defaults were raised.)
-Tuning-split result of the final defaults: 27 of 28 pairs (Open3D RANSAC+FPFH+ICP: 26 of 28).
-The narrow phase's step tolerance and its coarse stage's approximate neighbours were later set
-with ``benchmarks/narrow_phase.py``, on the same scan pairs started near their ground truth;
-the validation split was run after that (35 of 36 before and after).
-A full validation run of the four methods takes about 4-5 minutes on two shared cores.
+Splits (:mod:`spectrageo.datasets.splits`): the defaults of :mod:`spectrageo.register` were chosen
+on :data:`TUNING` (motions and registration seed 1, armadillo generated pairs); the tables report
+:data:`VALIDATION` (seed 0, five other meshes); the real scan pairs are in both with other
+motions (docs/decisions.md#register-defaults).
 """
 
 from __future__ import annotations
@@ -114,7 +85,9 @@ def bunny_scans(data: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
 
 
 def overlap(A: np.ndarray, B: np.ndarray) -> float:
-    """Ground-truth overlap of two aligned clouds (see the module docstring)."""
+    """Ground-truth overlap of two aligned clouds: the smaller of the two fractions of points (on a
+    1/100-diagonal voxel grid) with a point of the other cloud within 1 % of the diagonal.
+    """
     from scipy.spatial import cKDTree
 
     from ..register._common import bbox_diagonal, voxel_downsample

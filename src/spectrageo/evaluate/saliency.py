@@ -61,7 +61,9 @@ def _rotation(rng) -> np.ndarray:
 
 def _opts(method: str) -> dict:
     if method == "fast":
-        return {"method": "combined", "fast": True}
+        from ..saliency import SaliencyOptions
+
+        return {"method": "combined", "options": SaliencyOptions(fast=True)}
     return {"method": method}
 
 

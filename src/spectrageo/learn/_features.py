@@ -1,19 +1,5 @@
-"""Input representations of the learned denoisers, in numpy (and one numba kernel for the images),
-shared by training and inference.
-
-* :func:`guided_pixels` -- guided pixels of Eq. (5.38)-(5.39): for every face the "ideal-selected
-  row" among the candidate rows (the kNN rows of the centroids whose row contains the face) with
-  the smallest ``s_ij h_ij`` (eigenvalue gap of the row's covariance times the largest colour
-  difference), averaged and normalised. This is the guided normal of Section 4.2.1 with the
-  geometric kNN row as patch and unweighted averaging, so the repository's
-  :func:`spectrageo.denoise._normals.guided_normals` (``measure="thesis"``) computes it.
-* :func:`rotations_to_axis` -- rotations that map the "normal-of-interest" to ``[1 0 0]``
-  (Fig. 5.41 / 5.43), the coherence step of both Section 5.1.3 and 5.1.4.
-* :func:`normal_images` -- the images of Fig. 5.40: row ``r`` is centred at the ``r``-th nearest
-  centroid of face ``i`` (row 0: the face itself) and holds that centroid's ``k`` nearest centroids,
-  nearest in the centre column, then alternately right / left by increasing distance.
-* :func:`row_eigenvalues` and :func:`assign_classes` -- the flat / edge / corner classification of
-  Section 5.1.4 (kappa-means, kappa = 3, on the eigenvalues of the first row's covariance).
+"""Input representations of the learned denoisers: guided pixels (Eqs. 5.38-5.39), rotations to
+``[1 0 0]`` (Figs. 5.41, 5.43), the images of Fig. 5.40 and the flat / edge / corner classes.
 """
 
 from __future__ import annotations
@@ -36,22 +22,10 @@ FACE_RINGS = 2
 
 
 def centroid_knn(C: np.ndarray, k: int, F: np.ndarray | None = None) -> np.ndarray:
-    """Indices (m, k) of the ``k`` nearest centroids of every centroid, itself first.
+    """Indices (m, k) of the ``k`` nearest centroids of every centroid, itself first (ties by index).
 
-    Without ``F``: the Euclidean nearest centroids (Fig. 5.40), found by a k-d tree; the
-    neighbour order among equal distances is the tree's, deterministic for given input.
-
-    With the faces ``F`` (what the denoisers pass): the nearest centroids among the faces within
-    :data:`FACE_RINGS` vertex rings of the face (faces sharing a vertex with it, then with
-    those). The thesis takes the Euclidean nearest centroids, which on a closed, well-separated
-    surface are the same faces (two rings hold about 40 faces, the nine nearest centroids lie
-    in the first); but on thin parts and on models made of separate pieces that touch, the
-    Euclidean neighbours lie on the other side of the sheet or on another piece, with opposite
-    or unrelated normals, and the images mix two surfaces. In the shared animation
-    ``chickenCrossing`` (41 pieces) 77 % of the faces had such a neighbour (5 % in ``crane``,
-    1 % in Bunny) and the learned denoisers made it worse than the noisy input. Distance ties
-    are broken by face index. A face with fewer than ``k`` faces in reach (a piece smaller than
-    that) repeats its farthest one, as a mesh with fewer than ``k`` faces does.
+    Without ``F`` the Euclidean nearest (Fig. 5.40); with ``F`` the nearest among the faces within
+    :data:`FACE_RINGS` vertex rings (docs/decisions.md#learn-ring-neighbours).
     """
     m = C.shape[0]
     if F is not None:
@@ -179,18 +153,7 @@ def column_order(k: int) -> np.ndarray:
 
 
 def guided_pixels(N: np.ndarray, knn_idx: np.ndarray) -> np.ndarray:
-    """Guided pixels ``g_i`` of Eq. (5.38)-(5.39), shape (m, 3).
-
-    The candidate rows of face ``i`` are the first rows (kNN rows) of every face whose row contains
-    ``i``; the ideal row minimises ``s_ij h_ij`` with ``s_ij = |lambda_1 - lambda_2|`` (the two
-    smallest eigenvalues of ``C_ij = I^T I``) and ``h_ij`` the largest colour difference between
-    pixel ``i`` and the row (Eq. 5.38); ``g_i`` is its normalised mean pixel (Eq. 5.39).
-
-    This is :func:`spectrageo.denoise._normals.guided_normals` (``measure="thesis"``, unit
-    areas) on the patch matrix of the rows, computed by compiled kernels without building that
-    matrix (the same sums in the same order: equal bit for bit, tested); a row's repeated
-    faces count once. A face whose result is not a unit vector keeps its normal.
-    """
+    """Guided pixels ``g_i`` (m, 3) of Eqs. (5.38)-(5.39): the normalised mean of the candidate row with the smallest ``s_ij h_ij``."""
     from ..geometry._numba_kernels import sym3_eigenvalues
     from ..geometry.primitives import _normalize_rows
 
@@ -284,11 +247,7 @@ def _ideal_rows(N, members, a, cptr, cand, best):  # pragma: no cover - numba
 
 
 def rotations_to_axis(G: np.ndarray) -> np.ndarray:
-    """Rotations ``R_i`` (m, 3, 3) with ``R_i g_i = [1, 0, 0]`` (Fig. 5.41, 5.43).
-
-    The smallest rotation (Rodrigues about ``g_i x e_x``); a normal opposite to ``e_x`` is turned
-    by 180 degrees about ``e_z``; a zero normal gets the identity.
-    """
+    """Smallest rotations ``R_i`` (m, 3, 3) with ``R_i g_i = [1, 0, 0]`` (Figs. 5.41, 5.43)."""
     G = np.asarray(G, dtype=np.float64)
     m = G.shape[0]
     nrm = np.linalg.norm(G, axis=1)
@@ -317,26 +276,10 @@ def normal_images(
     out: np.ndarray | None = None,
     channel: int = 0,
 ) -> np.ndarray:
-    """Images of Fig. 5.40 built from the pixels ``G`` and rotated by ``R`` (Fig. 5.43).
+    """Images (b, 3, rows, k) float32 of Fig. 5.40 from the pixels ``G`` (m, 3), rotated by ``R`` (Fig. 5.43).
 
-    Parameters
-    ----------
-    G : (m, 3) pixels (guided normals)
-    knn_idx : (m, k) from :func:`centroid_knn` (``k`` odd: the image width)
-    R : (m, 3, 3) rotations of :func:`rotations_to_axis` (one per image centre)
-    rows : int, optional
-        Number of image rows to build (default ``k``, the square image of the thesis). Rows
-        beyond a network's receptive field do not change its output and need not be built.
-    faces : (b,) int, optional
-        Build only the images of these faces (default all).
-    out : (b, c, rows, k) float32 C-contiguous, optional
-        Write into channels ``channel .. channel + 2`` of this array (several pixel sets in one
-        array without a copy) and return it.
-
-    Returns
-    -------
-    (b, 3, rows, k) float32, channels first: ``img[i, :, r, column_order(k)[j]] = R_i G[nbr_j]``
-    with ``nbr`` the kNN row of the ``r``-th nearest centroid of face ``i``.
+    Row ``r`` of face ``i``'s image is the kNN row (``knn_idx``) of its ``r``-th nearest centroid,
+    nearest in the centre column; ``faces`` selects images, ``out`` receives them at ``channel``.
     """
     m, k = knn_idx.shape
     rows = k if rows is None else int(rows)
@@ -439,11 +382,7 @@ def assign_classes(X: np.ndarray, centres: np.ndarray, *, chunk: int = 65536) ->
 
 
 def filtered_pixels(N, G, knn_idx, C, A, *, sigma_r: float = 0.35) -> np.ndarray:
-    """The "filtered image based on guided pixels" of Algorithm 5, line 4: one joint bilateral
-    pass over the kNN row of every face, ``n_i <- normalize(sum_j A_j K_s(||c_i - c_j||)
-    K_r(||g_i - g_j||) n_j)`` with Gaussian kernels, ``sigma_s`` the mean distance to the
-    nearest centroid and ``sigma_r = 0.35`` (the guided filtering of Section 4.2, Zhang et al.
-    2015)."""
+    """Algorithm 5's filtered image: one joint bilateral pass of the normals over each kNN row (``sigma_r = 0.35``)."""
     from ..denoise._normals import joint_bilateral_normals, spatial_weights
 
     m, k = knn_idx.shape
@@ -456,10 +395,7 @@ def filtered_pixels(N, G, knn_idx, C, A, *, sigma_r: float = 0.35) -> np.ndarray
 
 
 def image_parts(V, F, *, k: int = IMAGE_COLS, channels: int = 9):
-    """What the images of :func:`build_images` are made of: ``(idx, R, parts)``, the neighbour
-    rows (m, k), the rotations (m, 3, 3) and the ``channels // 3`` pixel sets (m, 3) each
-    (filtered / guided pixels, noisy normals; see :func:`build_images`). Images of any subset of
-    faces follow by :func:`normal_images`, so a large mesh can be imaged in chunks."""
+    """Neighbour rows, rotations and pixel sets of :func:`build_images`, for imaging in chunks."""
     from ..geometry import face_areas
 
     N = face_normals(V, F)
@@ -484,13 +420,7 @@ def images_of(idx, R, parts, *, rows: int = 5, faces=None) -> np.ndarray:
 
 
 def build_images(V, F, *, k: int = IMAGE_COLS, rows: int = 5, channels: int = 9, faces=None):
-    """Network input of a mesh: images (b, channels, rows, k) float32 and rotations (m, 3, 3).
-
-    ``channels = 9``: filtered pixels (:func:`filtered_pixels`), guided pixels, noisy normals,
-    all rotated so that the face's filtered pixel is ``[1 0 0]``. ``channels = 6``: guided pixels
-    and noisy normals, rotated so that the guided pixel is ``[1 0 0]``. ``channels = 3``: guided
-    pixels only (the thesis' images).
-    """
+    """Network input: images (b, channels, rows, k) float32 and rotations (m, 3, 3) (``channels`` 3, 6 or 9)."""
     idx, R, parts = image_parts(V, F, k=k, channels=channels)
     return images_of(idx, R, parts, rows=rows, faces=faces), R
 

@@ -1,21 +1,9 @@
-"""Numpy inference of the learned models (no torch needed), and a small numpy trainer for the
-denoising autoencoders that are trained at denoise time (animations, Section 5.1.3).
+"""Numpy inference of the learned models, and a numpy trainer for the denoise-time autoencoders.
 
-BM3D-CNN shrinkage network (Section 5.1.4, Eq. 5.40-5.41), per feature class::
-
-    h = W1 * x + b1                              (Eq. 5.40, l = 1: the "wavelet transform")
-    a_c = sum_r w_{c r} exp(-(h_c - mu_r)^2 / (2 s^2))   (Eq. 5.41: RBF shrinkage per channel)
-    y = W2 * a + b2                              (Eq. 5.40, l = 3: the "inverse transform")
-    p_bar = x[:, 0, k//2] + y[:, 0, k//2]        (denoised centre pixel of the first row)
-
-``*`` is a 2-D cross-correlation with zero padding ``ks // 2`` ("same"), as
-``torch.nn.functional.conv2d``. Only the centre pixel of the first row is used (Section 5.1.4,
-"3D Mesh Reconstruction"), so only the ``(ks//2 + 1) x ks`` positions of ``h`` it depends on are
-evaluated here: with the tabulated shrinkage (denoising) by one compiled kernel per image, in
-float32; exactly (float64, Eq. 5.41 evaluated) as one im2col matrix product per batch.
-
-Denoising autoencoder (Section 5.1.3): ``y = W2 tanh(W1 x + b1) + b2`` (or linear, the thesis'
-``sigma = sigma'`` linear choice), trained to reproduce the clean row from the noisy one.
+BM3D-CNN shrinkage network per feature class (Eqs. 5.40-5.41): ``h = W1 * x + b1``,
+``a_c = sum_r w_cr exp(-(h_c - mu_r)^2 / (2 s^2))``, ``y = W2 * a + b2``; the output is the first
+row's centre pixel plus its residual. Only the positions of ``h`` it depends on are evaluated.
+Autoencoder (Section 5.1.3): ``y = W2 tanh(W1 x + b1) + b2`` (or linear).
 """
 
 from __future__ import annotations
@@ -38,14 +26,7 @@ def rbf(h: np.ndarray, w: np.ndarray, mu: np.ndarray, s: float) -> np.ndarray:
 
 
 class RBFTable:
-    """The RBF mixture of Eq. (5.41) per channel, tabulated for fast evaluation.
-
-    ``f_c(h) = sum_r w[c, r] exp(-(h - mu_r)^2 / (2 s^2))`` is sampled on ``n`` points over
-    ``[mu_0 - 8 s, mu_-1 + 8 s]`` and linearly interpolated (outside, every Gaussian is below
-    ``exp(-32)``: the end values are used). With the default ``n = 32769`` the interpolation error
-    is below ``h^2 max|f''| / 8``, about 1e-8 for the shipped weights -- far below float32
-    rounding -- and one table look-up replaces ``R`` exponentials per value.
-    """
+    """The RBF mixture of Eq. (5.41) per channel, tabulated on ``[mu_0 - 8 s, mu_-1 + 8 s]`` (error about 1e-8)."""
 
     def __init__(self, w: np.ndarray, mu: np.ndarray, s: float, n: int = 32769):
         self.lo = float(mu[0] - 8 * s)
@@ -84,24 +65,12 @@ def cnn_centre(
     table: RBFTable | None = None,
     index: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Denoised centre pixel of the first row of every image (the network of the module notes).
+    """Denoised centre pixel (b, 3) of the first row of every image (the network of the module notes).
 
-    Parameters
-    ----------
-    x : (b, ch, rows, k) images, ``rows >= ks`` and ``k >= 2 ks - 1`` (``ks`` the kernel size)
-    W1 : (C, ch, ks, ks), b1 : (C,), rw : (C, R), mu : (R,), s : float,
-    W2 : (3, C, ks, ks), b2 : (3,)
-        (the residual is added to the first three channels, the guided / filtered pixel)
-    table : RBFTable, optional
-        Tabulated shrinkage (fast path: a compiled kernel fusing both convolutions and the
-        shrinkage, float32 arithmetic; ``chunk`` is not used); None evaluates Eq. (5.41)
-        exactly in float64, ``chunk`` images at a time.
-    index : (b',) int, optional
-        Evaluate only the images ``x[index]`` (without copying them out of ``x``).
-
-    Returns
-    -------
-    (b, 3) float64 (not normalised); (b', 3) with ``index``.
+    ``x`` (b, ch, rows, k) with ``rows >= ks`` and ``k >= 2 ks - 1``; ``W1`` (C, ch, ks, ks), ``b1``,
+    ``rw`` (C, R), ``mu``, ``s``, ``W2`` (3, C, ks, ks), ``b2``. With ``table`` one compiled float32
+    kernel; without, Eq. (5.41) exactly in float64, ``chunk`` images at a time. ``index`` evaluates
+    only ``x[index]``.
     """
     b, ch, rows, k = x.shape
     C, _, ks, _ = W1.shape
@@ -151,12 +120,7 @@ def cnn_centre(
 
 @numba.njit(cache=True, parallel=True, fastmath=True)
 def _centre_kernel(x, index, c0, W1t, b1, tab, lo, step, W2c, b2, out):  # pragma: no cover
-    """:func:`cnn_centre` with a tabulated shrinkage, one image per iteration: the ``(p + 1) x ks``
-    positions of ``h`` the output depends on, their shrinkage and the second convolution at the
-    centre, fused (no im2col copy). ``W1t`` is ``W1`` as (ch, ks, ks, C) (channels innermost, so
-    the sums vectorise), ``W2c`` (p + 1, ks, C, 3) the rows of ``W2`` that reach the centre of the
-    first row; ``c0`` the first of the ``4 p + 1`` columns used; ``out[t]`` is the output of
-    image ``index[t]``."""
+    """:func:`cnn_centre` with a tabulated shrinkage, fused per image (``out[t]`` for image ``index[t]``)."""
     nb = index.size
     ch = x.shape[1]
     ks = W1t.shape[1]
@@ -228,14 +192,7 @@ def train_mlp_numpy(
     params: dict | None = None,
     min_steps: int = 600,
 ) -> tuple[dict[str, np.ndarray], list[float]]:
-    """Fit ``Y ~ mlp(X)`` by mini-batch Adam on the mean squared error (numpy only).
-
-    Used for the denoise-time training of Section 5.1.3 (the thesis minimises the same cost with
-    L-BFGS, minFunc; Adam on mini-batches is used here because it scales to the ~10^5 rows of a
-    few frames with a bounded memory). ``weight`` (d,) weights the output columns of the loss.
-    Small training sets get more epochs, so that at least ``min_steps`` Adam steps are taken.
-    Returns the parameters and the mean loss per epoch.
-    """
+    """Fit ``Y ~ mlp(X)`` by mini-batch Adam on the (column-``weight``-ed) mean squared error, numpy only."""
     if activation not in _ACTS:
         raise ValueError(f"activation must be one of {_ACTS}; got {activation!r}")
     try:  # small matrix products: BLAS threads only add overhead (and oversubscribe)

@@ -1,9 +1,5 @@
-"""Reading and writing the weight files of the learned denoisers (numpy ``.npz`` + JSON metadata).
-
-A weight file holds the arrays of one model and a ``__meta__`` entry: a JSON text with at least
-``model`` (``"bm3d-cnn"`` or ``"dae"``), ``architecture``, ``format_version``, ``training_meshes``,
-``noise_levels``, ``seed``, ``epochs`` and ``spectrageo_version``. Files are written atomically
-(temporary file in the same folder, then rename).
+"""Weight files of the learned denoisers: ``.npz`` arrays and a JSON ``__meta__`` (model,
+architecture, format_version, training data, seed, version); written atomically.
 """
 
 from __future__ import annotations

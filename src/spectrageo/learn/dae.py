@@ -1,58 +1,13 @@
 """Feature-aware, content-wise denoising autoencoders (thesis Section 5.1.3, Algorithm 4).
 
-Rows. Every face ``i`` gives a row ``M_i`` in R^{3k}: the guided normals (Section 4.2.1, made unit
-length as in Section 5.1.3) of its ``k = 9`` nearest centroids, nearest first (among the faces
-within two vertex rings, so that thin parts and touching pieces do not mix:
-:func:`spectrageo.learn._features.centroid_knn`), rotated so that its own guided normal is
-``[1 0 0]``. The thesis makes the dataset coherent by moving every
-normal into the positive octant (Fig. 5.33); a per-row rotation is used instead because it
-removes the orientation entirely (an octant flip does not keep the angles between the normals
-of a row, which are what the autoencoder must restore).
-
-Feature identification. RPCA (:func:`spectrageo.linalg.rpca`, principal component pursuit) of
-the matrix of rows minus the flat row ``[1 0 0 ... 1 0 0]``: a face is a feature when
-``||s_i||_2 > ||e_i||_2 + e`` (``e = 0.7`` as in the thesis) for its rows ``s_i`` of the sparse
-part ``S`` and ``e_i`` of the low-rank part ``E``. This splits ``M`` into ``M_1`` (features) and
-``M_2`` (flat areas).
-
-Content-wise DAEs (Algorithm 4). Algorithm 4 groups, for every training row, the rows within a
-distance ``epsilon`` and trains one DAE per group, then denoises a row with the DAE of the
-closest training group. With ``n_f`` overlapping groups that would be ``n_f`` networks; here the
-rows of each feature class are grouped by kappa-means (``n_groups`` centres per class), which
-keeps every row in the group of its nearest centre; at denoising time each noisy row takes the
-model of its class and its nearest centre (Algorithm 4, lines 10-17). Each DAE maps a noisy row
-to the clean row (one hidden layer, tanh; the thesis' linear units are ``activation="linear"``);
-the centre normal of the output is the denoised normal ``n_bar_c``, and the vertices follow by
-Eq. (4.28).
-
-Static meshes use the shipped weights (``spectrageo train dae``). Animations (Section 5.1.3,
-Fig. 5.38) train at denoise time on their first ``train_frames`` frames, in numpy
-(:func:`spectrageo.learn._nn.train_mlp_numpy`, no torch needed). The thesis trains on clean
-first frames; a noisy animation comes without them, so the targets are built from the other
-frames instead (Noise2Noise, Lehtinen et al. 2018): the row of frame ``t`` (which holds frames
-``t - r .. t + r``, ``r = temporal``) is mapped to the mean of the *noisy* normals of the same
-faces in frames ``t - r - 1`` and ``t + r + 1`` (in frame ``t``'s rotation). Their noise is
-independent of the row's and has zero mean, so the least-squares fit converges to the clean
-normals' conditional mean; motion between the frames enters only to second order (the linear
-part cancels in the two-sided mean). When clean first frames are at hand, ``clean=`` uses them
-as targets instead, as in the thesis.
-
-Motion. Between the poses of a pose set (``cat-poses``: a part turns by 60-160 degrees from one
-frame to the next) other frames' normals are not a view of frame ``t``'s surface, and the rows
-and targets above mixed orientations: the DAE came out worse than the noisy input (cat-poses
-46.1 degrees from 43.3, lion-poses 52.4 from 44.8). With ``motion="rigid"`` every other frame's
-normals are first turned by the local rotation from that frame to frame ``t``: Kabsch on the
-centroids of the :data:`MOTION_PATCH` faces around the face (nearest within two vertex rings).
-From noisy centroids that rotation is off by about 6 degrees (the median angle found between
-frames of ``crane``, whose parts turn by under 1 degree per frame), which on smooth animations
-costs more than it gains (horse-collapse 18.2 -> 19.5 degrees). ``motion="auto"`` (default)
-compensates when the median local rotation between training frames ``r + 1`` apart exceeds
-:data:`AUTO_MOTION_DEG` (35 degrees, the geometric midpoint of the tuning animations'
-horse-collapse, 8 degrees, and cat-poses / lion-poses, 153-154 degrees): cat-poses 46.1 ->
-26.7, lion-poses 52.4 -> 32.8, horse-collapse unchanged. On the evaluation animations (chosen
-without them) auto keeps crane (14.2; rigid 15.0) and chickenCrossing (45.7; rigid 45.5)
-uncompensated, and also horse-gallop (18-21 degrees of median local rotation), where rigid
-would have been better (21.7 against 23.1).
+A face's row holds the guided normals (Section 4.2.1) of its ``k = 9`` nearest centroids within
+two vertex rings, rotated so that its own is ``[1 0 0]``. RPCA of the rows minus the flat row
+splits feature faces (``||s_i|| > ||e_i|| + e``, ``e = 0.7``) from flat ones; each class is
+grouped by kappa-means and each group has one autoencoder (one hidden layer, tanh); a noisy row
+takes the network of its class and nearest centre (lines 10-17), and the vertices follow by
+Eq. (4.28). Static meshes use shipped weights; animations train at denoise time on their first
+frames (Fig. 5.38) with Noise2Noise targets (docs/decisions.md#learn-dae-rows), turning other
+frames' normals by their local motion when needed (docs/decisions.md#learn-motion).
 """
 
 from __future__ import annotations
@@ -62,10 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import as_faces, as_frames, as_points, check_choice, check_positive
+from .._validation import as_faces, as_frames, as_points, check_positive, options_with_legacy
 from ..geometry import face_centroids, face_normals
 from . import _features as fe
 from ._nn import mlp_forward, train_mlp_numpy
+from ._options import MOTIONS, FramesTrainOptions
 from ._weights import default_weights, load_weights, model_loader, unrotate_unit
 
 ARRAYS = ("centres", "W1", "b1", "W2", "b2")
@@ -75,7 +31,7 @@ FEATURE_THRESHOLD = 0.7
 
 # --------------------------------------------------------------------------- rows and groups
 def face_rows(V, F, k: int = fe.IMAGE_COLS):
-    """Rows ``M_i`` (m, 3k) of the module notes, and the rotations (m, 3, 3), kNN (m, k)."""
+    """Rows ``M_i`` (m, 3k) of the module notes, the rotations (m, 3, 3) and the kNN (m, k)."""
     N, idx, G, R = fe.mesh_inputs(V, F, k)
     return rows_of(G, idx, R), R, idx, N
 
@@ -140,8 +96,7 @@ def fit_groups(rows: np.ndarray, feat: np.ndarray, n_groups: int, rng=0) -> np.n
 
 # --------------------------------------------------------------------------- model
 class DAEModel:
-    """Content-wise DAEs: ``centres`` (2, G, d) and per model ``W1`` (M, d, H), ``b1`` (M, H),
-    ``W2`` (M, H, d), ``b2`` (M, d) with ``M = 2 G``."""
+    """Content-wise DAEs: ``centres`` (2, G, d) and per model ``W1``, ``b1``, ``W2``, ``b2`` (``2 G`` models)."""
 
     def __init__(self, arrays: dict[str, np.ndarray], meta: dict):
         missing = [k for k in ARRAYS if k not in arrays]
@@ -195,19 +150,9 @@ def dae(
 ) -> np.ndarray:
     """Denoise a static mesh with content-wise DAEs (Section 5.1.3, Algorithm 4).
 
-    Parameters
-    ----------
-    V : (n, 3) float, F : (m, 3) int
-    weights : path or DAEModel, optional
-        Weights from ``spectrageo train dae`` (default: the shipped weights).
-    n_iter : int, optional
-        Passes of (rows -> DAE -> vertex update); default from the metadata, else 1.
-    vertex_iter : int, optional
-        Iterations of Eq. (4.28) per pass; default from the metadata, else 20.
-
-    Returns
-    -------
-    (n, 3) float64 denoised positions.
+    ``weights``: a path or :class:`DAEModel` (default: the shipped weights); ``n_iter`` passes
+    (default from the metadata, else 1), each followed by ``vertex_iter`` iterations of Eq. (4.28)
+    (default 20). Returns the (n, 3) float64 denoised positions.
     """
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
@@ -220,18 +165,15 @@ def dae(
 
 
 # --------------------------------------------------------------------------- animations
-#: motion compensation of the temporal rows and targets (:func:`train_frames_model`)
-MOTIONS = ("auto", "rigid", "none")
 #: ``motion="auto"`` compensates when the median local rotation between training frames
-#: ``r + 1`` apart exceeds this many degrees (module notes, "Motion")
+#: ``r + 1`` apart exceeds this many degrees (docs/decisions.md#learn-motion)
 AUTO_MOTION_DEG = 35.0
 #: faces whose centroids fix the local rotation between two frames (``motion="rigid"``)
 MOTION_PATCH = 30
 
 
 def local_rotations(Cs: np.ndarray, Ct: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """Rotations (m, 3, 3) that best map the points ``Cs[idx[i]]`` onto ``Ct[idx[i]]`` after
-    centring (Kabsch: least squares, proper rotations only)."""
+    """Kabsch rotations (m, 3, 3) mapping the centred points ``Cs[idx[i]]`` onto ``Ct[idx[i]]``."""
     P = Cs[idx]
     Q = Ct[idx]
     P = P - P.mean(axis=1, keepdims=True)
@@ -277,9 +219,7 @@ class _FrameData:
         return self._centroids[t]
 
     def rotation(self, t: int, s: int) -> np.ndarray:
-        """Per row of frame ``t``: the rotation that brings frame ``s``'s normals into frame
-        ``t``'s row frame: ``R_t`` with ``motion="none"``; ``R_t Q`` with ``motion="rigid"``,
-        ``Q`` the local rotation from frame ``s`` to frame ``t`` of the row's centroids."""
+        """Rotation of frame ``s``'s normals into frame ``t``'s rows: ``R_t``, times the local motion with ``"rigid"``."""
         R = self.get(t)[3]
         if self.motion == "none" or self._clamp(s) == self._clamp(t):
             return R
@@ -298,9 +238,7 @@ class _FrameData:
         return self._patches[t]
 
     def rows(self, t: int, radius: int) -> tuple[np.ndarray, np.ndarray]:
-        """Temporal rows of frame ``t``: the guided normals of frames ``t - radius .. t + radius``
-        (clamped) at frame ``t``'s kNN faces, in frame ``t``'s rotation (each other frame first
-        rotated by its local motion to frame ``t`` when ``motion="rigid"``); and ``R_t``."""
+        """Temporal rows of frame ``t`` (frames ``t - radius .. t + radius``, frame ``t`` first) and ``R_t``."""
         _, idx, _, R = self.get(t)
         parts = [
             rows_of(self.get(t + d)[2], idx, self.rotation(t, t + d))
@@ -313,49 +251,50 @@ class _FrameData:
 def train_frames_model(
     frames,
     F,
+    options: FramesTrainOptions | None = None,
     *,
     train_frames: int,
     clean=None,
     inputs=None,
-    temporal: int = 2,
-    motion: str = "auto",
-    k: int = fe.IMAGE_COLS,
-    n_groups: int = 4,
-    hidden: int = 32,
-    epochs: int = 10,
-    max_rows: int = 60000,
-    activation: str = "tanh",
     rng=0,
+    **legacy,
 ) -> tuple[DAEModel, list[float]]:
     """Train content-wise DAEs on the first ``train_frames`` frames of an animation (numpy).
 
-    Rows: for ``temporal = 0`` the rows of the module notes (frame ``t`` alone, as in the thesis);
-    for ``temporal = r > 0`` the rows of frames ``t - r .. t + r`` at frame ``t``'s faces, side by
-    side (the animation's temporal coherence: the same surface seen with independent noise).
-    Targets: the clean frames ``clean`` when given (thesis setting), otherwise Noise2Noise: the
-    mean of the noisy normals of frames ``t - r - 1`` and ``t + r + 1`` (outside the input, so
-    their noise is independent of it), which needs ``train_frames >= 2 r + 3``. ``inputs`` (same
-    shape as ``frames``, default ``frames``): the frames the rows come from (later cascade stages
-    pass the previous stage's output); targets always come from the noisy ``frames``.
-    ``motion``: ``"rigid"`` turns the other frames' normals (rows and Noise2Noise targets) by
-    the local rotation to frame ``t``, ``"none"`` does not, ``"auto"`` decides from the local
-    rotations between training frames (module notes, "Motion"); the model's metadata records
-    the choice and denoising follows it.
-    Returns the model and the final training loss of each of its autoencoders.
+    Frame ``t``'s rows hold frames ``t - r .. t + r`` (``r = options.temporal``); targets are the
+    ``clean`` frames when given, else the mean of the noisy normals of frames ``t - r - 1`` and
+    ``t + r + 1`` (docs/decisions.md#learn-dae-rows), so ``train_frames >= 2 r + 3``.
+
+    Parameters
+    ----------
+    frames : (T, n, 3) float
+    F : (m, 3) int
+    options : FramesTrainOptions, optional
+    train_frames : int
+    clean, inputs : (T, n, 3) float, optional
+        Clean target frames; frames the rows come from (default ``frames``).
+    rng : int or numpy.random.Generator
+    **legacy
+        Deprecated: the fields of :class:`FramesTrainOptions` as keyword arguments.
+
+    Returns
+    -------
+    tuple
+        The :class:`DAEModel` and the final training loss of each autoencoder.
     """
+    o = options_with_legacy(options, legacy, FramesTrainOptions, "train_frames_model")
+    k, n_groups, hidden, epochs, activation = o.k, o.n_groups, o.hidden, o.epochs, o.activation
     A = as_frames(frames)
     F = as_faces(F, A.shape[1], "F")
     Ain = A if inputs is None else as_frames(inputs, "inputs")
     check_positive(train_frames, "train_frames", integer=True)
-    check_positive(temporal, "temporal", integer=True, allow_zero=True)
     if train_frames > A.shape[0]:
         raise InvalidInputError(
             f"`train_frames` must be <= the number of frames ({A.shape[0]}); got {train_frames}."
         )
-    check_positive(k, "k", integer=True)
     gen = np.random.default_rng(rng)
-    r = int(temporal)
-    check_choice(motion, "motion", MOTIONS)
+    r = int(o.temporal)
+    motion = o.motion
     data = _FrameData(Ain, F, k, "none" if motion == "auto" else motion)
     if motion == "auto":  # one training frame (clean targets) shows no motion: "none"
         gap = min(r + 1, train_frames - 1)
@@ -377,7 +316,7 @@ def train_frames_model(
                 f"to the noisy normals of frames t-{r + 1} and t+{r + 1}); got {train_frames}."
             )
         ts = range(r + 1, train_frames - r - 1)
-    per = max(1, max_rows // len(ts))
+    per = max(1, o.max_rows // len(ts))
     for t in ts:
         rows, R = data.rows(t, r)
         idx = data.get(t)[1]
@@ -470,17 +409,10 @@ def dae_animation(
 ) -> np.ndarray:
     """Denoise a mesh animation with content-wise DAEs (Section 5.1.3, Fig. 5.38).
 
-    With ``train_frames`` the DAEs are trained on the first ``train_frames`` frames of this
-    animation (:func:`train_frames_model`, numpy; ``temporal`` frames on each side in the rows)
-    and then denoise every frame, followed by the vertex update of Eq. (4.28); ``motion`` as
-    there (module notes, "Motion"). ``n_stages`` > 1
-    cascades: stage ``s`` is trained on the output of stages ``1..s-1`` on the frames (targets
-    still from the noisy frames). Without ``train_frames`` the static ``weights`` (default the
-    shipped ones) denoise every frame on its own (``n_stages`` passes).
-
-    Returns
-    -------
-    (T, n, 3) float64 denoised frames.
+    With ``train_frames`` the DAEs are trained on this animation's first frames
+    (:func:`train_frames_model`) and denoise every frame; ``n_stages`` > 1 cascades, each stage
+    trained on the previous output. Without it the static ``weights`` denoise each frame.
+    Returns the (T, n, 3) float64 frames.
     """
     if F is None:
         F = getattr(frames, "faces", None)
@@ -496,18 +428,20 @@ def dae_animation(
         return np.stack([_update(A[t], F, model, n_stages, vertex_iter) for t in range(A.shape[0])])
     if weights is not None:
         raise InvalidInputError("pass either `train_frames` or `weights`, not both.")
+    options = FramesTrainOptions(temporal=temporal, motion=motion, k=k, epochs=epochs)
     out = A.copy()
     for _ in range(n_stages):
         model, _ = train_frames_model(
-            A, F, train_frames=train_frames, clean=clean, inputs=out, temporal=temporal,
-            motion=motion, k=k, epochs=epochs, rng=gen,
-        )  # fmt: skip
+            A, F, options, train_frames=train_frames, clean=clean, inputs=out, rng=gen
+        )
         out = _denoise_frames(out, F, model, vertex_iter)
     return out
 
 
 __all__ = [
+    "MOTIONS",
     "DAEModel",
+    "FramesTrainOptions",
     "dae",
     "dae_animation",
     "face_rows",

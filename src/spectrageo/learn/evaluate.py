@@ -1,17 +1,8 @@
-"""Evaluation of the learned denoisers against TSGSP and BNF (issue 20).
+"""Evaluation of the learned denoisers against TSGSP and BNF, on data no weight was trained on.
 
-Three parts, all on data no weight was trained on (:data:`spectrageo.learn.train.TRAIN_MESHES`
-are disjoint from them, see :func:`spectrageo.learn.train.check_training_meshes`):
-
-* every noisy / ground-truth pair of ``denoise/``;
-* a slice of the validation split of the denoising protocol
-  (:data:`spectrageo.evaluate.denoise.VALIDATION_MESHES`) with Gaussian noise along the normals at
-  0.3 and 0.5, seeded per case exactly as the protocol does;
-* the shared animations with Gaussian noise 0.3 (Fig. 5.38 setting): ``dae`` trained on the first
-  ``train_frames`` frames (denoise-time training, Section 5.1.3) against per-frame TSGSP.
-
-Every method runs through :func:`spectrageo.denoise.denoise` (do-no-harm gate and trust region as
-for any registered method); times are wall-clock seconds in the same process.
+Parts: the pairs of ``denoise/``; a slice of the protocol's validation split at Gaussian noise 0.3
+and 0.5; the shared animations at 0.3, ``dae`` trained on their first frames. Every method runs
+through :func:`spectrageo.denoise.denoise`.
 """
 
 from __future__ import annotations
@@ -71,20 +62,11 @@ def evaluate_learned(
     protocol_levels=(),
     protocol_max_vertices: int = 30000,
 ) -> list[dict]:
-    """Run the comparison of the module notes; returns the rows (keys :data:`COLUMNS`) and, with
-    ``out``, writes ``<out>.md`` and ``<out>.csv``.
+    """Run the comparison of the module notes; returns the rows (:data:`COLUMNS`), written with ``out``.
 
-    ``repeat``: static cases are denoised ``repeat`` times per method and the best time is kept
-    (one run's time on a busy 2-core machine varies by 10-20 %).
-
-    ``frame_step``: per-frame TSGSP (slow) and the error of every method are evaluated on every
-    ``frame_step``-th frame of the first ``max_frames``; ``dae`` denoises all of them.
-
-    ``protocol_levels`` (e.g. ``(0.3,)``): also run the whole validation split of the denoising
-    protocol (:func:`spectrageo.evaluate.denoise.protocol_cases`: every corruption kind at these
-    levels, models up to ``protocol_max_vertices``), part ``"protocol"``, each case seeded and
-    corrupted exactly as ``spectrageo evaluate denoise --split validation`` does (one timed run
-    per method there, whatever ``repeat``).
+    ``repeat``: best time of that many runs; ``frame_step``: animation frames evaluated;
+    ``protocol_levels``: also the protocol's validation split at those levels (models up to
+    ``protocol_max_vertices``).
     """
     from .. import denoise, io
     from ..datasets import data_dir as _data_dir

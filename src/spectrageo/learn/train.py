@@ -1,15 +1,8 @@
-"""Training of the shipped weights (``spectrageo train dae|bm3d-cnn``); needs torch (``learn`` extra).
+"""Training of the shipped weights (``spectrageo train dae|bm3d-cnn``); needs torch.
 
-Training data: clean shared meshes corrupted by :func:`spectrageo.noise.generate` (Gaussian
-noise along the normals, ``"gaussian-normal"``, at every level of ``levels``; one "general"
-model for all levels, the thesis' GEN OUR). The default meshes (:data:`TRAIN_MESHES`) are
-feature-rich models outside the denoising protocol's validation split, outside the benchmark
-pairs of ``denoise/`` and of other shapes than those pairs (the thesis trains on 5 models);
-:func:`check_training_meshes` refuses any validation or benchmark shape. :data:`REPORT_MESH`,
-used by no choice, gives the validation theta of the training report.
-
-Everything is seeded: the noise of every case (:func:`spectrageo.noise.generator.case_seed`),
-the subsampling, kappa-means and torch (with deterministic algorithms).
+Clean meshes (:data:`TRAIN_MESHES`, held out of the denoising protocol's validation split and
+benchmark shapes) corrupted by Gaussian noise along the normals at :data:`TRAIN_LEVELS`; one
+model for all levels. Everything is seeded.
 """
 
 from __future__ import annotations
@@ -21,39 +14,21 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import check_positive
-from ..datasets.splits import (
-    DENOISE_SAME_SHAPE_AS_TUNING,
-    LEARN_REPORT_MESH,
-    LEARN_TRAIN_MESHES,
-)
-from ..datasets.splits import files as _files
+from .._validation import options_with_legacy
+from ..datasets.splits import LEARN_REPORT_MESH
 from . import _features as fe
+from ._options import (
+    TRAIN_LEVELS,
+    TRAIN_MESHES,
+    BM3DCNNTrainOptions,
+    DAETrainOptions,
+    check_training_meshes,
+)
 from ._weights import package_version, save_weights
 
-#: training meshes of the shipped weights (relative to the shared data folder; the split
-#: registry's ``learn-train`` tuning cases, :mod:`spectrageo.datasets.splits`)
-TRAIN_MESHES = LEARN_TRAIN_MESHES
 #: mesh whose noisy versions give the validation theta of the training report (no choice uses it)
 REPORT_MESH = LEARN_REPORT_MESH
-#: relative Gaussian noise levels of the training cases
-TRAIN_LEVELS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7)
 REPORT_LEVELS = (0.3, 0.5)
-
-
-def check_training_meshes(meshes) -> tuple[str, ...]:
-    """Refuse meshes of the validation split, the benchmark pairs or their shapes."""
-    banned = set(_files("denoise", "validation")) | set(DENOISE_SAME_SHAPE_AS_TUNING)
-    out = []
-    for m in meshes:
-        m = str(m).replace("\\", "/")
-        if m in banned or m.startswith("denoise/"):
-            raise InvalidInputError(
-                f"training mesh {m!r} is a validation or benchmark shape of the denoising "
-                "protocol (spectrageo.evaluate.denoise); training on it would not be held out."
-            )
-        out.append(m)
-    return tuple(out)
 
 
 def _load(data_dir: Path, rel: str):
@@ -138,50 +113,25 @@ def _finish(out, arrays, meta, loss, data_dir, method, seed, report) -> dict:
 
 
 def train_bm3d_cnn(
-    data_dir,
-    out,
-    *,
-    epochs: int = 4,
-    n_stages: int = 3,
-    device: str = "cpu",
-    seed: int = 0,
-    meshes=None,
-    levels=None,
-    per_case: int = 2500,
-    width: int = 16,
-    kernel: int = 5,
-    channels: int = 6,
-    vertex_iter: int = 20,
-    batch_size: int = 1024,
-    lr: float = 3e-3,
-    threads: int | None = None,
-    report: bool = True,
-    start=None,
-    log=print,
+    data_dir, out, options: BM3DCNNTrainOptions | None = None, *, log=print, **legacy
 ) -> dict:
-    """Train the bm3d-cnn weights (Section 5.1.4) and write them to ``out`` with a report.
+    """Train the bm3d-cnn weights (Section 5.1.4, Algorithm 5) into ``out`` (``.npz``) with a report.
 
-    Stage ``s`` of the cascade (see :mod:`spectrageo.learn.bm3d_cnn`) is trained on images of
-    the training cases after stages ``1..s-1``; the class centres of each stage are the
-    kappa-means (kappa = 3) centres of its training images' first-row eigenvalues.
-
-    ``start`` (optional callable ``(V_noisy, F) -> V``) replaces every noisy training input by
-    its result before stage 1, so that the stages learn to refine another denoiser's output
-    (``benchmarks/learned_refine.py`` trains on TSGSP's results this way); the weights then
-    expect that denoiser's output as their input, which the metadata records as ``start``.
-
-    Returns the training summary (also written as ``<out>.json``).
+    Stage ``s`` of the cascade is trained on the training cases after stages ``1..s-1``; its class
+    centres are the kappa-means (kappa = 3) centres of its images' first-row eigenvalues. ``data_dir``
+    is the shared data folder; ``options`` a :class:`BM3DCNNTrainOptions` (old keywords are
+    deprecated); ``log`` receives progress lines. Returns the training summary (also
+    ``<out>.json``).
     """
     from . import _torch as tt
     from .bm3d_cnn import BM3DCNNModel
 
-    check_positive(epochs, "epochs", integer=True)
-    check_positive(n_stages, "n_stages", integer=True)
-    if channels not in (3, 6, 9):
-        raise InvalidInputError(f"`channels` must be 3, 6 or 9; got {channels!r}.")
+    o = options_with_legacy(options, legacy, BM3DCNNTrainOptions, "train_bm3d_cnn")
+    epochs, n_stages, seed, meshes, levels = o.epochs, o.n_stages, o.seed, o.meshes, o.levels
+    per_case, width, kernel, channels = o.per_case, o.width, o.kernel, o.channels
+    vertex_iter, batch_size, lr, start = o.vertex_iter, o.batch_size, o.lr, o.start
+    device, threads, report = o.device, o.threads, o.report
     data_dir = Path(data_dir)
-    meshes = check_training_meshes(TRAIN_MESHES if meshes is None else meshes)
-    levels = TRAIN_LEVELS if levels is None else tuple(float(x) for x in levels)
     dev = tt.setup(seed, device=device, threads=threads)
     gen = np.random.default_rng(seed)
     t0 = time.perf_counter()
@@ -262,31 +212,21 @@ def train_bm3d_cnn(
 
 # --------------------------------------------------------------------------- dae
 def train_dae(
-    data_dir,
-    out,
-    *,
-    epochs: int = 10,
-    device: str = "cpu",
-    seed: int = 0,
-    meshes=None,
-    levels=None,
-    per_case: int = 4000,
-    n_groups: int = 4,
-    hidden: int = 32,
-    vertex_iter: int = 20,
-    threads: int | None = None,
-    report: bool = True,
-    log=print,
+    data_dir, out, options: DAETrainOptions | None = None, *, log=print, **legacy
 ) -> dict:
-    """Train the static content-wise DAE weights (Section 5.1.3, Algorithm 4) and write them."""
+    """Train the static content-wise DAE weights (Section 5.1.3, Algorithm 4) into ``out`` with a report.
+
+    As :func:`train_bm3d_cnn`, with a :class:`DAETrainOptions`.
+    """
     from ..geometry import face_normals
     from . import _torch as tt
     from .dae import face_rows, feature_mask, fit_groups, rows_of
 
-    check_positive(epochs, "epochs", integer=True)
+    o = options_with_legacy(options, legacy, DAETrainOptions, "train_dae")
+    epochs, seed, meshes, levels, per_case = o.epochs, o.seed, o.meshes, o.levels, o.per_case
+    n_groups, hidden, vertex_iter = o.n_groups, o.hidden, o.vertex_iter
+    device, threads, report = o.device, o.threads, o.report
     data_dir = Path(data_dir)
-    meshes = check_training_meshes(TRAIN_MESHES if meshes is None else meshes)
-    levels = TRAIN_LEVELS if levels is None else tuple(float(x) for x in levels)
     dev = tt.setup(seed, device=device, threads=threads)
     gen = np.random.default_rng(seed)
     t0 = time.perf_counter()
@@ -445,6 +385,8 @@ def write_report(weights: Path, summary: dict) -> list[Path]:
 
 
 __all__ = [
+    "BM3DCNNTrainOptions",
+    "DAETrainOptions",
     "REPORT_MESH",
     "TRAIN_LEVELS",
     "TRAIN_MESHES",

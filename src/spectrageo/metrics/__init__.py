@@ -1,18 +1,5 @@
-"""Quality metrics of Section 4.9: theta, vertex/normal distances, NMSVE, exact Hausdorff, KG error,
-STED, registration errors and bit rates.
-
-Quick use::
-
-    from spectrageo import metrics
-    d = metrics.compare(V_denoised, V_ground_truth, F)      # theta_deg, dmean, ..., hd_max
-    s = metrics.compare_surfaces((V, F), (V_other, F_other))  # no correspondence: hd, chamfer, fscore
-    a = metrics.compare_animation(frames, frames_ref, F)   # per-frame means, kg, sted
-
-Units: ``theta_deg`` in degrees; ``dmean``, ``dmax``, ``hd_*`` in model units (not normalised);
-``dist_n``, ``dmean_n`` unitless in [0, 2]; ``nmsve`` normalised by the squared bounding-box
-diagonal; ``kg`` in percent. ``hd_mean``/``hd_max`` are symmetric (both directions, surfaces
-sampled at vertices, edge midpoints and face centroids; see :mod:`spectrageo.metrics.surface`);
-``chamfer`` (not squared) in model units; ``fscore``, ``precision``, ``recall`` in [0, 1].
+"""Quality metrics of Section 4.9: theta, vertex and normal distances, NMSVE, Hausdorff, Chamfer,
+F-score, KG error, STED, registration errors and bit rates.
 """
 
 from .dynamic import (

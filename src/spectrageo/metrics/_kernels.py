@@ -40,14 +40,9 @@ def _closest_on_edges(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):  # pragma
 def closest_point_on_triangle(
     px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz
 ):  # pragma: no cover - jitted
-    """Closest point of triangle (a, b, c) to p, as barycentric weights (u, v, w) of (a, b, c).
+    """Closest point of triangle (a, b, c) to p as barycentric weights (Ericson, Sec. 5.1.5).
 
-    Voronoi-region classification of p against the triangle's vertices, edges and interior
-    (Ericson, *Real-Time Collision Detection*, Sec. 5.1.5). Exactly degenerate triangles (a repeated
-    vertex or collinear vertices) are handled as the union of their three edges, and so is a
-    triangle whose edge or area term rounds to zero against the query's distance (a point very
-    far away relative to the triangle's size, e.g. meshes compared across 30 orders of
-    magnitude), where the region formulas would divide by zero.
+    Degenerate triangles, and those whose terms round to zero against the distance, use their edges.
     """
     abx, aby, abz = bx - ax, by - ay, bz - az
     acx, acy, acz = cx - ax, cy - ay, cz - az
@@ -168,13 +163,7 @@ def closest_points(
 def build_bvh(
     tmin: np.ndarray, tmax: np.ndarray, cent: np.ndarray, leaf_size: int
 ):  # pragma: no cover
-    """Axis-aligned bounding-box tree over triangles (boxes ``tmin``/``tmax``, centroids ``cent``).
-
-    Nodes split their triangles at the midpoint of the longest axis of the centroid bounds (at the
-    median when the midpoint leaves one side empty). Returns ``order`` (triangle permutation; leaf
-    ``k`` holds ``order[start[k]:start[k] + count[k]]``), node boxes ``nmin``/``nmax``, children
-    ``left``/``right``, ``start``, ``count`` (> 0 for leaves), the number of nodes and the depth.
-    """
+    """Bounding-box tree over triangles, split at the centroid bounds' longest-axis midpoint (else median)."""
     m = cent.shape[0]
     order = np.arange(m)
     max_nodes = 2 * m + 1
@@ -276,11 +265,7 @@ def _box_sqdist(Q, i, nmin, nmax, node):  # pragma: no cover - jitted
 def bvh_query(
     Q, V, F, order, nmin, nmax, left, right, start, count, max_depth, best_d2, best_t
 ):  # pragma: no cover - jitted
-    """Exact closest triangle of every query point by depth-first traversal of the BVH.
-
-    A node is skipped only when the distance to its box exceeds the best distance found so far, so
-    the result is exact; ties keep the smallest triangle index. Updates ``best_d2``/``best_t``.
-    """
+    """Exact closest triangle of every point (BVH depth-first); updates ``best_d2``, ``best_t``."""
     for i in numba.prange(Q.shape[0]):
         stack = np.empty(2 * max_depth + 4, dtype=np.int64)
         bd = best_d2[i]

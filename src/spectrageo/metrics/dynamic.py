@@ -1,9 +1,4 @@
-"""Metrics for mesh animations (Section 4.9): KG error, STED, per-frame static metrics.
-
-``frames`` arrays have shape (T, n, 3) and share one face array ``F`` (m, 3); the result and the
-reference must have the same shape (frame t / vertex i of one corresponds to frame t / vertex i of
-the other).
-"""
+"""Metrics of mesh animations (Section 4.9): KG error, STED, per-frame static metrics; frames (T, n, 3), shared faces."""
 
 from __future__ import annotations
 
@@ -31,25 +26,9 @@ def _frame_pair(frames, frames_ref) -> tuple[np.ndarray, np.ndarray]:
 
 
 def kg_error(frames, frames_ref) -> float:
-    """KG error of Karni & Gotsman (2004) in percent (Section 4.9, [312]).
+    """KG error (percent) of Karni and Gotsman (2004), Section 4.9.
 
-    ``KG = 100 * ||A - A~||_F / ||A - E(A)||_F``
-
-    where ``A`` is the 3n x T matrix stacking the reference frames (one column per frame), ``A~`` the
-    same for the result, and ``E(A)`` holds in every entry of column t the mean of that coordinate
-    (x, y or z) over the vertices of frame t (the per-frame spatial mean, i.e. the centroid).
-
-    Parameters
-    ----------
-    frames : (T, n, 3) array_like or MeshAnimation
-        Result (e.g. decoded) animation.
-    frames_ref : (T, n, 3) array_like or MeshAnimation
-        Reference animation.
-
-    Raises
-    ------
-    InvalidInputError
-        Shapes differ, or the reference has all vertices at the centroid in every frame.
+    ``100 ||A - A~||_F / ||A - E(A)||_F``, ``A`` the reference frames (3n x T), ``E(A)`` the centroids.
     """
     A_res, A_ref = _frame_pair(frames, frames_ref)
     centred = A_ref - A_ref.mean(axis=1, keepdims=True)
@@ -63,7 +42,7 @@ def kg_error(frames, frames_ref) -> float:
 
 @dataclass(frozen=True)
 class StedResult:
-    """STED value and its parts: ``sted = sqrt(spatial^2 + c^2 * temporal^2)``."""
+    """STED and its parts: ``sted = sqrt(spatial^2 + c^2 temporal^2)``."""
 
     sted: float
     spatial: float
@@ -71,8 +50,7 @@ class StedResult:
 
 
 def _neighbourhood_edge_matrix(F: np.ndarray, n: int, E: np.ndarray, ring: int) -> sp.csr_matrix:
-    """(n, e) 0/1 matrix: edge e belongs to vertex v's neighbourhood when both its endpoints lie in
-    the closed ``ring``-ring of v."""
+    """(n, e) 0/1 matrix: edge e lies in the closed ``ring``-ring of vertex v."""
     C = sp.csr_matrix(
         (np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(n, n)
     )
@@ -88,45 +66,13 @@ def _neighbourhood_edge_matrix(F: np.ndarray, n: int, E: np.ndarray, ring: int) 
 def sted_components(
     frames, frames_ref, F, *, ring: int = 1, dt: float = 0.01, c: float = 1.0
 ) -> StedResult:
-    """Spatio-temporal edge difference of Vasa & Skala (2011) ([313], Section 4.9), with its parts.
+    """Spatio-temporal edge difference of Vasa and Skala (2011), with its parts (Section 4.9).
 
-    Spatial part. For each frame and each edge ``e`` with reference length ``l_e`` and result length
-    ``l~_e``, the relative edge difference is ``ed_e = (l~_e - l_e) / l_e``. For each vertex ``v`` the
-    neighbourhood ``N(v)`` is the set of edges whose two endpoints lie in the closed ``ring``-ring of
-    ``v`` (topological neighbourhood), and the local deviation is the edge-length-weighted standard
-    deviation
-
-    ``sigma(v) = sqrt( sum_{e in N(v)} l_e (ed_e - mu_v)^2 / sum_{e in N(v)} l_e )``, with
-    ``mu_v = sum l_e ed_e / sum l_e``.
-
-    ``STED_s`` is the mean of ``sigma`` over vertices and frames. A uniform scaling of the whole
-    mesh (a constant ``ed``) gives 0: the metric looks at local changes of the error.
-
-    Temporal part. Coordinates are divided by the reference's bounding-box diagonal (over all
-    frames), so the metric is scale invariant. The temporal edge of vertex ``v`` between frames t and
-    t+1 has length ``tl = sqrt(|v(t+1) - v(t)|^2 + dt^2)`` (time as a fourth coordinate, ``dt`` the
-    frame spacing in those normalised units); ``ted = |tl~ - tl| / tl`` and ``STED_t`` is its mean
-    over vertices and frame pairs (0 for a single frame).
-
-    ``STED = sqrt(STED_s^2 + c^2 * STED_t^2)``.
-
-    Defaults (``ring=1``, ``dt=0.01`` -- about the per-frame motion of typical captures, as a fraction
-    of the bounding-box diagonal -- and ``c=1``) are our choices; the thesis gives no values.
-    Edges of zero reference length carry zero weight; vertices without a non-degenerate edge in
-    their neighbourhood are skipped.
-
-    Parameters
-    ----------
-    frames, frames_ref : (T, n, 3) array_like or MeshAnimation
-        Result and reference animations.
-    F : (m, 3) array_like of int
-        Shared faces.
-    ring : int
-        Topological radius of the spatial neighbourhood (>= 1).
-    dt : float
-        Temporal spacing between frames in bbox-diagonal units (> 0).
-    c : float
-        Weight of the temporal part (>= 0).
+    Spatial: the mean over frames and vertices of the length-weighted standard deviation of the
+    relative edge differences within the ``ring``-ring. Temporal: the mean relative difference of the
+    edges ``sqrt(|v(t+1) - v(t)|^2 + dt^2)``, in units of the reference's bounding-box diagonal.
+    ``ring``, ``dt`` and ``c`` are this package's choices (the thesis gives none).
+    Returns a :class:`StedResult`.
     """
     check_positive(ring, "ring", integer=True)
     check_positive(dt, "dt")
@@ -174,20 +120,19 @@ def sted_components(
 
 
 def sted(frames, frames_ref, F, *, ring: int = 1, dt: float = 0.01, c: float = 1.0) -> float:
-    """STED (Vasa & Skala 2011) of a result animation against a reference; see
-    :func:`sted_components` for the exact formulas and defaults."""
+    """STED of :func:`sted_components`."""
     return sted_components(frames, frames_ref, F, ring=ring, dt=dt, c=c).sted
 
 
 def theta_per_frame(frames, frames_ref, F) -> np.ndarray:
-    """Mean face-normal angle (degrees) of every frame, shape (T,) (see :func:`theta_deg`)."""
+    """Mean face-normal angle (degrees) of every frame, (T,)."""
     A, B = _frame_pair(frames, frames_ref)
     F = as_faces(F, B.shape[1], "F")
     return np.array([theta_deg(A[t], B[t], F) for t in range(A.shape[0])])
 
 
 def hausdorff_per_frame(frames, frames_ref, F, *, symmetric: bool = False) -> list[HausdorffResult]:
-    """:func:`hausdorff` of every frame against the same reference frame (shared faces ``F``)."""
+    """:func:`hausdorff` of every frame against its reference frame."""
     A, B = _frame_pair(frames, frames_ref)
     F = as_faces(F, B.shape[1], "F")
     return [
@@ -207,28 +152,11 @@ def compare_animation(
     dt: float = 0.01,
     c: float = 1.0,
 ) -> dict:
-    """Per-frame static metrics aggregated over the animation, plus KG error and STED.
+    """:func:`compare` over the frames (mean; max for ``dmax``, ``hd_max``), KG error and STED.
 
-    Parameters
-    ----------
-    frames, frames_ref : (T, n, 3) array_like or MeshAnimation
-        Result and reference animations.
-    F : (m, 3) array_like of int, optional
-        Shared faces (taken from ``frames_ref`` / ``frames`` when they are MeshAnimation).
-    faces_result : (m, 3) array_like of int, optional
-        Faces of the result when known separately; must equal ``F``.
-    hausdorff_distance : bool
-        Compute the per-frame Hausdorff distances.
-    ring, dt, c :
-        STED parameters (:func:`sted_components`).
-
-    Returns
-    -------
-    dict
-        The keys of :func:`compare` aggregated over frames -- the mean over frames, except ``dmax``
-        and ``hd_max`` which are the maximum over frames -- plus ``theta_deg_per_frame``,
-        ``hd_mean_per_frame``, ``nmsve_per_frame`` (lists of T floats), ``kg`` (percent), ``sted``,
-        ``sted_spatial``, ``sted_temporal`` and ``n_frames``.
+    ``F`` defaults to the animations' faces; ``ring``, ``dt``, ``c`` as in :func:`sted_components`.
+    Adds ``theta_deg_per_frame``, ``hd_mean_per_frame``, ``nmsve_per_frame``, ``kg``, ``sted``,
+    ``sted_spatial``, ``sted_temporal`` and ``n_frames``.
     """
     F_ref = getattr(frames_ref, "faces", None)
     F_res = getattr(frames, "faces", None)

@@ -23,17 +23,7 @@ def _matrix(R, name: str) -> np.ndarray:
 
 
 def rotation_error_deg(R, R_gt) -> float:
-    """Rotation error in degrees (Eq. 4.34): ``arccos((trace(R R_gt^-1) - 1) / 2) * 180 / pi``.
-
-    Parameters
-    ----------
-    R, R_gt : (3, 3) or (4, 4) array_like
-        Estimated and ground-truth rotations (the upper-left 3x3 block of a 4x4 transform is used).
-
-    Notes
-    -----
-    The arccos argument is clipped to [-1, 1] so rounding never produces NaN. Range [0, 180].
-    """
+    """Rotation error (Eq. 4.34) in [0, 180] degrees of (3, 3) or (4, 4) ``R`` against ``R_gt``."""
     R = _matrix(R, "R")
     R_gt = _matrix(R_gt, "R_gt")
     if abs(np.linalg.det(R_gt)) < 1e-12:
@@ -44,10 +34,7 @@ def rotation_error_deg(R, R_gt) -> float:
 
 
 def translation_error(t, t_gt) -> float:
-    """Translation error (Eq. 4.35): ``||t - t_gt||`` (model units).
-
-    ``t`` and ``t_gt`` are 3-vectors, or (4, 4) transforms whose last column is used.
-    """
+    """Translation error (Eq. 4.35) ``||t - t_gt||`` of 3-vectors or (4, 4) transforms."""
     vals = []
     for x, name in ((t, "t"), (t_gt, "t_gt")):
         a = np.asarray(x, dtype=np.float64)
@@ -71,11 +58,7 @@ def bits_per_vertex(
     *,
     n_bytes: float | None = None,
 ) -> float:
-    """Bit rate in bits per vertex per frame (bpv for a static mesh, bpvf for an animation).
-
-    ``bpvf = n_bits / (n_vertices * n_frames)`` with ``n_bits = 8 * n_bytes`` when the size is given
-    in bytes. Exactly one of ``n_bits`` and ``n_bytes`` must be given.
-    """
+    """``n_bits / (n_vertices n_frames)`` (bpv, bpvf); exactly one of ``n_bits`` and ``n_bytes``."""
     if (n_bits is None) == (n_bytes is None):
         raise InvalidInputError("give exactly one of `n_bits` and `n_bytes`.")
     if n_vertices is None:

@@ -1,16 +1,6 @@
-"""Quality metrics between a result mesh and a reference with the same vertex order (Section 4.9).
+"""Metrics between a result and a reference with the same vertex order (Section 4.9), model units.
 
-All distances are in model units: nothing is normalised by the bounding box, except NMSVE whose
-normalisation is stated in :func:`nmsve`. The result and the reference must have the same number of
-vertices (vertex ``i`` of one corresponds to vertex ``i`` of the other) and, for the normal-based
-metrics, the same faces.
-
-Degenerate-geometry policy (follows :func:`spectrageo.geometry.face_normals`, whose degenerate
-faces get a zero normal): a face whose normal is zero in the result *or* in the reference has no
-defined angle; it is excluded from ``theta_deg`` and ``dmean_n`` (and reported as 0 by
-:func:`face_angle_errors`). Likewise vertices with a zero normal (isolated vertices, fully degenerate
-fans) are excluded from ``dist_n``. If no face (vertex) is left, an InvalidInputError is raised, so no
-metric is ever NaN.
+Faces or vertices with a zero normal in either mesh are left out; none left raises InvalidInputError.
 """
 
 from __future__ import annotations
@@ -46,10 +36,7 @@ def _pair_faces(V, V_ref, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _angles_deg(N1: np.ndarray, N2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Angle in degrees between rows and a validity mask (both rows non-zero).
-
-    ``atan2(|a x b|, a . b)`` is accurate for small and for near-180-degree angles (unlike arccos).
-    """
+    """Angles (degrees) between rows, by ``atan2(|a x b|, a . b)``, and the mask of non-zero pairs."""
     valid = _valid_rows(N1) & _valid_rows(N2)
     cross = np.linalg.norm(np.cross(N1, N2), axis=1)
     dot = np.einsum("ij,ij->i", N1, N2)
@@ -69,32 +56,13 @@ def _valid_rows(N: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- normals
 def face_angle_errors(V, V_ref, F) -> np.ndarray:
-    """Angle in degrees between corresponding face normals, shape (m,) (per-face heatmap).
-
-    Faces that are degenerate (zero normal) in either mesh get 0.
-    """
+    """Angle (degrees) between corresponding face normals, (m,); 0 on degenerate faces."""
     V, V_ref, F = _pair_faces(V, V_ref, F)
     return _angles_deg(face_normals(V, F), face_normals(V_ref, F))[0]
 
 
 def theta_deg(V, V_ref, F) -> float:
-    """Mean angle (degrees) between corresponding face normals of result and reference (Section 4.9).
-
-    ``theta = mean_j angle(n_j, n_j_ref)`` over faces, with the unit face normals of Eq. (3.2).
-    Faces degenerate in either mesh are excluded (see the module docstring).
-
-    Parameters
-    ----------
-    V, V_ref : (n, 3) array_like
-        Result and reference vertices (same order).
-    F : (m, 3) array_like of int
-        Shared faces.
-
-    Raises
-    ------
-    InvalidInputError
-        Mismatched shapes, or every face degenerate.
-    """
+    """Mean angle (degrees) between the face normals (Eq. 3.2) of ``(V, F)`` and ``(V_ref, F)`` (Section 4.9)."""
     V, V_ref, F = _pair_faces(V, V_ref, F)
     return _theta(face_normals(V, F), face_normals(V_ref, F))
 
@@ -109,7 +77,7 @@ def _theta(N: np.ndarray, Nr: np.ndarray) -> float:
 
 
 def vertex_normal_errors(V, V_ref, F) -> np.ndarray:
-    """``||n_i - n_i_ref||`` between unit vertex normals (Eq. 3.3), shape (n,) (0 where undefined)."""
+    """``||n_i - n_i_ref||`` between unit vertex normals (Eq. 3.3), (n,); 0 where undefined."""
     V, V_ref, F = _pair_faces(V, V_ref, F)
     N, Nr = vertex_normals(V, F), vertex_normals(V_ref, F)
     valid = _valid_rows(N) & _valid_rows(Nr)
@@ -119,11 +87,7 @@ def vertex_normal_errors(V, V_ref, F) -> np.ndarray:
 
 
 def dist_n(V, V_ref, F) -> float:
-    """Mean distance ``||n_i - n_i_ref||`` between corresponding unit vertex normals (Section 4.9).
-
-    Vertex normals are the plain average of the incident unit face normals (Eq. 3.3); vertices whose
-    normal is zero in either mesh (isolated vertices) are excluded. Range [0, 2], unitless.
-    """
+    """Mean ``||n_i - n_i_ref||`` over vertices of the unit vertex normals (Eq. 3.3, Section 4.9), in [0, 2]."""
     V, V_ref, F = _pair_faces(V, V_ref, F)
     return _dist_n(vertex_normals(V, F), vertex_normals(V_ref, F))
 
@@ -138,10 +102,7 @@ def _dist_n(N: np.ndarray, Nr: np.ndarray) -> float:
 
 
 def dmean_n(V, V_ref, F) -> float:
-    """Mean distance ``||f_j - f_j_ref||`` between corresponding unit face normals (Section 4.9).
-
-    Faces degenerate in either mesh are excluded. Range [0, 2], unitless.
-    """
+    """Mean ``||f_j - f_j_ref||`` between unit face normals (Section 4.9), in [0, 2]."""
     V, V_ref, F = _pair_faces(V, V_ref, F)
     return _dmean_n(face_normals(V, F), face_normals(V_ref, F))
 
@@ -157,31 +118,23 @@ def _dmean_n(N: np.ndarray, Nr: np.ndarray) -> float:
 
 # --------------------------------------------------------------------------- positions
 def vertex_errors(V, V_ref) -> np.ndarray:
-    """``|v_i - v_i_ref|`` per vertex, shape (n,) (the heatmap of Section 4.9), model units."""
+    """``|v_i - v_i_ref|`` per vertex (n,), the heatmap of Section 4.9."""
     V, V_ref = _pair(V, V_ref)
     return np.linalg.norm(V - V_ref, axis=1)
 
 
 def dmean(V, V_ref) -> float:
-    """Dmean d: mean Euclidean distance between corresponding vertices (Section 4.9), model units.
-
-    Not normalised by the bounding box.
-    """
+    """Dmean d: mean distance between corresponding vertices (Section 4.9)."""
     return float(vertex_errors(V, V_ref).mean())
 
 
 def dmax(V, V_ref) -> float:
-    """Dmax d: largest Euclidean distance between corresponding vertices (Section 4.9), model units."""
+    """Dmax d: largest distance between corresponding vertices (Section 4.9)."""
     return float(vertex_errors(V, V_ref).max())
 
 
 def _gl(V: np.ndarray, E: np.ndarray) -> np.ndarray:
-    """Geometric Laplacian of Eq. (4.33): ``v_i - sum_j d_ij^-1 v_j / sum_j d_ij^-1`` over 1-ring.
-
-    ``d_ij`` are the edge lengths of the mesh ``V`` itself; zero-length edges are given the weight
-    of the largest finite weight of the mesh (so coincident neighbours count fully, no inf/NaN).
-    Isolated vertices have ``GL(v) = 0``.
-    """
+    """Geometric Laplacian of Eq. (4.33) with inverse edge lengths (zero-length edges: the largest weight)."""
     n = V.shape[0]
     d = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
     w = np.zeros_like(d)
@@ -202,19 +155,10 @@ def _gl(V: np.ndarray, E: np.ndarray) -> np.ndarray:
 
 
 def nmsve(V, V_ref, F, *, normalize: str = "bbox") -> float:
-    """Normalized mean square visual error (Eq. 4.32-4.33; Karni & Gotsman's visual error).
+    """Normalised mean square visual error (Eqs. 4.32-4.33, Karni and Gotsman).
 
-    ``NMSVE = 1/(2n) * sum_i ( ||v_i - v~_i||^2 + ||GL(v_i) - GL(v~_i)||^2 ) / s^2``
-
-    with ``GL`` the geometric Laplacian of Eq. (4.33) (inverse-edge-length weighted average of the
-    1-ring, computed on each mesh with its own edge lengths), ``n`` the number of vertices and ``s``
-    the length of the reference's bounding-box diagonal (``normalize="bbox"``, default) or 1
-    (``normalize="none"``, model units squared).
-
-    The extracted thesis text of Eq. (4.32) shows plain norms and no normalisation; we read the
-    metric's name (*normalized mean square*) and the magnitudes of Table 5.5 (1e-5 for models of very
-    different sizes, which requires squares and a scale normalisation) as squared norms divided by
-    the squared bounding-box diagonal. Unitless with the default.
+    ``1/(2n) sum_i (||v_i - v~_i||^2 + ||GL(v_i) - GL(v~_i)||^2) / s^2``, ``s`` the reference's
+    bounding-box diagonal (``normalize="bbox"``) or 1; see docs/decisions.md#metrics-nmsve.
     """
     check_choice(normalize, "normalize", ("bbox", "none"))
     V, V_ref, F = _pair_faces(V, V_ref, F)
@@ -254,45 +198,20 @@ def compare(
     faces_result=None,
     hausdorff_distance: bool = True,
 ) -> dict[str, float]:
-    """All static metrics of Section 4.9 between a result and its reference, as a dict.
+    """All static metrics of Section 4.9 between a result and its reference (same vertex order).
 
     Parameters
     ----------
-    result : Mesh or (n, 3) array_like
-        The processed (e.g. denoised) mesh or its vertices.
-    reference : Mesh or (n, 3) array_like
-        The ground truth, same vertex order.
+    result, reference : Mesh or (n, 3) array_like
     F : (m, 3) array_like of int, optional
-        Shared faces; taken from ``reference`` (then ``result``) when they are meshes.
-    faces_result : (m, 3) array_like of int, optional
-        Faces of the result when they are known separately (e.g. read from a file): they must equal
-        ``F``, the metrics assume one shared connectivity.
+        Shared faces (default: those of ``reference``, then ``result``); ``faces_result`` must equal it.
     hausdorff_distance : bool
-        Compute ``hd_mean`` / ``hd_max`` (exact, the costliest part); False leaves them out.
+        Compute ``hd_mean`` and ``hd_max`` as :func:`compare_surfaces` does (the costliest part).
 
     Returns
     -------
     dict
-        ``theta_deg`` (degrees), ``dmean``, ``dmax`` (model units), ``dist_n``, ``dmean_n``
-        (unitless), ``nmsve`` (bbox-normalised, see :func:`nmsve`), ``hd_mean``, ``hd_max``
-        (symmetric, model units, exactly as in :func:`spectrageo.metrics.compare_surfaces`: each
-        surface is sampled at its referenced vertices, edge midpoints and face centroids and the
-        samples are measured exactly against the other surface; ``hd_max`` is the larger of the two
-        one-sided maxima, ``hd_mean`` the mean of the two one-sided area-weighted means). Python
-        floats.
-
-    Raises
-    ------
-    InvalidInputError
-        Different vertex counts, different faces, or no faces at all.
-
-    Notes
-    -----
-    Vertices used by no face are not part of either surface and do not enter ``hd_*``; the
-    per-vertex metrics (``dmean``, ``dmax``, ``nmsve``) are over all vertices, which correspond by
-    index. With corresponding vertices ``hd_max <= dmax`` (every surface point of one mesh is a
-    barycentric combination whose counterpart lies on the other). Both one-sided distances enter
-    ``hd_*``, so a mesh collapsed onto part of the reference surface is not scored as close.
+        The :data:`METRIC_KEYS` (``theta_deg`` in degrees).
     """
     V, F_res = _unpack(result, "result")
     V_ref, F_ref = _unpack(reference, "reference")

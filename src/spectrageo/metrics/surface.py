@@ -1,39 +1,8 @@
-"""Exact point-to-surface distances, Hausdorff distances, Chamfer distance and F-score.
+"""Exact point-to-surface distances, Hausdorff and Chamfer distances, F-score (model units).
 
-The distance from a point ``q`` to a triangle mesh is the distance to the closest point of the
-*surface* (any point of any triangle, not only the vertices). It is computed exactly with a
-bounding-volume hierarchy (BVH) over the reference triangles, in numba:
-
-* the tree splits triangles at the midpoint of the longest axis of their centroid bounds (leaves of
-  at most 4 triangles), each node storing the axis-aligned box of its triangles;
-* each query descends depth-first, nearer child first, testing leaf triangles with an exact
-  point-triangle kernel (Voronoi regions of vertices, edges and interior) and skipping a node only
-  when the distance to its box exceeds the best distance found so far. Since the box contains every
-  point of its triangles, no closer triangle can be skipped: the result is exact (up to rounding),
-  whatever the triangle sizes (a mix of tiny and huge triangles costs no correctness).
-
-Memory is O(m) for the tree plus O(q) for the answers (no per-query candidate lists), so it scales to
-meshes of millions of triangles; the 437,645-vertex dragon against itself takes a few seconds.
-
-Exact ties between triangles keep the smallest triangle index, so results are deterministic.
-Distances are in model units (no normalisation).
-
-Symmetric surface distances (:func:`compare_surfaces`, and ``hd_*`` of
-:func:`spectrageo.metrics.compare`) sample each side and measure the samples against the *other*
-side exactly:
-
-* a mesh is sampled by :func:`surface_samples`: its referenced vertices, the midpoint of every
-  edge and the centroid of every face (deterministic; no random sampling). These are the nodes of
-  the 7-point triangle quadrature rule exact for cubic polynomials (corner weight 3/60, edge
-  midpoint 8/60, centroid 27/60 of the face area), so a weighted mean over them is the mean over the
-  *surface* (area-weighted), and any surface point is within a third of its face's longest edge of
-  a sample. Vertices used by no face are not part of the surface and are ignored on both sides.
-* a point cloud is its points, each with the same weight.
-* distances to a mesh are exact point-to-surface (the BVH above); to a point cloud, point-to-point
-  (nearest neighbour, :class:`scipy.spatial.cKDTree`).
-
-Queries run in chunks of at most ``2**18`` sample points, so memory beyond the two inputs is O(q)
-floats for the distances.
+A bounding-volume hierarchy (numba) finds the exact closest surface point; ties keep the smallest
+triangle index. A mesh is sampled at its referenced vertices, edge midpoints and face centroids
+with the weights of the 7-point degree-3 triangle quadrature rule (:func:`surface_samples`).
 """
 
 from __future__ import annotations
@@ -73,17 +42,7 @@ SURFACE_KEYS = (
 
 @dataclass(frozen=True, eq=False)
 class SurfaceDistance:
-    """Closest-point query result.
-
-    Attributes
-    ----------
-    distances : (q,) float64
-        Euclidean distance from each query point to the surface.
-    face_index : (q,) int64
-        Index of a closest triangle (the smallest index among exact ties).
-    closest_points : (q, 3) float64 or None
-        The closest surface points (only when requested).
-    """
+    """``distances`` (q,), ``face_index`` (q,) and ``closest_points`` (q, 3) or None."""
 
     distances: np.ndarray
     face_index: np.ndarray
@@ -91,7 +50,7 @@ class SurfaceDistance:
 
 
 class _TriangleIndex:
-    """Reusable search structure over the triangles of one mesh (a BVH, see the module docstring)."""
+    """BVH over the triangles of one mesh (module notes)."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray) -> None:
         self.V = V
@@ -130,26 +89,10 @@ def point_to_surface(
     *,
     return_closest: bool = False,
 ) -> SurfaceDistance:
-    """Exact distance from each point of ``P`` to the triangle surface ``(V_ref, F_ref)``.
+    """Exact distance from each point of ``P`` (q, 3) to the triangle surface ``(V_ref, F_ref)``.
 
-    Parameters
-    ----------
-    P : (q, 3) array_like
-        Query points (e.g. the vertices of a result mesh).
-    V_ref : (n, 3) array_like
-    F_ref : (m, 3) array_like of int
-        Reference triangle mesh. Degenerate triangles are treated as the union of their edges.
-    return_closest : bool
-        Also return the closest surface points.
-
-    Returns
-    -------
-    SurfaceDistance
-        ``distances`` (q,), ``face_index`` (q,), ``closest_points`` (q, 3) or None.
-
-    Notes
-    -----
-    Exact up to floating-point rounding (BVH search, see the module docstring); model units.
+    Degenerate triangles count as the union of their edges; ``return_closest`` adds the closest
+    points. Returns a :class:`SurfaceDistance`.
     """
     P = as_points(P, "P")
     V_ref = as_points(V_ref, "V_ref")
@@ -160,27 +103,13 @@ def point_to_surface(
 
 
 def surface_distance_per_vertex(V, V_ref, F_ref) -> np.ndarray:
-    """Per-vertex exact distance from ``V`` to the reference surface, shape (n,) (heatmaps).
-
-    The same values whose mean and max are ``hd_mean`` and ``hd_max`` of :func:`hausdorff`.
-    """
+    """Exact distance (n,) from each vertex of ``V`` to the reference surface."""
     return point_to_surface(V, V_ref, F_ref).distances
 
 
 @dataclass(frozen=True)
 class HausdorffResult:
-    """Hausdorff distances between a result mesh and a reference mesh (model units).
-
-    Attributes
-    ----------
-    hd_mean, hd_max : float
-        Mean and max over the result's vertices of the distance to the reference surface
-        (one-sided, result -> reference; ``hd_mean`` is the thesis's HD, Section 4.9).
-    hd_mean_reverse, hd_max_reverse : float or None
-        The same from the reference's vertices to the result's surface (None when not computed).
-    hd_symmetric : float or None
-        ``max(hd_max, hd_max_reverse)``, the symmetric (vertex-sampled) Hausdorff distance.
-    """
+    """:func:`hausdorff`: ``hd_mean`` (the thesis's HD), ``hd_max``, their reverse and ``hd_symmetric``."""
 
     hd_mean: float
     hd_max: float
@@ -199,33 +128,12 @@ class HausdorffResult:
 
 
 def hausdorff(V, F, V_ref, F_ref, *, symmetric: bool = True) -> HausdorffResult:
-    """Exact vertex-to-surface Hausdorff distances between ``(V, F)`` and ``(V_ref, F_ref)``.
+    """Vertex-to-surface Hausdorff distances between ``(V, F)`` and ``(V_ref, F_ref)`` (Section 4.9).
 
-    The distance from every vertex of the result to the closest point of the reference *surface*
-    (triangles), and, when ``symmetric`` and ``F`` is given, from every reference vertex to the result
-    surface. The two meshes need not share connectivity or vertex count. Vertices used by no face
-    are not part of a surface and are left out (of ``V`` only when ``F`` is given).
-
-    This is the vertex-sampled variant (the thesis's HD is ``hd_mean``). The ``hd_mean`` / ``hd_max``
-    of :func:`spectrageo.metrics.compare` and :func:`compare_surfaces` are symmetric and also sample
-    edge midpoints and face centroids (see the module docstring).
-
-    Parameters
-    ----------
-    V : (n, 3) array_like
-        Result vertices.
-    F : (m, 3) array_like of int or None
-        Result faces; None (e.g. a point cloud) computes the one-sided values only.
-    V_ref, F_ref : (n_ref, 3), (m_ref, 3)
-        Reference mesh.
-    symmetric : bool
-        Also compute the reverse one-sided values and the symmetric maximum.
-
-    Returns
-    -------
-    HausdorffResult
-        ``hd_mean`` (thesis HD, Section 4.9), ``hd_max``, reverse values and ``hd_symmetric``.
-        Model units (not normalised by the bounding box).
+    The meshes need not correspond; vertices used by no face are left out. ``F`` None (a point
+    cloud) or ``symmetric=False`` gives the one-sided values only. The ``hd_*`` keys of
+    :func:`compare` and :func:`compare_surfaces` also sample edge midpoints and centroids.
+    Returns a :class:`HausdorffResult`.
     """
     V = as_points(V, "V")
     V_ref = as_points(V_ref, "V_ref")
@@ -250,11 +158,7 @@ def _referenced(F: np.ndarray, n: int) -> np.ndarray:
 
 
 class _Side:
-    """One side of a comparison: a mesh (sampled, see :func:`surface_samples`) or a point cloud.
-
-    Holds the samples' weights (summing to 1; None for equal weights) and, lazily, the search
-    structure of the side when it is the target of the other side's samples.
-    """
+    """A mesh (sampled as in :func:`surface_samples`) or a point cloud, with its sample weights."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray | None, *, like: _Side | None = None) -> None:
         """``like``: a side with the same ``F`` whose vertex and edge lists are reused."""
@@ -292,7 +196,7 @@ class _Side:
         return float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
 
     def sample_chunks(self):
-        """Yield the sample points in order (vertices, edge midpoints, centroids), in chunks."""
+        """The sample points in order (vertices, edge midpoints, centroids), in chunks."""
         V = self.V
         if self.F is None:
             for s in range(0, V.shape[0], _CHUNK):
@@ -308,7 +212,7 @@ class _Side:
             yield (V[f[:, 0]] + V[f[:, 1]] + V[f[:, 2]]) / 3.0
 
     def distances_to(self, Q: np.ndarray) -> np.ndarray:
-        """Exact distance from the points ``Q`` to this side (surface or nearest point)."""
+        """Exact distance from the points ``Q`` to this side."""
         if self._index is None:
             if self.F is None:
                 from scipy.spatial import cKDTree
@@ -322,7 +226,7 @@ class _Side:
 
 
 def _one_sided(src: _Side, tgt: _Side) -> np.ndarray:
-    """Distance from every sample of ``src`` to ``tgt``, shape (src.n_samples,)."""
+    """Distance from every sample of ``src`` to ``tgt``."""
     d = np.empty(src.n_samples)
     pos = 0
     for Q in src.sample_chunks():
@@ -345,7 +249,7 @@ def _fraction_within(d: np.ndarray, w: np.ndarray | None, radius: float) -> floa
 
 
 def _symmetric(res: _Side, ref: _Side, radius: float | None = None) -> dict[str, Any]:
-    """The :data:`SURFACE_KEYS` statistics (F-score ones only when ``radius`` is given)."""
+    """The :data:`SURFACE_KEYS` statistics (the F-score ones only with ``radius``)."""
     d_fwd = _one_sided(res, ref)  # result samples -> reference
     d_bwd = _one_sided(ref, res)  # reference samples -> result
     m_fwd, m_bwd = _mean(d_fwd, res.weights), _mean(d_bwd, ref.weights)
@@ -374,7 +278,7 @@ def _symmetric(res: _Side, ref: _Side, radius: float | None = None) -> dict[str,
 
 
 def _as_side(obj: Any, name: str) -> _Side:
-    """A Mesh, a PointCloud, a ``(V, F)`` pair (``F`` None for a point cloud) or an (n, 3) array."""
+    """A Mesh, a PointCloud, a ``(V, F)`` pair (``F`` None: a cloud) or an (n, 3) array."""
     from ..geometry.data import Mesh, MeshAnimation, PointCloud, PointCloudSequence
 
     if isinstance(obj, MeshAnimation | PointCloudSequence):
@@ -406,46 +310,22 @@ def _as_side(obj: Any, name: str) -> _Side:
 def compare_surfaces(result, reference, *, radius: float | None = None) -> dict[str, Any]:
     """Symmetric distances between two surfaces or point clouds that need not correspond.
 
-    Works between meshes of any resolution and connectivity, point clouds, and a mesh and a point
-    cloud. Each side is sampled (a mesh: referenced vertices, edge midpoints and face centroids,
-    area-weighted; a cloud: its points, equally weighted; see the module docstring) and the samples
-    are measured against the other side: exactly to its surface when it is a mesh, to its nearest
-    point when it is a point cloud.
+    With ``d_res`` the distances of the result's samples to the reference, ``d_ref`` the reverse and
+    ``w`` the sample weights: ``hd_max = max(max d_res, max d_ref)``; ``hd_mean`` and ``chamfer``
+    (not squared) the mean of the two weighted means; ``precision`` / ``recall`` the weight within
+    ``radius`` and ``fscore = 2 P R / (P + R)`` (Knapitsch et al. 2017); the one-sided
+    ``hd_{mean,max}_to_{reference,result}`` and ``n_points_{result,reference}``.
 
     Parameters
     ----------
-    result, reference : Mesh, PointCloud, ``(V, F)`` or ``(P, None)`` tuple, or (n, 3) array_like
-        The two sides; a bare array is a point cloud.
+    result, reference : Mesh, PointCloud, ``(V, F)``, ``(P, None)`` or (n, 3) array_like
     radius : float, optional
-        F-score distance threshold in model units; default 1% of the diagonal of the reference's
-        bounding box (of its referenced vertices or its points).
+        F-score threshold; default 1 % of the reference's bounding-box diagonal.
 
     Returns
     -------
     dict
-        With ``d_res`` the distances of the result's samples to the reference, ``d_ref`` those of the
-        reference's samples to the result, ``w`` the sample weights (summing to 1 per side) and
-        ``mean_w`` the weighted mean (model units unless stated):
-
-        * ``hd_max = max(max d_res, max d_ref)``: symmetric Hausdorff distance (over the samples).
-        * ``hd_mean = (mean_w d_res + mean_w d_ref) / 2``: mean of the two one-sided means.
-        * ``chamfer``: mean of the two mean nearest-neighbour (point-to-surface for meshes)
-          distances, *not squared*; by these definitions it equals ``hd_mean``.
-        * ``precision = sum of w over d_res <= radius``, ``recall`` the same for ``d_ref``,
-          ``fscore = 2 P R / (P + R)`` (0 when both are 0), all in [0, 1] (Knapitsch et al. 2017,
-          *Tanks and Temples*, with ``<=`` and area weights for meshes); ``fscore_radius``.
-        * ``hd_mean_to_reference``, ``hd_max_to_reference`` (from ``d_res``),
-          ``hd_mean_to_result``, ``hd_max_to_result`` (from ``d_ref``): the one-sided values.
-        * ``n_points_result``, ``n_points_reference``: samples compared per side (int).
-
-        Swapping ``result`` and ``reference`` leaves ``hd_*``, ``chamfer`` and (for a fixed
-        ``radius``) ``fscore`` unchanged and swaps precision and recall.
-
-    Raises
-    ------
-    InvalidInputError
-        Bad shapes, NaN, a mesh without faces, an animation or sequence, a non-positive radius, or
-        no radius given for a reference of zero extent.
+        The :data:`SURFACE_KEYS`.
     """
     res = _as_side(result, "result")
     ref = _as_side(reference, "reference")
@@ -463,24 +343,10 @@ def compare_surfaces(result, reference, *, radius: float | None = None) -> dict[
 
 
 def surface_samples(V, F) -> tuple[np.ndarray, np.ndarray]:
-    """The sample points of a mesh surface used by :func:`compare_surfaces`, and their weights.
+    """Sample points (q, 3) of a mesh surface and their weights (q,) summing to 1 (:func:`compare_surfaces`).
 
-    Parameters
-    ----------
-    V : (n, 3) array_like
-    F : (m, 3) array_like of int
-
-    Returns
-    -------
-    points : (q, 3) float64
-        The referenced vertices (ascending index), then the midpoints of the unique edges (sorted
-        by ``(i, j)``, ``i <= j``), then the face centroids (face order);
-        ``q = n_referenced + n_edges + m``.
-    weights : (q,) float64
-        Area weights of the 7-point degree-3 quadrature rule (corner 3/60, edge midpoint 8/60,
-        centroid 27/60 of each face's area, summed over the faces sharing a sample), divided by the
-        total area, so they sum to 1 and ``points``-weighted means are surface means. Equal weights
-        when every face has zero area.
+    Referenced vertices, sorted unique edges' midpoints, face centroids; weights 3/60, 8/60 and 27/60
+    of each face's area.
     """
     V = as_points(V, "V")
     side = _Side(V, as_faces(F, V.shape[0], "F"))

@@ -1,17 +1,7 @@
 """Synthetic noise and corruption with ground truth (Sections 3.4, 4.10).
 
-Design: the individual generators return a result object carrying the ground truth --
-:class:`NoiseResult` (``vertices``, ``displacement``, ``mask``, ``scale``, ``labels``) for noise,
-:class:`CorruptionResult` (kept ``vertices``/``faces``, ``removed`` mask, ``index_map``, ``kept``) for
-missing data -- while :func:`add_outliers` returns ``(P_out, labels)``. The dispatchers :func:`apply`
-and :func:`animation_noise` return plain arrays of noisy positions (``return_result=True`` gives the
-NoiseResult). Every random choice takes ``rng`` (seed or Generator; None = seed 0); inputs are never
-modified.
-
-Levels are relative to the mean edge length (Eq. 4.36): ``sigma = level * l``.
-
-:func:`generate` is the corruption generator of the denoising generality protocol (five kinds,
-:data:`GENERATOR_KINDS`, at the levels :data:`GENERATOR_LEVELS`).
+Levels are relative to the mean edge length ``l`` (Eq. 4.36): ``sigma = level * l``. Every random
+choice takes ``rng`` (seed or Generator; None is seed 0); inputs are never modified.
 """
 
 from ._core import NoiseResult

@@ -17,23 +17,10 @@ DIRECTIONS = ("normal", "random")
 class NoiseResult:
     """Noisy geometry with its ground truth.
 
-    Attributes
-    ----------
-    vertices : (n, 3) or (T, n, 3) float64
-        The noisy positions (``original + displacement``).
-    displacement : same shape as ``vertices``
-        The added noise vectors (exactly ``vertices - original``).
-    mask : (n,) or (T, n) bool
-        Vertices that were selected for noise (all True for dense noise; the random subset for
-        impulsive noise or a spatial mask). A selected vertex may still get a zero displacement
-        (e.g. an isolated vertex under normal-direction noise).
-    scale : (n,) or (T, n) float64
-        Absolute noise scale per vertex in model units: the standard deviation of the Gaussian,
-        of the uniform distribution (half-width / sqrt(3)), or the quantisation step.
-    labels : (n,) int64 or None
-        Region label per vertex for region-varying noise, else None.
-    kind : str
-        The noise kind that produced it.
+    ``vertices`` and ``displacement`` ((n, 3) or (T, n, 3)): the noisy positions and the exact added
+    vectors; ``mask``: the vertices selected for noise; ``scale``: the standard deviation (or
+    quantisation step) per vertex in model units; ``labels``: the region of every vertex for
+    region-varying noise, else None; ``kind``.
     """
 
     vertices: np.ndarray
@@ -68,8 +55,7 @@ def unique_edges(F: np.ndarray, n: int) -> np.ndarray:
 
 
 def mean_spacing(V: np.ndarray, F: np.ndarray | None) -> float:
-    """The length unit of noise levels: the mean edge length of a mesh (the ``l`` of Eq. 4.36), or
-    for a point cloud (``F`` None) the mean distance of a point to its nearest neighbour."""
+    """The ``l`` of Eq. (4.36): mean edge length, or mean nearest-neighbour distance for a cloud."""
     if F is not None:
         E = unique_edges(F, V.shape[0])
         if E.shape[0] == 0:
@@ -88,12 +74,7 @@ def mean_spacing(V: np.ndarray, F: np.ndarray | None) -> float:
 def prepare(
     V, F, normals, direction: str
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """Validate ``V``/``F`` and return the unit directions for ``direction="normal"``.
-
-    Mesh normals are the unit vertex normals of Eq. (3.3) (isolated vertices get a zero normal and
-    therefore no normal-direction noise). Point clouds (``F`` None) use ``normals`` when given, else
-    PCA normals (Eq. 6.31, 10 neighbours; their sign does not matter for symmetric noise).
-    """
+    """Validate ``V``/``F``; for ``direction="normal"`` also the unit normals (Eq. 3.3; a cloud: ``normals`` or PCA normals)."""
     check_choice(direction, "direction", DIRECTIONS)
     V = as_points(V, "V")
     if F is not None:
@@ -124,8 +105,7 @@ def prepare(
 def directions(
     n: int, N: np.ndarray | None, rng: np.random.Generator, coeff: np.ndarray
 ) -> np.ndarray:
-    """Displacements from per-vertex scalar draws: along ``N`` when given (``coeff`` (n,)), else
-    isotropic (``coeff`` (n, 3), one independent draw per coordinate)."""
+    """Displacements of per-vertex draws ``coeff``: (n,) along ``N``, else (n, 3) isotropic."""
     if N is not None:
         return coeff[:, None] * N
     return coeff

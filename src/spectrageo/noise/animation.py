@@ -22,20 +22,11 @@ def spatial_mask(
     distribution: str = "gaussian",
     direction: str = "normal",
 ) -> NoiseResult:
-    """Spatially masked noise: the SAME vertices get the SAME noise pattern in every frame.
+    """Noise on the same ``round(fraction * n)`` vertices, with the same pattern, in every frame.
 
-    A mask of ``round(fraction * n)`` vertices is drawn once -- a uniformly random subset
-    (``region="random"``) or the vertices nearest (in frame 0) to a random seed vertex, i.e. one
-    contiguous patch (``region="patch"``). One scalar coefficient ``c_i`` (or one 3-vector for
-    ``direction="random"``) is drawn per masked vertex from ``distribution`` with standard deviation
-    ``sigma = level * l``, ``l`` the mean edge length averaged over the frames (Eq. 4.36). In frame t
-    vertex i moves by ``c_i * n_i(t)`` (its normal in that frame, so the pattern follows the
-    surface) or by the fixed vector for ``direction="random"``.
-
-    Returns
-    -------
-    NoiseResult
-        ``vertices``/``displacement`` (T, n, 3), ``mask`` (n,), ``scale`` (n,).
+    The mask is random (``region="random"``) or a patch around a random seed (``"patch"``); each
+    masked vertex moves by one draw of ``distribution`` (deviation ``level * l``) times its normal in
+    each frame, or by one fixed vector (``direction="random"``).
     """
     A = as_frames(frames)
     T, n, _ = A.shape
@@ -89,17 +80,11 @@ def animation_noise(
     direction: str = "normal",
     return_result: bool = False,
 ):
-    """Noise on every frame of an animation; returns the noisy frames (T, n, 3) (or a NoiseResult).
+    """Noise on every frame of an animation; returns the noisy frames (T, n, 3).
 
-    * ``"gaussian"``, ``"uniform"``: independent per frame, scale from each frame's mean edge length;
-    * ``"impulsive"``: a NEW random subset of ``fraction`` (default 0.1) vertices in every frame;
-    * ``"spatial-mask"``: the same subset and pattern in every frame (:func:`spatial_mask`, default
-      ``fraction`` 0.2);
-    * ``"quantization"``: every frame rounded to a grid of step ``level * l``.
-
-    One generator drives all frames in order, so a seed reproduces the whole animation.
-    ``mask`` and ``scale`` of the NoiseResult are (T, n), except for "spatial-mask" where they are
-    (n,) (the same in every frame).
+    ``"gaussian"``, ``"uniform"``, ``"quantization"`` per frame; ``"impulsive"`` a new subset per
+    frame; ``"spatial-mask"`` as :func:`spatial_mask`. ``return_result=True`` returns the
+    :class:`NoiseResult`.
     """
     check_choice(kind, "kind", ANIMATION_KINDS)
     if fraction is not None and kind not in ("impulsive", "spatial-mask", "spatial_mask"):

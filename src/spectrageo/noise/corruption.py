@@ -14,8 +14,7 @@ from ._core import check_fraction, mean_spacing, unique_edges
 
 
 def _check_fraction(fraction) -> None:
-    """Outlier fractions are relative to the clean point count and may exceed 1 (unlike
-    :func:`._core.check_fraction`)."""
+    """Outlier fractions may exceed 1 (they are relative to the clean point count)."""
     if isinstance(fraction, bool) or not isinstance(
         fraction, int | float | np.integer | np.floating
     ):
@@ -35,41 +34,11 @@ def add_outliers(
     distance: tuple[float, float] = (1.0, 3.0),
     shuffle: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Append ``round(fraction * n)`` synthetic outliers to a point cloud.
+    """Append ``round(fraction * n)`` outliers to a point cloud; returns the points and the outlier labels.
 
-    Parameters
-    ----------
-    P : (n, 3) array_like
-        Clean points (the inliers).
-    fraction : float
-        Number of outliers relative to the number of inliers, >= 0 (so ``labels.sum() ==
-        round(fraction * n)``; values above 1 are allowed).
-    kind : {"far", "near"}
-        ``"far"``: uniform in the bounding box of ``P`` enlarged on every side by ``margin`` times its
-        diagonal. ``"near"``: near-surface outliers -- a random inlier (with replacement) displaced by
-        ``U(distance[0], distance[1])`` times the mean nearest-neighbour spacing, along a random unit
-        direction, or along ``+-normals`` of that inlier (random sign) when ``normals`` is given.
-    rng : int, Generator or None
-    normals : (n, 3) array_like, optional
-        Inlier normals for ``kind="near"``.
-    margin : float
-        Bounding-box enlargement for ``kind="far"`` (fraction of the diagonal, >= 0).
-    distance : (float, float)
-        Range of near-outlier offsets in units of the mean nearest-neighbour spacing.
-    shuffle : bool
-        False (default): the outliers are appended, so the first n rows are ``P`` in order and
-        ``labels[:n]`` is all False. True: all rows are permuted with ``rng``; ``labels`` follows.
-
-    Returns
-    -------
-    P_out : (n + k, 3) float64
-    labels : (n + k,) bool
-        True for outliers.
-
-    Notes
-    -----
-    A "far" outlier may by chance land close to the surface; the labels record how points were
-    generated, not their distance to the surface.
+    ``kind="far"``: uniform in the bounding box enlarged by ``margin`` diagonals; ``"near"``: a random
+    inlier moved by ``distance`` point spacings along a random direction (or its ``normals``).
+    Outliers follow ``P`` unless ``shuffle``.
     """
     P = as_points(P, "P")
     check_choice(kind, "kind", ("far", "near"))
@@ -117,22 +86,11 @@ def add_outliers(
 
 @dataclass(frozen=True, eq=False)
 class CorruptionResult:
-    """A mesh with missing vertices and the ground truth needed to evaluate a completion.
+    """A mesh with missing vertices and its ground truth.
 
-    Attributes
-    ----------
-    vertices : (n_kept, 3) float64
-        The kept vertices, in their original order.
-    faces : (m_kept, 3) int64 or None
-        The faces whose three vertices were kept, re-indexed into ``vertices``.
-    removed : (n,) bool
-        True for removed vertices (original indexing).
-    index_map : (n,) int64
-        New index of every original vertex, -1 where removed (``vertices[index_map[i]] == V[i]``).
-    kept : (n_kept,) int64
-        Original index of every kept vertex (``vertices == V[kept]``).
-    labels : (n,) int64 or None
-        For holes: the hole number of every removed vertex, -1 for kept vertices.
+    ``vertices`` and ``faces``: the kept vertices in order and the faces among them, re-indexed;
+    ``removed`` (n,) bool; ``index_map`` (n,): new index of every vertex, -1 where removed; ``kept``:
+    original indices of the kept vertices; ``labels``: the hole of every removed vertex, -1 elsewhere.
     """
 
     vertices: np.ndarray
@@ -155,11 +113,7 @@ def _apply_removal(V, F, removed, labels=None) -> CorruptionResult:
 
 
 def remove_vertices(V, F=None, *, fraction: float, rng=None) -> CorruptionResult:
-    """Remove a uniformly random subset of ``round(fraction * n)`` vertices (without replacement).
-
-    Faces that touch a removed vertex are dropped; the other faces are re-indexed. Works on point
-    clouds too (``F`` None). See :class:`CorruptionResult` for the ground truth returned.
-    """
+    """Remove ``round(fraction * n)`` random vertices and the faces touching them."""
     V = as_points(V, "V")
     if F is not None:
         F = as_faces(F, V.shape[0], "F")
@@ -172,23 +126,7 @@ def remove_vertices(V, F=None, *, fraction: float, rng=None) -> CorruptionResult
 
 
 def make_holes(V, F, *, n_holes: int = 1, size: float = 0.05, rng=None) -> CorruptionResult:
-    """Cut ``n_holes`` holes, each removing ``round(size * n)`` vertices around a random seed.
-
-    Each hole is grown from a random (not yet removed) seed vertex and takes the vertices nearest to
-    it in graph-geodesic distance (Dijkstra on the edge graph weighted by edge lengths), so it is
-    one connected patch on the surface; holes may touch or merge. ``labels`` gives the hole of every
-    removed vertex (-1 for kept ones).
-
-    Parameters
-    ----------
-    V : (n, 3) array_like
-    F : (m, 3) array_like of int
-    n_holes : int
-        Number of holes, >= 1.
-    size : float
-        Fraction of the vertices removed per hole, in (0, 1]; ``n_holes * size`` must not exceed 1.
-    rng : int, Generator or None
-    """
+    """Cut ``n_holes`` holes of ``round(size * n)`` vertices, each the graph-geodesic nearest to a random seed."""
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     check_positive(n_holes, "n_holes", integer=True)
@@ -237,60 +175,15 @@ def corrupt_outliers(
     margin: float = 0.1,
     shuffle: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Append ``round(fraction * n)`` labelled outliers of a given spatial pattern to a cloud.
+    """Append ``round(fraction * n)`` labelled outliers of one :data:`OUTLIER_PATTERNS` ``pattern``.
 
-    Distances are in units of the point spacing ``s`` (the mean nearest-neighbour distance of
-    ``P``, as in :func:`add_outliers`); ``diag`` is the bounding-box diagonal of ``P``.
-
-    Parameters
-    ----------
-    P : (n, 3) array_like
-        Clean points (the inliers), ``n >= 11`` for the patterns that use neighbourhoods.
-    pattern : str
-        One of :data:`OUTLIER_PATTERNS`.
-    fraction : float
-        Outliers relative to the number of inliers, >= 0 (``labels.sum() == round(fraction * n)``).
-    rng : int, Generator or None
-    viewpoint : (3,) array_like, optional
-        Sensor position for ``"flying"`` and ``"lidar"``. Default: ``centroid + 2 diag u`` with
-        ``u`` the smallest principal axis of ``P`` (sign fixed: largest-magnitude entry positive),
-        i.e. a sensor looking at the cloud across its thinnest extent.
-    margin : float
-        Bounding-box enlargement (fraction of ``diag``) of ``"uniform"``, ``"blobs"``, ``"mixed"``.
-    shuffle : bool
-        True (default): all rows permuted with ``rng``; False: outliers appended after ``P``.
-
-    Returns
-    -------
-    P_out : (n + m, 3) float64
-    labels : (n + m,) bool
-        True for the injected outliers.
-
-    Notes
-    -----
-    Patterns:
-
-    ``"uniform"``
-        Uniform in the bounding box of ``P`` enlarged on every side by ``margin * diag``.
-    ``"halo"``
-        A random inlier (with replacement) displaced by ``U(2, 20) s`` along a uniformly random
-        unit direction (so within 2-20 spacings of its inlier, possibly nearer the surface).
-    ``"blobs"``
-        Clustered outliers: clusters of 10-50 points (the last one smaller), each an isotropic
-        Gaussian of standard deviation ``U(2, 5) s`` around a centre uniform in the enlarged
-        bounding box.
-    ``"flying"``
-        Flying pixels of range sensors: a random inlier, drawn with probability proportional to
-        its local depth range (the spread of the depths of its 10 nearest neighbours seen from
-        ``viewpoint``, plus a floor of ``s``), so depth edges give most of them, moved along its
-        sensor ray (the line from ``viewpoint``) by ``+-U(2, 30) s`` (random sign).
-    ``"lidar"``
-        Structured LiDAR artefacts, half each: *multipath* returns -- a random inlier moved
-        *behind* its surface along its sensor ray by ``U(5, 50) s``; *vegetation-like scatter* --
-        a random inlier moved ``U(2, 10) s`` along a random direction in the hemisphere of its
-        PCA normal that faces ``viewpoint``.
-    ``"mixed"``
-        Half ``"uniform"``, half a halo at ``U(5, 15) s`` (the case of the outlier issue).
+    With ``s`` the mean point spacing: ``"uniform"`` in the bounding box enlarged by ``margin``
+    diagonals; ``"halo"`` an inlier moved ``U(2, 20) s``; ``"blobs"`` Gaussian clusters of 10-50
+    points of deviation ``U(2, 5) s``; ``"flying"`` inliers near depth edges moved ``+-U(2, 30) s``
+    along the ray from ``viewpoint``; ``"lidar"`` half multipath (``U(5, 50) s`` behind), half
+    scatter towards the sensor; ``"mixed"`` half uniform, half a ``U(5, 15) s`` halo. ``viewpoint``
+    defaults to two diagonals along the thinnest principal axis. Returns ``(P_out, labels)``,
+    shuffled unless ``shuffle=False``.
     """
     P = as_points(P, "P")
     check_choice(pattern, "pattern", OUTLIER_PATTERNS)

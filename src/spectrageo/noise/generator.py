@@ -1,29 +1,9 @@
-"""The corruption generator of the denoising generality protocol (``spectrageo evaluate denoise
---split``): five noise kinds at a relative level, deterministic for a seed.
+"""The corruption generator of the denoising generality protocol: five kinds at a relative level.
 
-Every kind is scaled by the mean edge length ``l`` of the clean mesh (Eq. 4.36) and reaches the
-requested ``level`` on the output in the sense stated per kind (the tests measure it):
-
-``gaussian-normal``
-    N(0, level * l) along the unit vertex normals (Eq. 3.3): the RMS of the displacement's
-    normal component is ``level * l``.
-``gaussian-random``
-    Isotropic N(0, level * l) per coordinate (so also ``level * l`` along any direction, normals
-    included).
-``impulsive``
-    10 % of the vertices, drawn without replacement, get N(0, level * l) along their normal; the
-    RMS over the hit vertices is ``level * l``, the others do not move.
-``region-varying``
-    Gaussian along the normals with a standard deviation that varies smoothly over the surface: a
-    linear ramp along a random direction from 1 to 7 (ratio :data:`REGION_RATIO`), rescaled so that
-    its RMS over the vertices is ``level * l`` (the level is the average power, the quiet end gets
-    about a quarter of it, the loud end about 1.6 times).
-``anisotropic``
-    Range-scanner-like noise: N(0, level * l) along one random axis of the object and
-    :data:`ANISOTROPIC_RATIO` times that across it (:func:`~spectrageo.noise.static.anisotropic`).
-
-The generator composes the individual functions of :mod:`spectrageo.noise.static`; it adds only
-the rescaling of the region-varying field and the fixed protocol parameters.
+Each kind reaches ``level * l`` (Eq. 4.36): ``gaussian-normal`` and ``impulsive`` along the normals
+(on :data:`IMPULSIVE_FRACTION` of the vertices), ``gaussian-random`` per coordinate,
+``region-varying`` as the RMS of a ramp of ratio :data:`REGION_RATIO`, ``anisotropic`` along a
+random axis (:data:`ANISOTROPIC_RATIO` across).
 """
 
 from __future__ import annotations
@@ -55,26 +35,7 @@ ANISOTROPIC_RATIO = 0.25
 
 
 def generate(V, F, *, kind: str, level: float, rng=None) -> NoiseResult:
-    """Corrupt a clean mesh with one protocol ``kind`` at relative ``level`` (see the module
-    docstring for what ``level`` means per kind).
-
-    Parameters
-    ----------
-    V : (n, 3) array_like
-        Clean vertices.
-    F : (m, 3) array_like of int
-        Faces (the mean edge length sets the scale).
-    kind : one of :data:`GENERATOR_KINDS`
-    level : float
-        Relative level ``sigma_E`` (Eq. 4.36), >= 0.
-    rng : int, Generator or None
-        Seed or generator (None = seed 0); the same seed gives the same output.
-
-    Returns
-    -------
-    NoiseResult
-        ``kind`` is the protocol kind; ``scale`` the per-vertex standard deviation in model units.
-    """
+    """Corrupt a clean mesh ``(V, F)`` with one :data:`GENERATOR_KINDS` ``kind`` at ``level``; the same seed gives the same output."""
     check_choice(kind, "kind", GENERATOR_KINDS)
     level = check_level(level)
     V = as_points(V, "V")

@@ -1,14 +1,8 @@
-"""Synthetic noise on meshes and point clouds, with ground truth (Sections 3.4, 4.10).
+"""Noise on meshes and point clouds with ground truth (Sections 3.4, 4.10).
 
-Every function returns a :class:`NoiseResult` (noisy ``vertices``, the exact ``displacement``, the
-``mask`` of selected vertices and the per-vertex absolute ``scale``); :func:`apply` is the
-convenience dispatcher that returns only the noisy positions.
-
-Noise level convention (Eq. 4.36): ``level`` is relative to the mean edge length ``l`` of the input
-mesh, so the absolute scale is ``sigma = level * l``; for point clouds (``F`` None) ``l`` is the mean
-distance of a point to its nearest neighbour. Normal-direction noise moves each vertex along its unit
-vertex normal (Eq. 3.3), as in the benchmark data of Zhang et al.; ``direction="random"`` draws an
-isotropic 3-D vector instead (Eq. 3.10 with independent coordinates).
+``sigma = level * l`` (Eq. 4.36), ``l`` the mean edge length (a cloud: the nearest-neighbour
+distance); ``direction="normal"`` moves along the unit vertex normal (Eq. 3.3),
+``"random"`` draws an isotropic vector (Eq. 3.10).
 """
 
 from __future__ import annotations
@@ -47,29 +41,10 @@ def _dense(kind, V, F, level, rng, direction, normals) -> NoiseResult:
 def gaussian(
     V, F=None, *, level: float, rng=None, direction: str = "normal", normals=None
 ) -> NoiseResult:
-    """Zero-mean Gaussian noise with standard deviation ``sigma = level * l`` (Eq. 4.36, 3.10).
+    """Zero-mean Gaussian noise of standard deviation ``level * l`` (Eqs. 3.10, 4.36).
 
-    Parameters
-    ----------
-    V : (n, 3) array_like
-        Clean vertices (or points).
-    F : (m, 3) array_like of int or None
-        Faces; None for a point cloud (then ``l`` is the mean nearest-neighbour distance and normals
-        are ``normals`` or PCA normals).
-    level : float
-        ``sigma_E`` of Eq. (4.36), >= 0.
-    rng : int, Generator or None
-        Seed or generator (None = seed 0).
-    direction : {"normal", "random"}
-        ``"normal"``: scalar N(0, sigma) along the unit vertex normal (the displacement's component
-        along the normal has standard deviation ``sigma``); ``"random"``: isotropic, each coordinate
-        N(0, sigma).
-    normals : (n, 3) array_like, optional
-        Directions to use instead of the computed normals (normalised here).
-
-    Returns
-    -------
-    NoiseResult
+    ``F`` None for a point cloud; ``direction`` "normal" (along the unit vertex normals, or the
+    given ``normals``) or "random" (isotropic). Returns a :class:`NoiseResult`.
     """
     return _dense("gaussian", V, F, level, rng, direction, normals)
 
@@ -77,11 +52,7 @@ def gaussian(
 def uniform(
     V, F=None, *, level: float, rng=None, direction: str = "normal", normals=None
 ) -> NoiseResult:
-    """Zero-mean uniform noise with the same standard deviation as :func:`gaussian`.
-
-    Draws from U(-a, a) with half-width ``a = sqrt(3) * level * l`` (standard deviation
-    ``level * l``), along the normals or, with ``direction="random"``, independently per coordinate.
-    """
+    """Zero-mean uniform noise on ``[-sqrt(3) level l, sqrt(3) level l]``; parameters as :func:`gaussian`."""
     return _dense("uniform", V, F, level, rng, direction, normals)
 
 
@@ -95,11 +66,7 @@ def impulsive(
     direction: str = "normal",
     normals=None,
 ) -> NoiseResult:
-    """Impulsive noise: a random subset of ``round(fraction * n)`` vertices (without replacement)
-    gets Gaussian noise of standard deviation ``level * l``; the others are unchanged.
-
-    ``mask`` marks the chosen vertices. Parameters as in :func:`gaussian`.
-    """
+    """Gaussian noise on ``round(fraction * n)`` random vertices (``mask``); parameters as :func:`gaussian`."""
     fraction = check_fraction(fraction)
     level = check_level(level)
     V, F, N = prepare(V, F, normals, direction)
@@ -141,17 +108,11 @@ def region_varying(
     direction: str = "normal",
     normals=None,
 ) -> NoiseResult:
-    """Noise whose level varies over the surface (complex noise patterns, Section 3.4 item 8).
+    """Noise whose level varies over the surface (Section 3.4, item 8).
 
-    ``mode="clusters"``: ``len(levels)`` regions are formed around seed vertices chosen by farthest
-    point sampling from a random start; every vertex joins its nearest seed (Euclidean), and region
-    ``r`` gets ``levels[r]``. ``labels`` holds the region of every vertex.
-
-    ``mode="smooth"``: ``levels`` must be ``(low, high)``; the level ramps linearly along a random
-    unit direction ``u``: ``level(v) = low + (high - low) * (u.v - min) / (max - min)``.
-
-    The absolute scale is ``level(v) * l`` (Eq. 4.36) and the noise is ``kind`` ("gaussian" or
-    "uniform", same standard deviation) along ``direction``.
+    ``mode="clusters"``: regions around farthest-point seeds, region ``r`` at ``levels[r]``
+    (``labels``); ``mode="smooth"``: ``levels=(low, high)`` ramped along a random direction.
+    ``kind`` is "gaussian" or "uniform".
     """
     check_choice(mode, "mode", ("clusters", "smooth"))
     check_choice(kind, "kind", ("gaussian", "uniform"))
@@ -201,35 +162,10 @@ def anisotropic(
     rng=None,
     normals=None,
 ) -> NoiseResult:
-    """Anisotropic Gaussian noise: standard deviation ``sigma = level * l`` (Eq. 4.36) along one
-    principal direction and ``ratio * sigma`` across it.
+    """Gaussian noise of deviation ``level * l`` along one direction and ``ratio`` times that across it.
 
-    ``frame="axis"``: the principal direction is one unit vector ``u`` for the whole object
-    (``axis``, else drawn at random from ``rng``), like the depth noise of a range scanner along its
-    viewing direction; the displacement covariance is ``sigma^2 (u u^T + ratio^2 (I - u u^T))``.
-    ``frame="normal"``: the principal direction is the unit vertex normal (Eq. 3.3) and the
-    tangential components get ``ratio * sigma`` (vertices without a normal are not moved).
-
-    Parameters
-    ----------
-    V : (n, 3) array_like
-    F : (m, 3) array_like of int or None
-        None for a point cloud (``l`` is then the mean nearest-neighbour distance).
-    level : float
-        ``sigma_E`` of Eq. (4.36) along the principal direction, >= 0.
-    ratio : float
-        Standard deviation across the principal direction relative to ``sigma``, >= 0.
-    frame : {"axis", "normal"}
-    axis : (3,) array_like, optional
-        The principal direction for ``frame="axis"`` (normalised here).
-    rng : int, Generator or None
-    normals : (n, 3) array_like, optional
-        Directions to use instead of the computed normals for ``frame="normal"``.
-
-    Returns
-    -------
-    NoiseResult
-        ``scale`` is ``sigma`` (the principal standard deviation) for every vertex.
+    ``frame="axis"``: one direction ``axis`` (default random) for the whole object, like a range
+    scanner's depth noise; ``frame="normal"``: along each unit vertex normal.
     """
     level = check_level(level)
     ratio = check_level(ratio, "ratio")
@@ -265,11 +201,7 @@ def anisotropic(
 
 
 def quantize(V, F=None, *, level: float) -> NoiseResult:
-    """Quantisation noise: coordinates rounded to a grid of step ``q = level * l`` anchored at the
-    origin (``q * round(v / q)``), e.g. to mimic a coarse coordinate encoding. Deterministic.
-
-    ``level = 0`` leaves the vertices unchanged. ``scale`` is ``q`` for every vertex.
-    """
+    """Coordinates rounded to the grid of step ``level * l`` (deterministic; ``scale`` is the step)."""
     level = check_level(level)
     V, F, _ = prepare(V, F, None, "random")
     q = level * mean_spacing(V, F)
@@ -295,24 +227,10 @@ def apply(
     normals=None,
     return_result: bool = False,
 ):
-    """Add noise of one ``kind`` and return the noisy vertices (n, 3) (or the full NoiseResult).
+    """Noise of one ``kind`` (gaussian, uniform, impulsive, quantization); returns the noisy (n, 3) vertices.
 
-    Parameters
-    ----------
-    V : (n, 3) array_like
-    F : (m, 3) array_like of int or None
-        None for a point cloud.
-    kind : {"gaussian", "uniform", "impulsive", "quantization" ("quantisation")}
-    level : float
-        Relative level (Eq. 4.36): standard deviation (gaussian, uniform, impulsive) or grid step
-        (quantization) divided by the mean edge length.
-    rng : int, Generator or None
-    fraction : float, optional
-        Fraction of vertices hit by impulsive noise (default 0.1); only for ``kind="impulsive"``.
-    direction : {"normal", "random"}
-    normals : (n, 3) array_like, optional
-    return_result : bool
-        Return the :class:`NoiseResult` (with the ground-truth displacement) instead of the array.
+    ``fraction`` (default 0.1) is for ``"impulsive"`` only; ``return_result=True`` returns the
+    :class:`NoiseResult` instead.
     """
     check_choice(kind, "kind", KINDS)
     if fraction is not None and kind != "impulsive":
