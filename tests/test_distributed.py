@@ -197,8 +197,9 @@ def test_tiled_equals_untiled_knn_methods(tmp_path, method):
     np.save(tmp_path / "c.npy", X)
     ref = outliers.remove_outliers(X, method=method, k=10)
     r = distributed.remove_outliers_tiled(
-        tmp_path / "c.npy", tmp_path / "o.npy", tile=800, method=method, chunk=1000,
-        return_arrays=True, processes=False, workers=2,
+        tmp_path / "c.npy", tmp_path / "o.npy",
+        distributed.TileOptions(800, chunk=1000, processes=False, workers=2),
+        method=method, return_arrays=True,
     )  # fmt: skip
     assert r.n_tiles == 8
     np.testing.assert_array_equal(r.keep, ref.keep)
@@ -211,8 +212,8 @@ def test_tiled_rpca_one_tile_equals_untiled(tmp_path):
     np.save(tmp_path / "c.npy", X)
     ref = outliers.remove_outliers(X, k=10)
     r = distributed.remove_outliers_tiled(
-        tmp_path / "c.npy", tmp_path / "o.npy", tile=10_000, chunk=700, return_arrays=True,
-        processes=False, workers=1,
+        tmp_path / "c.npy", tmp_path / "o.npy",
+        distributed.TileOptions(10_000, chunk=700, processes=False, workers=1), return_arrays=True,
     )  # fmt: skip
     assert r.n_tiles == 1
     np.testing.assert_array_equal(r.keep, ref.keep)
@@ -225,10 +226,12 @@ def test_tiled_rpca_many_tiles_equal_untiled(tmp_path, tile):
     # is cut down to block_size, so both runs score the same regions bit for bit
     X = _cloud()
     np.save(tmp_path / "c.npy", X)
-    ref = outliers.remove_outliers(X, k=10, block_size=1500)
+    opts = outliers.RPCAOptions(block_size=1500)
+    ref = outliers.remove_outliers(X, k=10, options=opts)
     r = distributed.remove_outliers_tiled(
-        tmp_path / "c.npy", tmp_path / "o.npy", tile=tile, chunk=900, return_arrays=True,
-        processes=False, workers=2, block_size=1500,
+        tmp_path / "c.npy", tmp_path / "o.npy",
+        distributed.TileOptions(tile, chunk=900, processes=False, workers=2),
+        options=opts, return_arrays=True,
     )  # fmt: skip
     assert r.n_tiles == 8
     np.testing.assert_array_equal(r.scores, ref.scores)
@@ -244,8 +247,8 @@ def test_tiled_rpca_smaller_tiles_close_to_untiled(tmp_path):
     np.save(tmp_path / "c.npy", X)
     ref = outliers.remove_outliers(X, k=10)
     r = distributed.remove_outliers_tiled(
-        tmp_path / "c.npy", tmp_path / "o.npy", tile=1500, return_arrays=True,
-        processes=False, workers=2,
+        tmp_path / "c.npy", tmp_path / "o.npy",
+        distributed.TileOptions(1500, processes=False, workers=2), return_arrays=True,
     )  # fmt: skip
     assert r.n_tiles == 8
     # both runs find the outliers: measured on _cloud(seed=0..19) recall 0.97-1.0 of the
@@ -281,8 +284,9 @@ def test_tiled_las_round_trip(tmp_path):
     io.write(tmp_path / "c.las", PointCloud(X))
     src = io.read(tmp_path / "c.las").points
     r = distributed.remove_outliers_tiled(
-        tmp_path / "c.las", tmp_path / "o.las", tile=1000, method="radius", chunk=500,
-        return_arrays=True, processes=False, workers=2,
+        tmp_path / "c.las", tmp_path / "o.las",
+        distributed.TileOptions(1000, chunk=500, processes=False, workers=2),
+        method="radius", return_arrays=True,
     )  # fmt: skip
     ref = outliers.remove_outliers(src, method="radius", k=10)
     np.testing.assert_array_equal(r.keep, ref.keep)
@@ -295,25 +299,32 @@ def test_tiled_las_round_trip(tmp_path):
         ({"tile": 0}, "`tile` must be"),
         ({"tile": 5}, "`tile` must be >= 2 k"),
         ({"method": "magic"}, "`method` must be one of"),
-        ({"method": "sor", "lam": 0.1}, "apply to method='rpca' only"),
+        ({"method": "sor", "options": {"lam": 0.1}}, "apply to method='rpca' only"),
     ],
 )
 def test_tiled_bad_input(tmp_path, kw, match):
     np.save(tmp_path / "c.npy", _cloud(200, 0))
     args = {"tile": 100, **kw}
     with pytest.raises(InvalidInputError, match=match):
-        distributed.remove_outliers_tiled(tmp_path / "c.npy", tmp_path / "o.npy", **args)
+        if "options" in args:
+            args["options"] = outliers.RPCAOptions(**args["options"])
+        tiling = distributed.TileOptions(args.pop("tile"))
+        distributed.remove_outliers_tiled(tmp_path / "c.npy", tmp_path / "o.npy", tiling, **args)
 
 
 def test_tiled_rejects_meshes_and_nan(tmp_path):
     io.write(tmp_path / "m.ply", _grid_mesh())
     with pytest.raises(InvalidInputError, match="has faces"):
-        distributed.remove_outliers_tiled(tmp_path / "m.ply", tmp_path / "o.ply", tile=100)
+        distributed.remove_outliers_tiled(
+            tmp_path / "m.ply", tmp_path / "o.ply", distributed.TileOptions(100)
+        )
     X = _cloud(200, 0)
     X[5] = np.nan
     np.save(tmp_path / "n.npy", X)
     with pytest.raises(InvalidInputError, match="NaN"):
-        distributed.remove_outliers_tiled(tmp_path / "n.npy", tmp_path / "o.npy", tile=100)
+        distributed.remove_outliers_tiled(
+            tmp_path / "n.npy", tmp_path / "o.npy", distributed.TileOptions(100)
+        )
 
 
 def test_missing_dask_message(monkeypatch):
@@ -330,6 +341,10 @@ def test_missing_dask_message(monkeypatch):
 _THREADS = {"processes": False, "workers": 2}
 
 
+def _tiles(tile: int, **kw):
+    return distributed.TileOptions(tile, **_THREADS, **kw)
+
+
 def test_tiled_outliers_on_arrays(tmp_path):
     # the Python API takes an (n, 3) numpy or dask array: same scores as the file, no output file
     # unless asked (then .npy), and a clear error for other output formats
@@ -338,19 +353,19 @@ def test_tiled_outliers_on_arrays(tmp_path):
     X = _cloud()
     np.save(tmp_path / "c.npy", X)
     ref = distributed.remove_outliers_tiled(
-        tmp_path / "c.npy", tmp_path / "o.npy", tile=1500, return_arrays=True, **_THREADS
+        tmp_path / "c.npy", tmp_path / "o.npy", _tiles(1500), return_arrays=True
     )
     lazy = da.from_array(X, chunks=(1000, 3))
-    r = distributed.remove_outliers_tiled(lazy, None, tile=1500, chunk=700, **_THREADS)
+    r = distributed.remove_outliers_tiled(lazy, None, _tiles(1500, chunk=700))
     np.testing.assert_array_equal(r.scores, ref.scores)
     np.testing.assert_array_equal(r.keep, ref.keep)
-    r2 = distributed.remove_outliers_tiled(X, tmp_path / "k.npy", tile=1500, **_THREADS)
+    r2 = distributed.remove_outliers_tiled(X, tmp_path / "k.npy", _tiles(1500))
     assert r2.keep is None and r2.n_kept == ref.n_kept
     np.testing.assert_array_equal(np.load(tmp_path / "k.npy"), X[ref.keep])
     with pytest.raises(InvalidInputError, match=r"written as \.npy"):
-        distributed.remove_outliers_tiled(X, tmp_path / "k.ply", tile=1500, **_THREADS)
+        distributed.remove_outliers_tiled(X, tmp_path / "k.ply", _tiles(1500))
     with pytest.raises(InvalidInputError, match="expected an"):
-        distributed.remove_outliers_tiled(X[:, :2], None, tile=1500, **_THREADS)
+        distributed.remove_outliers_tiled(X[:, :2], None, _tiles(1500))
 
 
 def test_tiled_rpca_with_an_empty_tile_equals_untiled(tmp_path):
@@ -359,10 +374,9 @@ def test_tiled_rpca_with_an_empty_tile_equals_untiled(tmp_path):
         rng.random((1000, 3)) * [10.0, 1.0, 1.0], np.c_[np.full(3000, 5.0), rng.random((3000, 2))]
     ]
     np.save(tmp_path / "c.npy", X)
-    ref = outliers.rpca_scores(X, 10, block_size=1000)
-    r = distributed.remove_outliers_tiled(
-        tmp_path / "c.npy", None, tile=1000, block_size=1000, **_THREADS
-    )
+    opts = outliers.RPCAOptions(block_size=1000)
+    ref = outliers.rpca_scores(X, 10, opts)
+    r = distributed.remove_outliers_tiled(tmp_path / "c.npy", None, _tiles(1000), options=opts)
     assert r.n_tiles == 4
     np.testing.assert_array_equal(r.scores, ref.scores)
 
@@ -373,7 +387,7 @@ def test_tiled_rpca_mostly_copies_is_a_clear_error(tmp_path):
     X = np.r_[rng.random((2000, 3)), np.zeros((3000, 3)) + 0.5]
     np.save(tmp_path / "c.npy", X)
     with pytest.raises(InvalidInputError, match="exact copies"):
-        distributed.remove_outliers_tiled(tmp_path / "c.npy", None, tile=1300, **_THREADS)
+        distributed.remove_outliers_tiled(tmp_path / "c.npy", None, _tiles(1300))
 
 
 def test_tiled_functions_are_imported_on_first_use():
@@ -406,7 +420,7 @@ def test_denoise_does_not_import_scipy_stats():
     import sys
 
     code = (
-        "import sys, spectrageo.denoise, spectrageo.cli.commands\n"
+        "import sys, spectrageo.denoise, spectrageo.cli.main\n"
         "assert 'scipy.stats' not in sys.modules, 'scipy.stats imported'\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)

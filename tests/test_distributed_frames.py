@@ -33,10 +33,10 @@ def noisy():
 @pytest.mark.parametrize("basis", ["partitioned", "exact"])
 def test_block_alone_equals_its_slice_of_full_run(noisy, basis):
     An, F = noisy
-    full = dyn.gft_rpca(An, F, block_size=10, rng=7, basis=basis, **KW)
+    full = dyn.gft_rpca(An, F, block_size=10, rng=7, options=dyn.GFTRPCAOptions(basis=basis, **KW))
     assert full.n_high.shape == (full.n_submeshes, 3)
     assert full.n_submeshes == (1 if basis == "exact" else 4)
-    setup = dyn.gft_rpca_setup(F, An.shape[1], rng=7, basis=basis, **KW)
+    setup = dyn.gft_rpca_setup(F, An.shape[1], rng=7, options=dyn.GFTRPCAOptions(basis=basis, **KW))
     assert setup.n_parts == full.n_submeshes and setup.nbytes > 0
     # blocks in reverse order, each alone: the same bits as the block's slice of the full run
     for b, s in reversed(list(enumerate(range(0, 23, 10)))):
@@ -45,16 +45,18 @@ def test_block_alone_equals_its_slice_of_full_run(noisy, basis):
         np.testing.assert_array_equal(blk.n_high, full.n_high[:, b])
         assert blk.n_iter <= full.n_iter and blk.residual <= full.residual
     # the last block run as a short animation of its own gets other generators, same quality
-    alone = dyn.gft_rpca(An[20:], F, rng=7, basis=basis, **KW)
+    alone = dyn.gft_rpca(An[20:], F, rng=7, options=dyn.GFTRPCAOptions(basis=basis, **KW))
     assert alone.frames.shape == (3, *An.shape[1:])
 
 
 def test_result_depends_on_seed_not_on_generator_state(noisy):
     An, F = noisy
-    a = dyn.gft_rpca(An, F, block_size=10, rng=3, **KW)
-    b = dyn.gft_rpca(An, F, block_size=10, rng=np.random.default_rng(3), **KW)
+    a = dyn.gft_rpca(An, F, block_size=10, rng=3, options=dyn.GFTRPCAOptions(**KW))
+    b = dyn.gft_rpca(
+        An, F, block_size=10, rng=np.random.default_rng(3), options=dyn.GFTRPCAOptions(**KW)
+    )
     np.testing.assert_array_equal(a.frames, b.frames)
-    c = dyn.gft_rpca(An, F, block_size=10, rng=4, **KW)
+    c = dyn.gft_rpca(An, F, block_size=10, rng=4, options=dyn.GFTRPCAOptions(**KW))
     assert not np.array_equal(a.frames, c.frames)  # the seed reaches the RPCA starts
 
 
@@ -68,12 +70,17 @@ def test_result_depends_on_seed_not_on_generator_state(noisy):
         (lambda An, F, s: dyn.gft_rpca_setup(F, 2.5), "n_vertices"),
         (lambda An, F, s: dyn.gft_rpca_setup(F, 0), "n_vertices"),
         (lambda An, F, s: dyn.gft_rpca_setup(F, 10), "F"),
-        (lambda An, F, s: dyn.gft_rpca_setup(F, An.shape[1], energy=2.0), "energy"),
+        (
+            lambda An, F, s: dyn.gft_rpca_setup(
+                F, An.shape[1], options=dyn.GFTRPCAOptions(energy=2.0)
+            ),
+            "energy",
+        ),
     ],
 )
 def test_setup_and_block_validation(noisy, call, match):
     An, F = noisy
-    setup = dyn.gft_rpca_setup(F, An.shape[1], basis="exact")
+    setup = dyn.gft_rpca_setup(F, An.shape[1], options=dyn.GFTRPCAOptions(basis="exact"))
     with pytest.raises(InvalidInputError, match=match):
         call(An[:4], F, setup)
 
@@ -82,7 +89,7 @@ def test_setup_and_block_validation(noisy, call, match):
 @pytest.mark.parametrize("basis", ["partitioned", "exact"])
 def test_dask_blocks_equal_serial_threads(noisy, basis):
     An, F = noisy
-    ser = dyn.gft_rpca(An, F, block_size=10, rng=7, basis=basis, **KW)
+    ser = dyn.gft_rpca(An, F, block_size=10, rng=7, options=dyn.GFTRPCAOptions(basis=basis, **KW))
     res = distributed.gft_rpca_blocks(
         An, F, block_size=10, rng=7, basis=basis, workers=2, processes=False, **KW
     )
@@ -96,7 +103,7 @@ def test_dask_blocks_equal_serial_worker_processes(noisy):
     """Setup and blocks pickled to two worker processes: still the serial bits."""
     An, F = noisy
     A = MeshAnimation(An, F)
-    ser = dyn.gft_rpca(A, block_size=8, rng=11, **KW)
+    ser = dyn.gft_rpca(A, block_size=8, rng=11, options=dyn.GFTRPCAOptions(**KW))
     res = distributed.gft_rpca_blocks(A, block_size=8, rng=11, workers=2, **KW)
     np.testing.assert_array_equal(res.frames, ser.frames)
     np.testing.assert_array_equal(res.n_high, ser.n_high)

@@ -15,19 +15,12 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
 from .._errors import InvalidInputError
 from ._argtypes import seed_type
-
-
-def _status(msg: str) -> None:
-    from . import commands
-
-    if not commands.QUIET:
-        print(msg, file=sys.stderr, flush=True)
+from ._common import status as _status
 
 
 def cmd_identify(args) -> int:

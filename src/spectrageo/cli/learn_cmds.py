@@ -13,6 +13,7 @@ from pathlib import Path
 
 from .._errors import InvalidInputError
 from ._argtypes import seed_type
+from ._common import apply_help, is_quiet, status
 
 HELP = {
     "train": (
@@ -29,8 +30,6 @@ HELP = {
 
 
 def cmd_train(args) -> int:
-    from . import commands
-
     if importlib.util.find_spec("torch") is None:
         raise InvalidInputError("`spectrageo train` needs PyTorch: install spectrageo[learn].")
     data = Path(args.data)
@@ -43,8 +42,8 @@ def cmd_train(args) -> int:
         raise InvalidInputError(f"--epochs must be >= 1; got {args.epochs}.")
     from ..learn import train
 
-    log = None if commands.QUIET else commands._status
-    kw = {"device": args.device, "seed": args.seed, "log": log, "threads": args.threads}
+    log = None if is_quiet() else status
+    kw = {"device": args.device, "seed": args.seed, "threads": args.threads}
     if args.epochs is not None:
         kw["epochs"] = args.epochs
     if args.meshes:
@@ -52,14 +51,14 @@ def cmd_train(args) -> int:
     if args.model == "bm3d-cnn":
         if args.stages is not None:
             kw["n_stages"] = args.stages
-        summary = train.train_bm3d_cnn(data, out, **kw)
+        summary = train.train_bm3d_cnn(data, out, train.BM3DCNNTrainOptions(**kw), log=log)
     else:
         if args.stages is not None:
             raise InvalidInputError("--stages applies to bm3d-cnn only.")
-        summary = train.train_dae(data, out, **kw)
+        summary = train.train_dae(data, out, train.DAETrainOptions(**kw), log=log)
     val = summary.get("validation") or []
     text = ", ".join(f"{r['level']:g}: {r['input_theta']:.1f} -> {r['theta']:.1f} deg" for r in val)
-    commands._status(
+    status(
         f"wrote {out} ({summary['meta']['train_seconds']:.0f} s)"
         + (f"; validation theta on {train.REPORT_MESH} {text}" if text else "")
     )
@@ -84,10 +83,7 @@ def register(sub) -> None:
         "(default: spectrageo.learn.train.TRAIN_MESHES)",
     )
     p.set_defaults(func=cmd_train)
-    for name, (desc, example) in HELP.items():
-        sp = sub.choices[name]
-        sp.description = desc
-        sp.epilog = "example:\n  " + "\n  ".join(example.strip().splitlines())
+    apply_help(sub, HELP)
 
 
 __all__ = ["register"]

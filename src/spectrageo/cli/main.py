@@ -15,6 +15,36 @@ import traceback
 import warnings
 
 from .._errors import SpectrageoError
+from . import (
+    batch_cmds,
+    complete_cmds,
+    compress_cmds,
+    denoise_cmds,
+    evaluate_cmds,
+    file_cmds,
+    identify_cmds,
+    learn_cmds,
+    register_cmds,
+    saliency_cmds,
+    view_cmd,
+)
+from ._common import set_quiet
+
+#: The command groups, in ``spectrageo --help`` order; each module's ``register(sub)`` adds its
+#: sub-commands with their descriptions and examples.
+COMMAND_MODULES = (
+    file_cmds,
+    denoise_cmds,
+    evaluate_cmds,
+    saliency_cmds,
+    view_cmd,
+    compress_cmds,
+    complete_cmds,
+    batch_cmds,
+    register_cmds,
+    identify_cmds,
+    learn_cmds,
+)
 
 
 class _Formatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
@@ -38,8 +68,6 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import commands
-
     p = _Parser(
         prog="spectrageo",
         description="Spectral processing of static and dynamic 3D geometry.",
@@ -47,13 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=_version())
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    commands.register_all(sub)
-    for name, sp in sub.choices.items():
-        doc = commands.HELP_TEXTS.get(name)
-        if doc is not None:
-            desc, example = doc
-            sp.description = desc
-            sp.epilog = "example:\n  " + "\n  ".join(example.strip().splitlines())
+    for module in COMMAND_MODULES:
+        module.register(sub)
+    for sp in sub.choices.values():
         if not any("--quiet" in a.option_strings for a in sp._actions):
             sp.add_argument(
                 "-q",
@@ -120,11 +144,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return 2
     from .. import _progress
-    from . import commands
 
     quiet = bool(getattr(args, "quiet", False))
     _progress.QUIET = quiet
-    commands.QUIET = quiet
+    set_quiet(quiet)
     with warnings.catch_warnings():
         # warnings are one line each, like errors: "spectrageo CMD: warning: ..."
         warnings.showwarning = functools.partial(_show_warning, args.command)

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -23,13 +22,9 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ._argtypes import seed_type
-
-
-def _status(msg: str) -> None:
-    from . import commands
-
-    if not commands.QUIET:
-        print(msg, file=sys.stderr, flush=True)
+from ._common import check_outputs
+from ._common import read_reported as _read
+from ._common import status as _status
 
 
 def _load_transform(path: str) -> np.ndarray:
@@ -61,7 +56,6 @@ def _load_transform(path: str) -> np.ndarray:
 
 def _read_geometry(path: str, name: str):
     from ..geometry import Mesh, PointCloud
-    from .commands import _read
 
     if not Path(path).is_file():
         raise InvalidInputError(f"{name}: file not found: {path}")
@@ -127,9 +121,8 @@ def cmd_register(args) -> int:
     from .. import io
     from ..io import atomic_write
     from ..register import register
-    from .commands import _check_outputs
 
-    _check_outputs([args.source, args.target], [args.out, args.apply])
+    check_outputs([args.source, args.target], [args.out, args.apply])
     init = _load_transform(args.init) if args.init else None
     t0 = time.perf_counter()
     src = _read_geometry(args.source, "SOURCE")

@@ -1,40 +1,54 @@
 """``spectrageo saliency | features | curves | simplify | inspect`` (thesis Section 4.4 and 6.1).
 
-Values go to ``.npy`` (array), ``.csv`` (one value per line) or ``.ply`` (the input geometry with the
-values as a vertex or face property and jet colours quantised to 64 classes, as the thesis
-visualises; per-face values are coloured through their first-ring mean at the vertices, since PLY
-viewers colour vertices).
+Values go to ``.npy``, ``.csv`` or ``.ply`` (see :mod:`spectrageo.distributed._values`).
 """
 
 from __future__ import annotations
 
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
 from .._errors import InvalidInputError
+from ..distributed import COMMANDS
+from ..distributed._values import value_suffix as _suffix
+from ..distributed._values import write_values as _write_values
 from ._argtypes import seed_type
-from .batch_cmds import add_tile_options
+from ._common import (
+    add_schema_options,
+    add_tile_options,
+    apply_help,
+    check_outputs,
+    check_tile,
+    status,
+)
 
-_VALUE_SUFFIXES = (".npy", ".csv", ".ply")
+HELP = {
+    "saliency": (
+        "Saliency map of a mesh, point cloud or animation (Section 6.1), per vertex or face.",
+        "spectrageo saliency part.obj --out saliency.ply --per vertex",
+    ),
+    "features": (
+        "Corner / edge / flat classification of faces or vertices (Section 4.4, Eq. 4.14-4.15).",
+        "spectrageo features part.obj --out classes.npy",
+    ),
+    "curves": (
+        "Feature vertices and feature curves (Section 6.1.1).",
+        "spectrageo curves part.obj --out curves.ply",
+    ),
+    "simplify": (
+        "Saliency-aware simplification (Algorithm 15).",
+        "spectrageo simplify model.off small.ply --ratio 0.8",
+    ),
+    "inspect": (
+        "Saliency deviation of a scanned, scaled or aged copy against a reference (Eq. 6.17-6.19).",
+        "spectrageo inspect reference.ply scan.ply --out heat.ply",
+    ),
+}
 
 
 def _status(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-def _suffix(path: str) -> str:
-    p = Path(path)
-    suf = p.suffix.lower()
-    if suf == ".gz":
-        suf = Path(p.stem).suffix.lower()
-    if suf not in _VALUE_SUFFIXES:
-        raise InvalidInputError(
-            f"`--out` must end with one of {', '.join(_VALUE_SUFFIXES)}; got {path!r}."
-        )
-    return suf
+    status(msg, always=True)
 
 
 def _read_mesh(path: str):
@@ -47,107 +61,39 @@ def _read_mesh(path: str):
     return obj
 
 
-def _write_values(path: str, values: np.ndarray, *, geometry=None, per: str = "vertex", name: str):
-    """Write values to .npy/.csv, or as a property + jet colours of ``geometry`` to .ply."""
-    from .. import io
-    from .._colormap import jet
-    from ..geometry import Mesh, PointCloud
-    from ..io import atomic_write
-
-    suf = _suffix(path)
-    values = np.asarray(values)
-    if suf == ".npy":
-        with atomic_write(path) as tmp, open(tmp, "wb") as fh:
-            np.save(fh, values)
-        return
-    if suf == ".csv":
-        fmt = "%d" if np.issubdtype(values.dtype, np.integer) else "%.9g"
-        with atomic_write(path) as tmp:
-            np.savetxt(tmp, values if values.ndim > 1 else values[:, None], fmt=fmt, delimiter=",")
-        return
-    if geometry is None:
-        raise InvalidInputError("a .ply output needs geometry; use .npy or .csv.")
-    vals = values.astype(np.float64)
-    if isinstance(geometry, PointCloud):
-        out = PointCloud(
-            geometry.points,
-            normals=geometry.normals,
-            colors=jet(vals),
-            attributes={**geometry.attributes, name: vals},
-        )
-    else:
-        if per == "face":
-            from ..saliency._common import face_to_vertex
-
-            shown = face_to_vertex(vals, geometry.faces, geometry.n_vertices)
-            out = Mesh(
-                geometry.vertices,
-                geometry.faces,
-                vertex_colors=jet(shown),
-                face_attributes={name: vals},
-            )
-        else:
-            out = Mesh(
-                geometry.vertices,
-                geometry.faces,
-                vertex_colors=jet(vals),
-                vertex_attributes={name: vals},
-            )
-    io.write(path, out)
-
-
-# --------------------------------------------------------------------------- saliency
 def cmd_saliency(args) -> int:
-    from .. import io, saliency
-    from ..geometry import Mesh, MeshAnimation, PointCloud
-
+    """``spectrageo saliency IN --out OUT``: in memory, or tiled on Dask with ``--tile``."""
+    if getattr(args, "tile", None) is None:
+        return COMMANDS["saliency"].run(args)
     _suffix(args.out)
-    if getattr(args, "tile", None) is not None:  # out-of-core point clouds on Dask (issue 21)
-        from .batch_cmds import cmd_saliency_tiled
+    return cmd_saliency_tiled(args)
 
-        return cmd_saliency_tiled(args)
-    obj, rep = io.read_with_report(args.input, nan_points="drop")
-    t0 = time.perf_counter()
-    if isinstance(obj, Mesh):
-        s = saliency.saliency(
-            obj.vertices,
-            obj.faces,
-            method=args.method,
-            per=args.per,
-            k=args.k,
-            fast=args.fast,
-        )
-        _write_values(args.out, s, geometry=obj, per=args.per, name="saliency")
-    elif isinstance(obj, PointCloud):
-        if args.per == "face":
-            raise InvalidInputError("a point cloud has no faces; use --per vertex.")
-        s = saliency.pointcloud_saliency(obj.points, k=args.k)
-        if rep.source_index is not None and _suffix(args.out) != ".ply":
-            # one value per input row, as the outlier masks: NaN where a row (an organized
-            # scan's missing measurement) had no coordinates; a .ply holds the points kept
-            full = np.full(rep.n_input_vertices, np.nan)
-            full[rep.source_index] = s
-            s = full
-            _status(f"{rep.n_nonfinite_rows} rows without coordinates (NaN): saliency NaN")
-        _write_values(args.out, s, geometry=obj, name="saliency")
-    elif isinstance(obj, MeshAnimation):
-        if args.per == "face":
-            raise InvalidInputError("animations are mapped per vertex; use --per vertex.")
-        if _suffix(args.out) == ".ply":
-            raise InvalidInputError("an animation map is (frames, vertices): use .npy or .csv.")
-        res = saliency.animation_saliency(obj.frames, obj.faces, method=args.method, k=args.k)
-        s = res.values
-        _write_values(args.out, s, name="saliency")
-        _status(
-            f"recomputed {100 * res.recomputed_fraction[1:].mean():.1f} % of the vertices per frame"
-            if obj.n_frames > 1
-            else "one frame"
-        )
-    else:
-        raise InvalidInputError(
-            f"`saliency` needs a mesh or a point cloud; got {type(obj).__name__}."
-        )
-    _status(f"wrote {args.out} ({s.shape[-1]} values, {time.perf_counter() - t0:.2f} s)")
+
+def cmd_saliency_tiled(args) -> int:
+    """``spectrageo saliency IN --out OUT --tile N``: :func:`spectrageo.distributed.saliency_tiled`."""
+    from .. import _progress, distributed
+
+    check_tile(args)
+    if args.per == "face":
+        raise InvalidInputError("a point cloud has no faces; use --per vertex.")
+    check_outputs([args.input], [args.out])
+    res = distributed.saliency_tiled(
+        args.input,
+        args.out,
+        distributed.TileOptions(
+            args.tile,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            progress=_progress.progress_enabled(),
+        ),
+        k=args.k,
+    )
+    i = res.info
+    status(
+        f"wrote {args.out} ({res.n_points} values, {res.n_tiles} tiles of <= "
+        f"{i['tile_points_max']} points, halo +{100 * i['halo_fraction_mean']:.0f} %, "
+        f"{i['n_workers']} workers, {i['time_total_s']:.2f} s)"
+    )
     return 0
 
 
@@ -194,7 +140,7 @@ def cmd_curves(args) -> int:
 def cmd_simplify(args) -> int:
     from .. import io
     from ..geometry import Mesh
-    from ..saliency import simplify
+    from ..saliency import SaliencyOptions, simplify
 
     mesh = _read_mesh(args.input)
     t0 = time.perf_counter()
@@ -205,7 +151,7 @@ def cmd_simplify(args) -> int:
         n_classes=args.classes,
         rng=args.seed,
         method=args.method,
-        k=args.k,
+        options=SaliencyOptions(k=args.k),
     )
     io.write(args.output, Mesh(res.vertices, res.faces))
     frac = ", ".join(f"{p:.2f}" for p in res.keep_fractions)
@@ -221,18 +167,28 @@ def cmd_inspect(args) -> int:
     from .. import io
     from .._colormap import jet
     from ..geometry import Mesh
-    from ..saliency import inspect
+    from ..saliency import SaliencyOptions, inspect
 
     ref = _read_mesh(args.reference)
     scan = _read_mesh(args.scan)
     if _suffix(args.out) != ".ply":
         res = inspect(
-            ref.vertices, ref.faces, scan.vertices, scan.faces, method=args.method, k=args.k
+            ref.vertices,
+            ref.faces,
+            scan.vertices,
+            scan.faces,
+            method=args.method,
+            options=SaliencyOptions(k=args.k),
         )
         _write_values(args.out, res.deviation, name="deviation")
     else:
         res = inspect(
-            ref.vertices, ref.faces, scan.vertices, scan.faces, method=args.method, k=args.k
+            ref.vertices,
+            ref.faces,
+            scan.vertices,
+            scan.faces,
+            method=args.method,
+            options=SaliencyOptions(k=args.k),
         )
         out = Mesh(
             scan.vertices,
@@ -260,12 +216,7 @@ def register(sub) -> None:
     )
     p.add_argument("input")
     p.add_argument("--out", required=True, help="FILE.npy | FILE.csv | FILE.ply (jet colours)")
-    p.add_argument("--per", choices=["vertex", "face"], default="vertex")
-    p.add_argument("--method", choices=["combined", "spectral", "geometric"], default="combined")
-    p.add_argument("--k", type=int, default=25, help="faces per patch besides the face (25)")
-    p.add_argument(
-        "--fast", action="store_true", help="leave the least salient class out of the RPCA"
-    )
+    add_schema_options(p, COMMANDS["saliency"])
     add_tile_options(p, "a point cloud")
     p.set_defaults(func=cmd_saliency)
 
@@ -305,6 +256,7 @@ def register(sub) -> None:
     p.add_argument("--method", choices=["combined", "spectral", "geometric"], default="combined")
     p.add_argument("--k", type=int, default=25)
     p.set_defaults(func=cmd_inspect)
+    apply_help(sub, HELP)
 
 
 __all__ = ["register"]

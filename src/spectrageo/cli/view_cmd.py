@@ -9,8 +9,17 @@ import threading
 import webbrowser
 
 from .._errors import InvalidInputError
+from ._common import apply_help
 
 DEFAULT_PORT = 8765
+
+HELP = {
+    "view": (
+        "Serve a local web viewer on 127.0.0.1 and open it in the browser. Files given here are\n"
+        "loaded at start; more can be loaded from the page.",
+        "spectrageo view model.ply noisy.ply",
+    ),
+}
 
 
 def _limits(args) -> dict:
@@ -115,3 +124,4 @@ def register(sub) -> None:
         "are unloaded (default 2048)",
     )
     p.set_defaults(func=cmd_view)
+    apply_help(sub, HELP)

@@ -12,6 +12,8 @@
   per block of frames, equal to the serial ``gft_rpca(..., block_size=...)``.
 * :func:`encode_animation_blocks` -- the ``.sga`` animation codec (Section 5.2.2), one Dask task
   per frame block, the same bytes as the serial ``compress.encode_animation``.
+* :data:`COMMANDS` -- the :class:`CommandSchema` of every batch command (runner, options, result
+  description), from which the command line builds its options.
 
 Dask is imported only when a function runs; without it they raise :class:`DaskMissingError`.
 """
@@ -19,11 +21,14 @@ Dask is imported only when a function runs; without it they raise :class:`DaskMi
 from ._batch import BATCH_COMMANDS, batch, expand_inputs, output_paths
 from ._cluster import DaskMissingError, open_client, require_dask
 from ._codec import CODEC_BLOCK_METHODS, encode_animation_blocks
+from ._commands import COMMANDS
 from ._frames import gft_rpca_blocks
+from ._schema import CommandSchema, Option, describe, json_default
 
 #: names of :mod:`._tiled`, imported on first use (it pulls in the outlier kernels, which every
 #: other command, and ``spectrageo --help``, would otherwise pay for at start-up)
 _TILED = (
+    "TileOptions",
     "TiledResult",
     "TiledRobotResult",
     "TiledSaliencyResult",
@@ -44,14 +49,20 @@ def __getattr__(name: str):
 __all__ = [
     "BATCH_COMMANDS",
     "CODEC_BLOCK_METHODS",
+    "COMMANDS",
+    "CommandSchema",
     "DaskMissingError",
+    "Option",
+    "TileOptions",
     "TiledResult",
     "TiledRobotResult",
     "TiledSaliencyResult",
     "batch",
+    "describe",
     "encode_animation_blocks",
     "expand_inputs",
     "gft_rpca_blocks",
+    "json_default",
     "open_client",
     "output_paths",
     "remove_outliers_tiled",

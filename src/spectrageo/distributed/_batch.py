@@ -1,22 +1,20 @@
 """``spectrageo batch``: one Dask task per file, each running the single-file command unchanged.
 
-A task runs the command's own function of :mod:`spectrageo.cli` on a namespace built by that
-command's own parser (defaults, then the caller's options): the options, the checks and the output
-of a batch file are those of ``spectrageo COMMAND IN OUT`` by construction, with no second copy of
-the option handling to drift. Per file the task returns a record (status, time, metrics, the
-command's status lines, the error); an exception in one file never stops the others.
+A task runs the command's runner (:data:`~spectrageo.distributed._commands.COMMANDS`) on a
+namespace built from its schema (defaults, then the caller's options), so the options, checks and
+output of a batch file are those of ``spectrageo COMMAND IN OUT``. Per file the task returns a
+record (status, time, metrics, the command's status lines, the error); an exception in one file
+never stops the others.
 
 Animations with ``denoise --method gft-rpca --block-size N`` are split further: the file's task
-reads the animation, computes the spatial setup, and submits one task per block of ``N`` frames to
-the same cluster (:func:`~spectrageo.distributed.gft_rpca_blocks`, via ``worker_client``: the
-file's task secedes from its worker's thread while it waits, so it holds no slot), then writes the
-output as ``spectrageo denoise`` does; the result equals the serial command's.
+submits one task per block of ``N`` frames to the same cluster
+(:func:`~spectrageo.distributed.gft_rpca_blocks`, via ``worker_client``, seceding while it waits),
+then writes the output as ``spectrageo denoise`` does; the result equals the serial command's.
 """
 
 from __future__ import annotations
 
 import contextlib
-import functools
 import glob
 import io as _stdio
 import json
@@ -28,28 +26,21 @@ from pathlib import Path
 from typing import Any
 
 from .._errors import InvalidInputError
-from ._cluster import open_client, require_dask, show_progress, thread_budget
+from ._cluster import open_client, require_dask, show_progress, thread_budget, thread_limits
+from ._commands import COMMANDS
+from ._schema import json_default
 
 __all__ = ["BATCH_COMMANDS", "batch", "expand_inputs", "output_paths"]
 
 #: Commands ``batch`` runs, with the attribute of the command's namespace that holds its output.
-BATCH_COMMANDS: dict[str, str] = {
-    "denoise": "output",
-    "outliers": "output",
-    "saliency": "out",
-    "compress": "output",
-    "complete": "output",
-    "convert": "output",
-}
-#: Options that name one file per run; a batch cannot pass one path to every file.
-_PER_FILE_OPTIONS = {"outliers": ("mask", "scores"), "complete": ("known",)}
+BATCH_COMMANDS: dict[str, str] = {name: schema.output for name, schema in COMMANDS.items()}
 _GLOB_CHARS = set("*?[")
 SUMMARY_NAME = "batch-summary.json"
 
 
 def available_commands() -> list[str]:
-    """Batch commands whose single-file command is installed (``complete`` is a later module)."""
-    return [c for c in BATCH_COMMANDS if _command_parser(c) is not None]
+    """Names of the commands ``batch`` runs."""
+    return list(COMMANDS)
 
 
 # ----------------------------------------------------------------------------- inputs and outputs
@@ -158,42 +149,12 @@ def output_paths(
 
 
 # ----------------------------------------------------------------------------- the per-file task
-@functools.cache
-def _command_parser(command: str):
-    from ..cli.main import build_parser
-
-    p = build_parser()
-    for action in p._actions:
-        if hasattr(action, "choices") and isinstance(action.choices, dict):
-            return action.choices.get(command)
-    return None
-
-
 def command_namespace(command: str, options: dict[str, Any]):
     """The namespace ``spectrageo COMMAND IN OUT`` would get, with ``options`` (Python names,
     e.g. ``method="bilateral"``) in place of the defaults."""
-    if command not in BATCH_COMMANDS:
-        raise InvalidInputError(
-            f"`command` must be one of {', '.join(BATCH_COMMANDS)}; got {command!r}."
-        )
-    sp = _command_parser(command)
-    if sp is None:
-        raise InvalidInputError(f"`command` {command!r} is not available in this installation.")
-    out_attr = BATCH_COMMANDS[command]
-    argv = ["IN", "OUT"] if out_attr == "output" else ["IN", "--out", "OUT"]
-    ns = sp.parse_args(argv)
-    allowed = sorted(k for k in vars(ns) if k not in ("input", out_attr, "func", "quiet"))
-    for key, value in options.items():
-        if key in _PER_FILE_OPTIONS.get(command, ()):
-            raise InvalidInputError(
-                f"`{key}` names one file per run; {command} in a batch cannot take it."
-            )
-        if key not in allowed:
-            raise InvalidInputError(
-                f"{command} has no option {key!r}; its options are {', '.join(allowed)}."
-            )
-        setattr(ns, key, value)
-    return ns
+    if command not in COMMANDS:
+        raise InvalidInputError(f"`command` must be one of {', '.join(COMMANDS)}; got {command!r}.")
+    return COMMANDS[command].namespace(options)
 
 
 class _ThreadStderr:
@@ -235,28 +196,6 @@ def _capture_stderr():
         proxy.local.buf = None
 
 
-@contextlib.contextmanager
-def _threads(n: int | None):
-    if n is None:
-        yield
-        return
-    from threadpoolctl import threadpool_limits
-
-    try:
-        import numba
-
-        old = numba.get_num_threads()
-        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
-    except ImportError:  # pragma: no cover - numba is a dependency
-        numba = None
-    try:
-        with threadpool_limits(n):
-            yield
-    finally:
-        if numba is not None:
-            numba.set_num_threads(old)
-
-
 def run_file(
     command: str, src: str, dst: str, options: dict[str, Any], n_threads: int | None = None
 ) -> dict:
@@ -269,23 +208,27 @@ def run_file(
     with _capture_stderr() as log:
         try:
             ns = command_namespace(command, options)
+            schema = COMMANDS[command]
             ns.input = src
-            setattr(ns, BATCH_COMMANDS[command], dst)
+            setattr(ns, schema.output, dst)
             Path(dst).parent.mkdir(parents=True, exist_ok=True)
             mask = None
-            if command == "outliers":
+            if schema.keep_mask is not None:
                 mask = Path(dst).with_name(f".{Path(dst).name}.keep.npy")
-                ns.mask = str(mask)
+                setattr(ns, schema.keep_mask, str(mask))
             if command == "denoise" and getattr(ns, "block_size", None) is not None:
                 # an animation's frame blocks run as tasks of this cluster (None off a worker)
                 from ._frames import gft_rpca_blocks_in_task
 
                 ns.frame_blocks = gft_rpca_blocks_in_task(n_threads)
-            with _threads(n_threads):
-                rc = int(ns.func(ns) or 0)
+            with thread_limits(n_threads):
+                rc = int(schema.run(ns) or 0)
             if rc != 0:
                 raise RuntimeError(f"{command} exited with status {rc}")
-            rec["info"] = _metrics(command, dst, mask)
+            p = Path(dst)
+            info = {"output_bytes": p.stat().st_size if p.is_file() else None}
+            info.update(schema.result(p, mask))
+            rec["info"] = info
             rec["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - a batch reports every file's failure and goes on
             rec["error"] = f"{type(exc).__name__}: {exc}"
@@ -294,35 +237,6 @@ def run_file(
     if lines:
         rec["log"] = lines
     return rec
-
-
-def _metrics(command: str, dst: str, mask: Path | None) -> dict:
-    import numpy as np
-
-    p = Path(dst)
-    info: dict[str, Any] = {"output_bytes": p.stat().st_size if p.is_file() else None}
-    if command == "outliers" and mask is not None and mask.exists():
-        keep = np.load(mask, allow_pickle=True)
-        mask.unlink()
-        if keep.dtype == bool:
-            info.update(n_points=int(keep.size), n_kept=int(keep.sum()))
-    elif command == "compress":
-        from .. import compress
-
-        data = p.read_bytes()
-        d = compress.info_animation(data) if p.suffix == ".sga" else compress.info(data)
-        info.update({k: v for k, v in d.items() if isinstance(v, int | float | str | bool)})
-    elif command == "saliency" and p.suffix.lower() == ".npy":
-        s = np.load(p)
-        info.update(n_values=int(s.size), min=float(s.min()), max=float(s.max()))
-    else:
-        from .. import io
-        from ..cli.commands import describe
-
-        d = describe(io.read(p))
-        keys = ("kind", "n_vertices", "n_faces", "n_points", "n_frames")
-        info.update({k: d[k] for k in keys if k in d})
-    return info
 
 
 # ----------------------------------------------------------------------------- the driver
@@ -464,7 +378,6 @@ def _previous_records(path: Path) -> dict[str, dict]:
 
 
 def _write_summary(path, command, options, records, n_workers, scheduler, t0) -> None:
-    from ..cli.commands import _json_default
     from ..io import atomic_write
 
     counts = {s: sum(r["status"] == s for r in records) for s in ("ok", "failed", "skipped")}
@@ -480,4 +393,4 @@ def _write_summary(path, command, options, records, n_workers, scheduler, t0) ->
     }
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(path) as tmp:
-        Path(tmp).write_text(json.dumps(doc, indent=2, default=_json_default) + "\n")
+        Path(tmp).write_text(json.dumps(doc, indent=2, default=json_default) + "\n")

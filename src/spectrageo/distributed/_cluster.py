@@ -138,3 +138,26 @@ def show_progress(futures: list, enabled: bool) -> None:
     distributed = require_dask()
     distributed.progress(futures, notebook=False)
     print(file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def thread_limits(n: int | None):
+    """BLAS/OpenMP (threadpoolctl) and numba threads limited to ``n`` inside the block."""
+    if n is None:
+        yield
+        return
+    from threadpoolctl import threadpool_limits
+
+    try:
+        import numba
+
+        old = numba.get_num_threads()
+        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    except ImportError:  # pragma: no cover - numba is a dependency
+        numba = None
+    try:
+        with threadpool_limits(n):
+            yield
+    finally:
+        if numba is not None:
+            numba.set_num_threads(old)

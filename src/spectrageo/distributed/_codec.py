@@ -58,10 +58,10 @@ def _basis_task(Ab, origin, scale, prev_U, n_iter: int, n_threads: int | None):
     """One link of the OI chain: the eigen-trajectories (3 x (nf, nf)) of one block, started from
     the previous block's (``prev_U``; None for the first block), as the serial encoder finds them."""
     from ..compress._animation import eigen_trajectories
-    from ._batch import _threads
+    from ._cluster import thread_limits
 
     X = (Ab - origin) / scale
-    with _threads(n_threads):
+    with thread_limits(n_threads):
         return [
             eigen_trajectories(
                 np.ascontiguousarray(X[:, :, c]), None if prev_U is None else prev_U[c], n_iter
@@ -73,20 +73,20 @@ def _basis_task(Ab, origin, scale, prev_U, n_iter: int, n_threads: int | None):
 def _plan_task(Ab, origin, scale, L, anchors, t0: int, prev_U, n_iter, n_threads):
     """Eq. (5.46)-(5.48) for one block (the serial ``analyse_block`` call, same arguments)."""
     from ..compress._animation import analyse_block
-    from ._batch import _threads
+    from ._cluster import thread_limits
 
     X = (Ab - origin) / scale
     prev = None if prev_U is None else SimpleNamespace(U=prev_U)
-    with _threads(n_threads):
+    with thread_limits(n_threads):
         return analyse_block(X, L, anchors, t0, prev, n_iter)
 
 
 def _segment_task(plan, b: int, head: dict, step, n_threads: int | None) -> bytes:
     """Quantisation + entropy coding of one analysed block into its ``.sga`` segment."""
     from ..compress._animation import block_segment, encode_block
-    from ._batch import _threads
+    from ._cluster import thread_limits
 
-    with _threads(n_threads):
+    with thread_limits(n_threads):
         chunks = encode_block(plan, head["method"], step, head["ratio"], head["rd"])
     return block_segment(
         head["method"], head["n"], head["m"], head["origin"], head["scale"],

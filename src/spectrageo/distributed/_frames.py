@@ -12,7 +12,7 @@ equals the serial ``gft_rpca(frames, F, block_size=block_size, rng=rng)``.
 
 from __future__ import annotations
 
-import inspect
+import dataclasses
 import time
 import uuid
 from typing import Any
@@ -25,33 +25,27 @@ from ._cluster import open_client, require_dask, show_progress, thread_budget
 
 __all__ = ["gft_rpca_blocks"]
 
-#: Options of :func:`~spectrageo.denoise.dynamic.gft_rpca` that ``gft_options`` may hold.
-_SKIP = ("block_size", "rng")
 
-
+# ``gft_options`` may hold the fields of :class:`~spectrageo.denoise.dynamic.GFTRPCAOptions`
 def _gft_options() -> set[str]:
-    from ..denoise.dynamic import gft_rpca
+    from ..denoise.dynamic import GFTRPCAOptions
 
-    return {
-        p.name
-        for p in inspect.signature(gft_rpca).parameters.values()
-        if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in _SKIP
-    }
+    return {f.name for f in dataclasses.fields(GFTRPCAOptions)}
 
 
 def _block_task(setup, frames: np.ndarray, block_index: int, n_threads: int | None):
     """One Dask task: Algorithm 3 on one block of frames with the scattered setup."""
     from .. import _progress
     from ..denoise.dynamic import gft_rpca_block
-    from ._batch import _threads
+    from ._cluster import thread_limits
 
     _progress.QUIET = True
-    with _threads(n_threads):
+    with thread_limits(n_threads):
         return gft_rpca_block(setup, frames, block_index)
 
 
 def _prepare(frames, F, block_size, rng, gft_options):
-    from ..denoise.dynamic import _check_block_size, _faces_of, gft_rpca_setup
+    from ..denoise.dynamic import GFTRPCAOptions, _check_block_size, _faces_of, gft_rpca_setup
 
     unknown = sorted(set(gft_options) - _gft_options())
     if unknown:
@@ -66,7 +60,7 @@ def _prepare(frames, F, block_size, rng, gft_options):
     if block_size is None:
         raise InvalidInputError("`block_size` is required (frames per Dask task); got None.")
     bs = _check_block_size(block_size, T)
-    setup = gft_rpca_setup(F, n, rng=rng, **gft_options)
+    setup = gft_rpca_setup(F, n, options=GFTRPCAOptions(**gft_options), rng=rng)
     return A, bs, setup
 
 
