@@ -565,13 +565,16 @@ def test_fill_holes_shared_holes_watertight(shared_data):
     import trimesh
 
     from spectrageo import io
+    from spectrageo.geometry import weld
 
     for name in ("elephant-with-holes", "holes", "mech-holes-shark"):
         p = shared_file(shared_data, "holes", f"{name}.off")
         m = io.read_mesh(p)
         V2, F2 = fill_holes(m.vertices, m.faces)
-        assert boundary_edges(F2).shape[0] == 0, name
-        tm = trimesh.Trimesh(V2, F2, process=False)
+        assert np.array_equal(F2[: m.n_faces], m.faces), name  # seams of copies kept as input
+        w = weld(V2, F2)
+        assert boundary_edges(w.faces).shape[0] == 0, name
+        tm = trimesh.Trimesh(w.vertices, w.faces, process=False)
         assert tm.is_watertight and tm.is_winding_consistent, name
         assert np.array_equal(V2[: m.n_vertices], m.vertices)
 

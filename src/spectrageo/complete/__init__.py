@@ -5,13 +5,15 @@ and :func:`complete_sequence` (Algorithm 13) keep the vertex order and the known
 """
 
 from .dynamic import ANIMATION_METHODS, SEQUENCE_METHODS, complete_animation, complete_sequence
-from .holes import fill_holes
+from .holes import FilledMesh, OpenLoop, fill_holes
 from .static import INPAINT_METHODS, inpaint, patch_indices
 
 __all__ = [
     "ANIMATION_METHODS",
     "INPAINT_METHODS",
     "SEQUENCE_METHODS",
+    "FilledMesh",
+    "OpenLoop",
     "complete_animation",
     "complete_sequence",
     "fill_holes",

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay
 
 from .._errors import InvalidInputError
@@ -14,7 +16,7 @@ from ..geometry import boundary_edges, boundary_loops, weld
 from ..geometry.primitives import _normalize_rows
 from .static import INPAINT_METHODS, inpaint
 
-__all__ = ["DP_MAX_LOOP", "FAIR_RINGS", "MAX_IMPLANTED", "fill_holes"]
+__all__ = ["DP_MAX_LOOP", "FAIR_RINGS", "MAX_IMPLANTED", "FilledMesh", "OpenLoop", "fill_holes"]
 
 #: Loops with more edges are cut into pieces by chords before they are patched: the planar
 #: patch's tests cost O(L^2) memory and Liepa's dynamic programming O(L^3) time (about 2.6 s at
@@ -285,7 +287,7 @@ def _in_sorted(q: np.ndarray, keys: np.ndarray) -> np.ndarray:
     return keys[pos] == q
 
 
-def _chords_ok(tri: np.ndarray, loop: np.ndarray, edge_keys: np.ndarray, n: int) -> bool:
+def _chords_ok(tri: np.ndarray, loop: np.ndarray, ctx: _Context) -> bool:
     """No patch chord between loop vertices may already be a mesh edge."""
     L = loop.size
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
@@ -295,7 +297,7 @@ def _chords_ok(tri: np.ndarray, loop: np.ndarray, edge_keys: np.ndarray, n: int)
     if e.size == 0:
         return True
     g = np.sort(loop[e], axis=1)
-    return not _in_sorted(g[:, 0] * n + g[:, 1], edge_keys).any()
+    return not ctx.has_edge(g[:, 0] * ctx.n + g[:, 1]).any()
 
 
 def _fan_patch(P: np.ndarray):
@@ -310,7 +312,21 @@ class _Context:
 
     def __init__(self, V: np.ndarray, F: np.ndarray, n: int, edge_keys: np.ndarray):
         self.V, self.F, self.n, self.edge_keys = V, F, n, edge_keys
+        self.added_keys = np.zeros(0, dtype=np.int64)  # edges of the patches accepted so far
         self._faces = None
+
+    def has_edge(self, keys: np.ndarray) -> np.ndarray:
+        """Whether the edges ``keys`` (``a * n + b``, ``a < b``) are in the mesh or a patch."""
+        return _in_sorted(keys, self.edge_keys) | _in_sorted(keys, self.added_keys)
+
+    def add_edges(self, faces: np.ndarray) -> None:
+        """Record the edges of an accepted patch ``faces`` between mesh vertices."""
+        E = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        E = E[(E < self.n).all(axis=1)]
+        keys = E[:, 0] * self.n + E[:, 1]
+        keys = keys[~_in_sorted(keys, self.edge_keys)]  # chords
+        if keys.size:
+            self.added_keys = np.union1d(self.added_keys, keys)
 
     @property
     def faces(self) -> tuple:
@@ -339,11 +355,11 @@ def _loop_patch(loop: np.ndarray, P: np.ndarray, h: float, ctx: _Context):
     if L > DP_MAX_LOOP:
         return _split_patch(loop, P, h, ctx)
     got = _planar_patch(P, h) if h > 0 else None
-    if got is not None and not _chords_ok(got[0], loop, ctx.edge_keys, n):
+    if got is not None and not _chords_ok(got[0], loop, ctx):
         got = None
     if got is None:
         g = np.sort(np.stack(np.meshgrid(loop, loop, indexing="ij"), axis=-1), axis=-1)
-        forbid = _in_sorted(g[..., 0] * n + g[..., 1], ctx.edge_keys) & (g[..., 0] >= 0)
+        forbid = ctx.has_edge(g[..., 0] * n + g[..., 1]) & (g[..., 0] >= 0)
         idx = np.arange(L)
         forbid[idx, (idx + 1) % L] = forbid[(idx + 1) % L, idx] = False
         nb = _border_normals(ctx.V, ctx.faces, loop, n)
@@ -380,6 +396,206 @@ def _split_patch(loop: np.ndarray, P: np.ndarray, h: float, ctx: _Context):
     return np.concatenate(tris), np.concatenate(news)
 
 
+class OpenLoop(NamedTuple):
+    """A boundary loop :func:`fill_holes` left open: its input vertex indices and why."""
+
+    vertices: np.ndarray
+    reason: str
+
+
+#: Reasons a loop is left open (``OpenLoop.reason``).
+OPEN_MAX_HOLE = "longer than max_hole (--max-hole)"
+OPEN_NOT_CLOSED = (
+    "not one closed border (borders meet at a vertex where their faces are wound inconsistently)"
+)
+OPEN_NON_ORIENTABLE = "on a non-orientable surface (such as a Moebius strip)"
+OPEN_UNCOVERED = "whose fill would not cover every edge of it"
+OPEN_DUPLICATE = "whose fill would duplicate a face"
+OPEN_NON_MANIFOLD = "whose fill would give an edge more than two faces"
+
+
+class FilledMesh(tuple):
+    """``(V, F)`` returned by :func:`fill_holes`, with ``n_loops`` (boundary loops found, seams
+    excluded) and ``open_loops`` (an :class:`OpenLoop` per loop left open)."""
+
+    def __new__(cls, V: np.ndarray, F: np.ndarray, n_loops: int, open_loops: list):
+        self = super().__new__(cls, (V, F))
+        self.n_loops = int(n_loops)
+        self.open_loops = tuple(open_loops)
+        return self
+
+    def __getnewargs__(self):
+        return (self[0], self[1], self.n_loops, self.open_loops)
+
+    @property
+    def vertices(self) -> np.ndarray:
+        return self[0]
+
+    @property
+    def faces(self) -> np.ndarray:
+        return self[1]
+
+    @property
+    def n_filled(self) -> int:
+        return self.n_loops - len(self.open_loops)
+
+
+def _seam_map(V: np.ndarray, F: np.ndarray, n: int) -> np.ndarray:
+    """Each vertex's representative: the first coincident border copy for border vertices."""
+    to = np.arange(n)
+    onb = np.zeros(n, dtype=bool)
+    onb[boundary_edges(F, n).ravel()] = True
+    if onb.any():
+        g = weld(V, F).index_map
+        rep = np.full(int(g.max()) + 1, -1, dtype=np.int64)
+        order = np.flatnonzero(onb)[::-1]
+        rep[g[order]] = order
+        to = np.where(onb, rep[g], to)
+    return to
+
+
+class _Checker:
+    """Welded-mesh edge counts and faces around a loop, to refuse fills that would duplicate a
+    face or give an edge more than two faces (the fills accepted so far included)."""
+
+    def __init__(self, Fw: np.ndarray, n: int):
+        self.n, self.Fw = n, Fw
+        E = np.sort(np.concatenate([Fw[:, [0, 1]], Fw[:, [1, 2]], Fw[:, [2, 0]]]), axis=1)
+        self.ekey, self.ecnt = np.unique(E[:, 0] * n + E[:, 1], return_counts=True)
+        m = Fw.shape[0]
+        self.inc = sp.csr_matrix(
+            (np.ones(3 * m, dtype=bool), (Fw.ravel(), np.repeat(np.arange(m), 3))), shape=(n, m)
+        )
+        self.added_e: dict[int, int] = {}
+        self.added_f: dict[int, list] = {}
+
+    def count(self, keys: np.ndarray) -> np.ndarray:
+        """Faces on the edges ``keys`` (``a * n + b``, ``a < b``)."""
+        pos = np.minimum(np.searchsorted(self.ekey, keys), self.ekey.size - 1)
+        c = np.where(self.ekey[pos] == keys, self.ecnt[pos], 0)
+        return c + np.array([self.added_e.get(k, 0) for k in keys.tolist()], dtype=np.int64)
+
+    def loop_closed(self, loop: np.ndarray) -> bool:
+        a, b = loop, np.roll(loop, -1)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        return bool(np.all(self.count(lo * self.n + hi) == 1))
+
+    def faces_on(self, loop: np.ndarray) -> np.ndarray:
+        """Faces of the mesh with a corner on ``loop``."""
+        return np.unique(self.inc[loop].indices)
+
+    def problem(self, loop: np.ndarray, faces: np.ndarray) -> str | None:
+        n = self.n
+        Fs = np.sort(faces, axis=1)
+        if np.unique(Fs, axis=0).shape[0] < Fs.shape[0]:
+            return OPEN_DUPLICATE
+        old = Fs[(Fs < n).all(axis=1)]
+        if old.shape[0]:
+            near = [self.Fw[self.faces_on(loop)]]
+            near += [np.asarray(self.added_f[v]) for v in loop.tolist() if v in self.added_f]
+            have = {tuple(f) for f in np.sort(np.concatenate(near), axis=1).tolist()}
+            if any(tuple(f) in have for f in old.tolist()):
+                return OPEN_DUPLICATE
+        E = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        N = int(faces.max()) + 1
+        key, cnt = np.unique(E[:, 0] * N + E[:, 1], return_counts=True)
+        a, b = key // N, key % N
+        old_e = b < n  # both ends are mesh vertices
+        total = cnt.copy()
+        total[old_e] += self.count(a[old_e] * n + b[old_e])
+        if np.any(total > 2):
+            return OPEN_NON_MANIFOLD
+        lo, hi = np.minimum(loop, np.roll(loop, -1)), np.maximum(loop, np.roll(loop, -1))
+        if not np.all(self.count(lo * n + hi) + _in_sorted(lo * N + hi, key) == 2):
+            return OPEN_UNCOVERED
+        return None
+
+    def add(self, faces: np.ndarray) -> None:
+        n = self.n
+        for f in faces[(faces < n).all(axis=1)].tolist():  # faces a later fill could repeat
+            for v in f:
+                self.added_f.setdefault(v, []).append(f)
+        E = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        for k in (E[(E < n).all(axis=1)] @ np.array([n, 1])).tolist():
+            self.added_e[k] = self.added_e.get(k, 0) + 1
+
+
+def _half_edges(F: np.ndarray) -> np.ndarray:
+    """(3m, 2) directed edges of the faces, all first edges, then all second, then all third."""
+    return np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+
+
+def _loop_copies(loops: list, F: np.ndarray, Fw: np.ndarray, n: int) -> list:
+    """For each welded loop, the input vertex of each loop vertex in the face on its next edge."""
+    H = _half_edges(Fw)
+    Ho = _half_edges(F)
+    key = H[:, 0] * n + H[:, 1]
+    order = np.argsort(key, kind="stable")
+    key, Ho = key[order], Ho[order]
+    out = []
+    for loop in loops:
+        nxt = np.roll(loop, -1)
+        cp = loop.copy()
+        for q, end in ((loop * n + nxt, 0), (nxt * n + loop, 1)):  # the face runs u->v or v->u
+            pos = np.minimum(np.searchsorted(key, q), key.size - 1)
+            hit = (key[pos] == q) & (cp == loop)
+            cp[hit] = Ho[pos[hit], end]
+        out.append(cp)
+    return out
+
+
+def _non_orientable(Fw: np.ndarray, n: int) -> np.ndarray:
+    """(m,) bool: faces of a component (across edges with two faces) with no consistent
+    orientation, such as a Moebius strip."""
+    m = Fw.shape[0]
+    H = _half_edges(Fw)
+    f = np.tile(np.arange(m), 3)
+    key = np.minimum(H[:, 0], H[:, 1]) * n + np.maximum(H[:, 0], H[:, 1])
+    order = np.argsort(key, kind="stable")
+    key, H, f = key[order], H[order], f[order]
+    _, start, cnt = np.unique(key, return_index=True, return_counts=True)
+    a = start[cnt == 2]
+    fa, fb = f[a], f[a + 1]
+    same = H[a, 0] == H[a + 1, 0]  # both faces run the edge one way: opposite orientations
+    rows = np.concatenate([fa, fa + m])
+    cols = np.concatenate([np.where(same, fb + m, fb), np.where(same, fb, fb + m)])
+    G = sp.coo_matrix((np.ones(rows.size, dtype=bool), (rows, cols)), shape=(2 * m, 2 * m))
+    lab = connected_components(G, directed=False)[1]
+    return lab[:m] == lab[m:]
+
+
+def _unwound_loops(Fw: np.ndarray, n: int, edges: np.ndarray) -> tuple[list, list]:
+    """Boundary ``edges`` (k, 2) left by the directed walks (faces wound inconsistently along
+    them), as simple cycles running like most of their faces, and the other pieces' vertices."""
+    adj = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    lab = connected_components(adj, directed=False)[1]
+    deg = np.bincount(edges.ravel(), minlength=n)
+    H = _half_edges(Fw)
+    hkey = np.sort(H[:, 0] * n + H[:, 1])
+    comp_of = lab[edges[:, 0]]
+    cycles, pieces = [], []
+    nbr: dict[int, list] = {}
+    for u, v in edges.tolist():
+        nbr.setdefault(u, []).append(v)
+        nbr.setdefault(v, []).append(u)
+    for c in np.unique(comp_of).tolist():
+        vs = np.unique(edges[comp_of == c])
+        if not np.all(deg[vs] == 2) or vs.size < 3:
+            pieces.append(vs)
+            continue
+        loop, prev = [int(vs[0])], -1
+        while len(loop) < vs.size:
+            a, b = nbr[loop[-1]]
+            nxt = b if a == prev else a
+            prev = loop[-1]
+            loop.append(nxt)
+        loop = np.asarray(loop, dtype=np.int64)
+        if 2 * np.count_nonzero(_in_sorted(loop * n + np.roll(loop, -1), hkey)) < loop.size:
+            loop = loop[::-1].copy()
+        cycles.append(loop)
+    return cycles, pieces
+
+
 def fill_holes(
     V: Any,
     F: Any,
@@ -389,11 +605,14 @@ def fill_holes(
     weld_seams: bool = True,
     density: float = 1.0,
     rng: Any = None,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> FilledMesh:
     """Close every boundary loop of a mesh: implant points, triangulate, complete (Section 5.3.1).
 
     Patches: docs/decisions.md#complete-holes-details; the default method:
-    docs/decisions.md#complete-fill-holes.
+    docs/decisions.md#complete-fill-holes. A loop is left open, and reported in
+    ``open_loops``, when it is longer than ``max_hole``, is not one closed border, lies on a
+    non-orientable surface, or when its fill would duplicate a face or give an edge more than
+    two faces; borders whose faces are wound inconsistently are followed edge by edge.
 
     Parameters
     ----------
@@ -403,16 +622,16 @@ def fill_holes(
     max_hole : int, optional
         Leave loops with more edges open (e.g. a scan's border).
     weld_seams : bool
-        Treat coincident border vertices as one, so that seams are not holes.
+        Treat coincident border vertices as one, so that seams are not holes (the input faces
+        keep their indices).
     density, rng
         Implanted points per loop edge length (refused above :data:`MAX_IMPLANTED`); seed.
 
     Returns
     -------
-    V_out : (n + p, 3) ndarray
-        The input rows, then the implanted points.
-    F_out : (m' + q, 3) int64 ndarray
-        The input faces (re-indexed when welded), then the new faces.
+    FilledMesh
+        Unpacks as ``(V_out, F_out)``: the input rows then the implanted points, the input faces
+        unchanged then the new faces; ``n_loops``, ``n_filled`` and ``open_loops``.
     """
     V = as_points(V, "V")
     n = V.shape[0]
@@ -421,38 +640,57 @@ def fill_holes(
     check_positive(density, "density")
     if max_hole is not None:
         check_positive(max_hole, "max_hole", integer=True)
+    Fo = F
     if weld_seams:
-        # only border vertices are welded (to their first coincident border copy): a seam of
-        # duplicated vertices closes, while coincident vertices inside the surface (parts that
-        # touch) stay apart, as in the input
-        onb = np.zeros(n, dtype=bool)
-        onb[boundary_edges(F, n).ravel()] = True
-        if onb.any():
-            g = weld(V, F).index_map
-            rep = np.full(int(g.max()) + 1, -1, dtype=np.int64)
-            order = np.flatnonzero(onb)[::-1]
-            rep[g[order]] = order  # first border vertex of each group
-            to = np.where(onb, rep[g], np.arange(n))
-            F = to[F]
-            F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])]
-            if F.shape[0] == 0:
-                raise InvalidInputError("`F` has no face left after welding coincident vertices.")
-    loops = [s for lp in boundary_loops(F, n) for s in _simple_loops(lp)]
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        # border vertices are welded to their first coincident border copy for finding the
+        # holes (a seam of duplicated vertices is no hole); coincident vertices inside the
+        # surface (parts that touch) stay apart; the output keeps the input's face indices
+        to = _seam_map(V, F, n)
+        Fw = to[F]
+        ok = (Fw[:, 0] != Fw[:, 1]) & (Fw[:, 1] != Fw[:, 2]) & (Fw[:, 2] != Fw[:, 0])
+        Fw, Fo = Fw[ok], F[ok]
+        if Fw.shape[0] == 0:
+            raise InvalidInputError(
+                "every face of the mesh collapses when its coincident border vertices are "
+                "merged; there is no surface whose holes could be filled."
+            )
+    else:
+        Fw = F
+    check = _Checker(Fw, n)
+    walks = [s for lp in boundary_loops(Fw, n) for s in _simple_loops(lp)]
+    loops = [s for s in walks if check.loop_closed(s)]
+    n_walked = len(loops)
+    pieces: list = []
+    if n_walked < len(walks):  # borders along which the faces are wound inconsistently
+        B = np.sort(boundary_edges(Fw, n), axis=1)
+        done = np.concatenate(
+            [np.sort(np.column_stack([lp, np.roll(lp, -1)]), axis=1) for lp in loops]
+            or [np.zeros((0, 2), dtype=np.int64)]
+        )
+        B = B[~_in_sorted(B[:, 0] * n + B[:, 1], np.unique(done[:, 0] * n + done[:, 1]))]
+        more, pieces = _unwound_loops(Fw, n, B)
+        loops += more
+    copies = _loop_copies(loops, Fo, Fw, n)
+    E = np.sort(np.concatenate([Fw[:, [0, 1]], Fw[:, [1, 2]], Fw[:, [2, 0]]]), axis=1)
     edge_keys = np.unique(E[:, 0] * n + E[:, 1])
     new_pts: list[np.ndarray] = []
     new_faces: list[np.ndarray] = []
-    ctx = _Context(V, F, n, edge_keys)
+    ctx = _Context(V, Fw, n, edge_keys)
     n_next = n
-    todo = []
+    todo, open_loops = [], [OpenLoop(pc, OPEN_NOT_CLOSED) for pc in pieces]
+    bad_face = _non_orientable(Fw, n) if len(loops) > n_walked else None
     expected = 0.0
-    for loop in loops:
+    for k, (loop, cp) in enumerate(zip(loops, copies)):
         L = loop.size
-        if L < 3 or (max_hole is not None and L > max_hole):
+        if max_hole is not None and L > max_hole:
+            open_loops.append(OpenLoop(cp, OPEN_MAX_HOLE))
+            continue
+        if k >= n_walked and bad_face[check.faces_on(loop)].any():
+            open_loops.append(OpenLoop(cp, OPEN_NON_ORIENTABLE))
             continue
         P = V[loop]
         h = float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).mean()) / density
-        todo.append((loop, P, h))
+        todo.append((loop, cp, P, h))
         expected += _lattice_count(P, h)
     if expected > MAX_IMPLANTED:
         raise InvalidInputError(
@@ -461,23 +699,29 @@ def fill_holes(
             "`density` (1 spaces the points like the hole's border edges) or leave large holes "
             "open with `max_hole`."
         )
-    for loop, P, h in progress(todo, desc="holes", total=len(todo)):
+    for loop, cp, P, h in progress(todo, desc="holes", total=len(todo)):
         tri, new3 = _loop_patch(loop, P, h, ctx)
-        ids = np.concatenate([loop, np.arange(n_next, n_next + new3.shape[0])])
+        new_ids = np.arange(n_next, n_next + new3.shape[0])
+        faces_w = np.concatenate([loop, new_ids])[tri]  # already oriented against the loop
+        why = check.problem(loop, faces_w)
+        if why is not None:
+            open_loops.append(OpenLoop(cp, why))
+            continue
+        check.add(faces_w)
+        ctx.add_edges(faces_w)
         new_pts.append(new3)
-        new_faces.append(ids[tri])  # already oriented against the loop
+        new_faces.append(np.concatenate([cp, new_ids])[tri])
         n_next += new3.shape[0]
     if not new_faces:
-        return V.copy(), F.copy()
+        return FilledMesh(V.copy(), F.copy(), len(loops) + len(pieces), open_loops)
     V_all = np.concatenate([V, *new_pts])
     F_all = np.concatenate([F, *new_faces]).astype(np.int64)
     if V_all.shape[0] > n:
-        # unreferenced original rows (welded duplicates) are known: they stay as they are
         unknown = np.zeros(V_all.shape[0], dtype=bool)
         unknown[n:] = True
         with activity(f"completing {int(unknown.sum())} implanted points ({method})"):
             V_all[unknown] = _complete_near(V_all, F_all, unknown, method, rng)
-    return V_all, F_all
+    return FilledMesh(V_all, F_all, len(loops) + len(pieces), open_loops)
 
 
 #: Graph rings of known vertices around the implanted points that take part in their completion:

@@ -172,10 +172,10 @@ def _read_partial_mesh(path: str):
 
 def _read_partial_frames(path: str):
     """``(frames, faces or None)`` of an ``.npz`` animation/sequence, NaN entries allowed."""
-    import io as _bytes_io
     import zipfile
 
     from ..io._common import read_bytes
+    from ..io._npz import npz_array, open_npz
 
     p = Path(path)
     if not p.is_file():
@@ -184,12 +184,14 @@ def _read_partial_frames(path: str):
         # the same archives as every other command: optionally gzip-compressed, frames under
         # `vertices` or `frames`
         data = read_bytes(p, p.name.lower().endswith(".gz"))
-        with np.load(_bytes_io.BytesIO(data), allow_pickle=False) as d:
+        with open_npz(data, p.name) as d:
             keys = set(d.files)
             vkey = "vertices" if "vertices" in keys else "frames" if "frames" in keys else None
             if vkey is not None:
-                A = np.asarray(d[vkey], dtype=np.float64)
-                F = np.asarray(d["faces"], dtype=np.int64) if "faces" in keys else None
+                A = np.asarray(npz_array(d, vkey, p.name), dtype=np.float64)
+                F = None
+                if "faces" in keys:
+                    F = np.asarray(npz_array(d, "faces", p.name), dtype=np.int64)
                 if F is None:
                     raise InvalidInputError(f"{p.name}: has `{vkey}` but no `faces`.")
             elif "points" in keys:
@@ -198,17 +200,30 @@ def _read_partial_frames(path: str):
                         f"{p.name}: frames of different sizes have no point correspondence; "
                         "completion needs (T, n, 3) `points`."
                     )
-                A, F = np.asarray(d["points"], dtype=np.float64), None
+                A, F = np.asarray(npz_array(d, "points", p.name), dtype=np.float64), None
             else:
                 raise InvalidInputError(
                     f"{p.name}: expected arrays `vertices` (or `frames`) + `faces` (animation) or "
                     f"`points` (sequence); got {', '.join(sorted(keys)) or 'none'}."
                 )
+    except InvalidInputError:
+        raise
     except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
         raise InvalidInputError(f"{p.name}: not a readable .npz archive ({exc}).") from exc
     if A.ndim != 3 or A.shape[2] != 3:
         raise InvalidInputError(f"{p.name}: frames must have shape (T, n, 3); got {A.shape}.")
     return A, F
+
+
+def _open_note(open_loops) -> str:
+    """``; N left open: k <reason>, ...`` for the status line of ``complete --fill-holes``."""
+    if not open_loops:
+        return ""
+    why: dict[str, int] = {}
+    for lp in open_loops:
+        why[lp.reason] = why.get(lp.reason, 0) + 1
+    reasons = "; ".join(f"{c} {k}" for k, c in why.items())
+    return f"; {len(open_loops)} left open: {reasons}"
 
 
 def run_complete(args) -> int:
@@ -227,17 +242,19 @@ def run_complete(args) -> int:
                 f"`--method` must be one of {', '.join(MESH_METHODS)} with --fill-holes."
             )
         m = io.read_mesh(src)
-        V, F = complete.fill_holes(
+        res = complete.fill_holes(
             m.vertices,
             m.faces,
             method=method,
             max_hole=args.max_hole,
             density=1.0 if args.density is None else args.density,
         )
+        V, F = res
         io.write(args.output, Mesh(V, F))
         status(
-            f"wrote {args.output}: {V.shape[0] - m.n_vertices} implanted vertices, "
-            f"{F.shape[0] - m.n_faces} faces added ({method}, {time.perf_counter() - t0:.2f} s)"
+            f"wrote {args.output}: {res.n_filled} of {res.n_loops} boundary loops closed, "
+            f"{V.shape[0] - m.n_vertices} implanted vertices, {F.shape[0] - m.n_faces} faces "
+            f"added ({method}, {time.perf_counter() - t0:.2f} s){_open_note(res.open_loops)}"
         )
         return 0
     for flag, value in (("--max-hole", args.max_hole), ("--density", args.density)):
