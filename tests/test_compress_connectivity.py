@@ -213,19 +213,18 @@ def test_every_shared_mesh_roundtrips(path):
 
 
 def test_version_1_files_still_read():
-    import struct
-    import zlib
-
     from spectrageo import compress
+    from spectrageo.compress import _container
 
     V, F = load_fandisk()
-    data = bytearray(compress.encode(V, F))
-    assert data[4] == 2
-    V2, F2 = compress.decode(bytes(data))
-    data[4] = 1
-    (plen,) = struct.unpack_from("<H", data, 48)
-    end = 50 + plen
-    data[end : end + 4] = struct.pack("<I", zlib.crc32(bytes(data[:end])))
-    V1, F1 = compress.decode(bytes(data))
+    data = compress.encode(V, F)
+    assert data[4] == 3  # version 3: chained chunk checksums
+    V2, F2 = compress.decode(data)
+    # the same content as version 1 writes it (version byte, checksums of each payload alone)
+    c = _container.parse(data)
+    c.version = 1
+    old = c.to_bytes()
+    assert old[4] == 1 and len(old) == len(data)
+    V1, F1 = compress.decode(old)
     np.testing.assert_array_equal(F1, F)
     np.testing.assert_array_equal(V1, V2)

@@ -207,16 +207,22 @@ def decode(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     Raises
     ------
     InvalidInputError
-        Not an ``.sgc`` file, unsupported version, checksum mismatch, truncated, or malformed.
+        Not an ``.sgc`` file, unsupported version, checksum mismatch, chunks out of place,
+        truncated, malformed, or declared counts whose decoding would exceed the memory cap
+        (:func:`spectrageo.io._common.max_bytes`).
     """
     c = _parse(data, partial)
     n, m = c.n_vertices, c.n_faces
+    _container.check_memory(c.method, n, m, ".sgc header")
     F = _connectivity.decode_faces(c.chunks[0][1], n, m)
     mod = _module(c.method)
-    X = mod.decode(c.params, c.chunks[1:], F, n, c.method)
-    if not np.isfinite(X).all():
-        raise InvalidInputError(".sgc data decodes to non-finite coordinates (corrupted).")
+    if c.method == "spectral":
+        X = mod.decode(c.params, c.chunks[1:], F, n, c.method, complete=c.complete)
+    else:
+        X = mod.decode(c.params, c.chunks[1:], F, n, c.method)
     V = X * c.scale + np.asarray(c.origin)
+    if not np.isfinite(V).all():
+        raise InvalidInputError(".sgc data decodes to non-finite coordinates (corrupted).")
     return V, F
 
 
@@ -235,7 +241,7 @@ def info(data) -> dict:
         params["sent_share"] = round(mod.sent_share(c.chunks[1:], c.n_vertices), 6)
     return {
         "format": "sgc",
-        "version": _container.FORMAT_VERSION,
+        "version": c.version,
         "method": c.method,
         "n_vertices": c.n_vertices,
         "n_faces": c.n_faces,
@@ -308,9 +314,10 @@ def encode_animation(
 def decode_animation(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Decompress ``.sga`` bytes into ``(frames, F)``: (T, n, 3) float64 and (m, 3) int64.
 
-    ``partial=True`` accepts a truncated file and returns the frames of every complete block
-    (compare ``frames.shape[0]`` with :func:`info_animation` of the full file, or use
-    :class:`StreamDecoder`, to know what is missing). Damaged data raise
+    ``partial=True`` accepts a truncated file (one without its trailing frame index included)
+    and returns the frames of every complete block (compare ``frames.shape[0]`` with
+    :func:`info_animation` of the full file, or use :class:`StreamDecoder`, to know what is
+    missing). Damaged data, and counts whose decoding would exceed the memory cap, raise
     :class:`~spectrageo.InvalidInputError`.
     """
     return _sga.decode_animation(data, partial=partial)

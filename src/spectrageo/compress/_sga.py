@@ -33,6 +33,7 @@ from ._sga_format import (
     KIND_INDEX,
     Params,
     block_segment,
+    declared_frames,
     header_segment,
     index_segment,
     info_dict,
@@ -56,22 +57,56 @@ def encode_animation(
     return encode_at_rate(enc.build, A, method, step, bpvf, error)
 
 
+def _check_header_memory(head: _container.Container, name: str) -> None:
+    """Refuse a stream whose header declares counts beyond the memory cap (before decoding)."""
+    frames = declared_frames(head)
+    _container.check_memory(head.method, head.n_vertices, head.n_faces, name, max(frames, 1))
+
+
+def check_memory(data: bytes, name: str) -> None:
+    """:func:`._container.check_memory` for the counts an ``.sga`` header declares (nothing
+    when ``data`` does not start with a complete animation header: decoding reports that)."""
+    try:
+        end = segment_end(data, 0) if is_animation(data) else None
+        head = None if end is None else _container.parse(data[:end], fmt=".sga")
+    except InvalidInputError:
+        return
+    if head is not None:
+        _check_header_memory(head, name)
+
+
 def _parse_stream(data, partial: bool):
     segs = iter_segments(data, partial)
     try:
         _p, _e, head = next(segs)
     except StopIteration:
         raise InvalidInputError(".sga data is empty.") from None
+    _check_header_memory(head, ".sga header")
     if head.method == "layered":
         return LayeredState(head), segs
     st = read_header(head)
     return st, segs
 
 
+def _sga_error(exc: InvalidInputError) -> InvalidInputError:
+    """``exc`` naming the ``.sga`` format (the helpers shared with ``.sgc`` say ``.sgc``)."""
+    text = str(exc)
+    return type(exc)(".sga" + text[4:]) if text.startswith(".sgc ") else exc
+
+
+def _indexed(segs, seen: list[bool]):
+    """``segs``, recording in ``seen[0]`` whether the frame index segment was among them."""
+    for item in segs:
+        if item[2].params[:1] == bytes([KIND_INDEX]):
+            seen[0] = True
+        yield item
+
+
 def iter_decode(data, *, partial: bool = False, serial: bool | None = None, _state=None):
     """Yield ``(t0, frames_block)`` for every block of an ``.sga`` byte string, in order.
 
-    ``_state``: a dict that receives the stream state under ``"st"`` (its faces, parameters).
+    A file ends with its frame index; without it the file was cut short, an error unless
+    ``partial``. ``_state``: a dict that receives the stream state under ``"st"``.
     """
     if isinstance(data, memoryview | bytearray):
         data = bytes(data)
@@ -79,13 +114,23 @@ def iter_decode(data, *, partial: bool = False, serial: bool | None = None, _sta
         raise InvalidInputError(f"`data` must be bytes; got {type(data).__name__}.")
     if not is_animation(data):
         raise InvalidInputError("not a spectrageo compressed animation (.sga).")
-    st, segs = _parse_stream(data, partial)
-    if _state is not None:
-        _state["st"] = st
-    if st.method == "layered":
-        yield from _layered.iter_frames(st, segs, partial)
-        return
-    yield from _animation.iter_blocks(st, segs, partial, serial)
+    try:
+        st, segs = _parse_stream(data, partial)
+        if _state is not None:
+            _state["st"] = st
+        seen = [False]
+        segs = _indexed(segs, seen)
+        if st.method == "layered":
+            yield from _layered.iter_frames(st, segs, partial)
+        else:
+            yield from _animation.iter_blocks(st, segs, partial, serial)
+        if not seen[0] and not partial:
+            raise InvalidInputError(
+                ".sga data is truncated: its trailing frame index segment is missing "
+                "(`spectrageo decompress --partial` decodes the complete blocks)."
+            )
+    except InvalidInputError as exc:
+        raise _sga_error(exc) from exc
 
 
 def decode_animation(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -101,12 +146,19 @@ def info_animation(data) -> dict:
     """Header summary of ``.sga`` bytes without decoding the geometry."""
     if isinstance(data, memoryview | bytearray):
         data = bytes(data)
+    try:
+        return _info_animation(data)
+    except InvalidInputError as exc:
+        raise _sga_error(exc) from exc
+
+
+def _info_animation(data: bytes) -> dict:
     st, segs = _parse_stream(data, False)
     if st.method == "layered":
         return _layered.info(data, st, segs)
     n_blocks = 0
     frames = 0
-    conn = len(_container.parse(data[: segment_end(data, 0)]).chunks[0][1])
+    conn = len(_container.parse(data[: segment_end(data, 0)], fmt=".sga").chunks[0][1])
     has_index = False
     for _p, _e, c in segs:
         if c.params[:1] == bytes([KIND_INDEX]):
@@ -300,14 +352,21 @@ class StreamDecoder:
         if self.done and data:
             raise InvalidInputError(".sga stream continues after its frame index.")
         self.buf += bytes(data)
+        try:
+            return self._segments()
+        except InvalidInputError as exc:
+            raise _sga_error(exc) from exc
+
+    def _segments(self) -> list[np.ndarray]:
         out: list[np.ndarray] = []
         while self.buf:
             end = segment_end(self.buf, 0)
             if end is None:
                 break
-            c = _container.parse(self.buf[:end])
+            c = _container.parse(self.buf[:end], fmt=".sga")
             self.buf = self.buf[end:]
             if self.state is None:
+                _check_header_memory(c, ".sga header")
                 if c.method == "layered":
                     self.state = LayeredState(c)
                 else:

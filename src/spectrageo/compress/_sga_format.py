@@ -5,6 +5,7 @@ stream header (kind 0: :class:`Params` with the connectivity and anchor chunks, 
 ``layered`` header), one segment per block (kind 1: block number, first frame, frame count,
 step; a ``layered`` frame is a block of one frame) and, in files, the frame index (kind 2: first
 frame, frame count, byte offset and length of every block, so a decoder can start at any block).
+A file without its trailing index was cut short: decoding it needs ``partial=True``.
 """
 
 from __future__ import annotations
@@ -174,8 +175,16 @@ def iter_segments(data: bytes, partial: bool) -> Iterator[tuple[int, int, _conta
             if partial and pos > 0:
                 return
             raise InvalidInputError(f".sga data is truncated (segment at byte {pos} is cut short).")
-        yield pos, end, _container.parse(data[pos:end])
+        yield pos, end, _container.parse(data[pos:end], fmt=f".sga segment at byte {pos}:")
         pos = end
+
+
+def declared_frames(head: _container.Container) -> int:
+    """Frame count a stream header segment declares (0: unknown, a live stream); both header
+    layouts (:class:`Params` and the ``layered`` one) start with ``(kind u8, frames u32)``."""
+    if len(head.params) < 5:
+        raise InvalidInputError(".sga stream header is malformed.")
+    return int(struct.unpack_from("<I", head.params, 1)[0])
 
 
 def is_animation(data) -> bool:
@@ -188,7 +197,7 @@ def info_dict(data, st, frames, conn, n_blocks, has_index, parameters) -> dict:
     nvf = max(1, st.n * max(frames, 1))
     return {
         "format": "sga",
-        "version": _container.FORMAT_VERSION,
+        "version": data[4],
         "method": st.method,
         "n_frames": frames,
         "n_vertices": st.n,

@@ -15,14 +15,9 @@ import numpy as np
 from .._errors import InvalidInputError
 from ..geometry.data import MeshAnimation, PointCloud, PointCloudSequence
 from ..io import register_format
-from ..io._common import check_alloc
 from ..io._raw import RawGeometry
-from . import decode, decode_animation, info, info_animation
-
-#: decoder working memory per vertex, bytes (peak resident growth of a fresh process decoding the
-#: 437,645-vertex dragon, with margin), checked against the memory cap before decoding
-_WORK_PER_VERTEX = {"spectral": 1500}
-_WORK_DEFAULT = 5000
+from . import _sga, decode, decode_animation, info, info_animation
+from ._container import check_memory
 
 #: advice given when a .sgc / .sga output is asked of :func:`spectrageo.io.write`
 WRITE_ADVICE = (
@@ -40,7 +35,7 @@ def register() -> None:
 
 def _named(exc: InvalidInputError, name: str) -> InvalidInputError:
     text = str(exc)
-    if "truncated" in text and "header" not in text:
+    if "truncated" in text and "header" not in text and "--partial" not in text:
         text += " `spectrageo decompress --partial` decodes the complete part of a cut file."
     return InvalidInputError(f"{name}: {text}")
 
@@ -51,9 +46,7 @@ def read_sgc(data: bytes, name: str) -> RawGeometry:
         head = info(data)
     except InvalidInputError as exc:
         raise _named(exc, name) from exc
-    n, m = int(head["n_vertices"]), int(head["n_faces"])
-    work = _WORK_PER_VERTEX.get(str(head["method"]), _WORK_DEFAULT)
-    check_alloc(n * (24 + work) + 24 * m, name, f"decoding {n} vertices and {m} faces")
+    check_memory(str(head["method"]), int(head["n_vertices"]), int(head["n_faces"]), name)
     try:
         V, F = decode(data)
     except InvalidInputError as exc:
@@ -66,12 +59,13 @@ def read_sga(data: bytes, name: str, *, kind: str | None) -> MeshAnimation | Poi
     with ``kind="sequence"``."""
     if kind in ("mesh", "points"):
         raise InvalidInputError(f"{name}: a .sga file holds an animation, not a single {kind!r}.")
+    _sga.check_memory(data, name)
     try:
         head = info_animation(data)
     except InvalidInputError as exc:
         raise _named(exc, name) from exc
     t, n, m = int(head["n_frames"]), int(head["n_vertices"]), int(head["n_faces"])
-    check_alloc(2 * 24 * t * n + _WORK_DEFAULT * n + 24 * m, name, f"decoding {t} frames")
+    check_memory(str(head["method"]), n, m, name, max(t, 1))
     try:
         frames, F = decode_animation(data)
     except InvalidInputError as exc:

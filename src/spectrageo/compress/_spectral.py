@@ -465,8 +465,16 @@ def describe(params: bytes, method: str) -> dict:
 
 
 def decode(
-    params: bytes, chunks: list[tuple[int, bytes]], F: np.ndarray, n: int, method: str = "spectral"
+    params: bytes,
+    chunks: list[tuple[int, bytes]],
+    F: np.ndarray,
+    n: int,
+    method: str = "spectral",
+    *,
+    complete: bool = True,
 ) -> np.ndarray:
+    """Normalised coordinates (n, 3) from the geometry chunks; a ``complete`` file (not a prefix
+    read with ``partial=True``) must hold every frequency layer."""
     from ..spectral import reassemble
 
     p = SpectralParams.from_bytes(params)
@@ -484,6 +492,11 @@ def decode(
     layout = _layout(sizes, layer_cutoffs(int(dic.sizes.max())))
     if len(rest) > len(layout) or any(t != TAG_LAYER for t, _ in rest):
         raise InvalidInputError(".sgc spectral stream has unexpected chunks.")
+    if complete and len(rest) < len(layout):
+        raise InvalidInputError(
+            f".sgc spectral stream holds {len(rest)} of its {len(layout)} frequency layers "
+            "(the header's chunk count does not match the parameters)."
+        )
     vals = []
     for (_sub, col), (_t, payload) in zip(layout, rest):
         g, ng = _groups(col)
