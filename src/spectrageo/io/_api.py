@@ -39,7 +39,7 @@ _READER_SPECS: dict[str, tuple[str, str, dict[str, Any]]] = {
     ".laz": ("_las", "read_las", {"compressed": True}),
     ".glb": ("_trimesh_formats", "read_glb", {}),
     ".gltf": ("_trimesh_formats", "read_gltf", {}),
-    ".3mf": ("_trimesh_formats", "read_3mf", {}),
+    ".3mf": ("_3mf", "read_3mf", {}),
 }
 
 #: extension -> (reader, whole) registered by plugins (:func:`register_format`)

@@ -10,6 +10,7 @@ of the address-space limit. A file whose decoding would exceed it is refused wit
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import gzip
 import os
 import re
@@ -50,14 +51,44 @@ def _default_max_bytes() -> int:
     return int(cap)
 
 
+_LOWERED: contextvars.ContextVar[tuple[int, str] | None] = contextvars.ContextVar(
+    "spectrageo_lowered_cap", default=None
+)
+
+
+@contextlib.contextmanager
+def lowered_cap(nbytes: int, advice: str) -> Iterator[None]:
+    """In the block (this thread), :func:`max_bytes` is at most ``nbytes``; refusals then give
+    ``advice`` instead of ``SPECTRAGEO_MAX_BYTES``."""
+    token = _LOWERED.set((int(nbytes), advice))
+    try:
+        yield
+    finally:
+        _LOWERED.reset(token)
+
+
+def _cap_advice() -> str:
+    low = _LOWERED.get()
+    if low is not None and low[0] < _env_max_bytes():
+        return low[1]
+    return f"set {MAX_BYTES_ENV} to raise it"
+
+
 def max_bytes() -> int:
-    """Memory cap (bytes) for what one file may ask to allocate (see the module docstring).
+    """Memory cap (bytes) for what one file may ask to allocate (see the module docstring), at
+    most the one of an enclosing :func:`lowered_cap`.
 
     Raises
     ------
     InvalidInputError
         When ``SPECTRAGEO_MAX_BYTES`` is set but is not a positive size.
     """
+    low = _LOWERED.get()
+    cap = _env_max_bytes()
+    return cap if low is None else min(cap, low[0])
+
+
+def _env_max_bytes() -> int:
     text = os.environ.get(MAX_BYTES_ENV, "").strip()
     if not text:
         return _default_max_bytes()
@@ -83,7 +114,7 @@ def check_alloc(need: int, name: str, what: str) -> None:
     if need > cap:
         raise InvalidInputError(
             f"{name}: {what} needs {_fmt_bytes(need)}, more than the memory cap of "
-            f"{_fmt_bytes(cap)} (set {MAX_BYTES_ENV} to raise it)."
+            f"{_fmt_bytes(cap)} ({_cap_advice()})."
         )
 
 
@@ -148,7 +179,7 @@ def gunzip(raw: bytes, name: str) -> bytes:
                 if total > cap:
                     raise InvalidInputError(
                         f"{name}: gzip data expands to more than the memory cap of "
-                        f"{_fmt_bytes(cap)} (set {MAX_BYTES_ENV} to raise it)."
+                        f"{_fmt_bytes(cap)} ({_cap_advice()})."
                     )
                 parts.append(out)
                 if d.eof:
@@ -403,3 +434,20 @@ def text_colors(c: np.ndarray) -> np.ndarray:
     if c.size and (c == np.round(c)).all() and c.max() > 1.0 and c.min() >= 0 and c.max() <= 255:
         return c.astype(np.uint8)
     return c
+
+
+@contextlib.contextmanager
+def quiet_trimesh() -> Iterator[None]:
+    """Keep trimesh's log records (tracebacks of input it recovers from) off stderr in the block."""
+    import logging
+
+    log = logging.getLogger("trimesh")
+    sink = logging.NullHandler()
+    before = log.propagate
+    log.addHandler(sink)
+    log.propagate = False
+    try:
+        yield
+    finally:
+        log.propagate = before
+        log.removeHandler(sink)

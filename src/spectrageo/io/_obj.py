@@ -6,7 +6,8 @@ vertices per texture coordinate and regroups faces, against the order guarantees
 
 Reading
     * ``v x y z [w]`` (w ignored); ``v x y z r g b [a]`` gives vertex colours (uint8 when written
-      as integers 0-255). All ``v`` lines must have the same number of values.
+      as integers 0-255). When only some ``v`` lines carry colours, the geometry is read and the
+      colours dropped with a RepairWarning.
     * Faces ``f`` with corners ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``, fan-triangulated in file
       order; per-corner data follow the fan.
     * ``vt`` become the face attribute ``texcoord`` (m, 6), NaN for corners without one.
@@ -46,14 +47,28 @@ def _line_number(text: str, key: str, k: int) -> int:
     return -1
 
 
-def _table(text: str, key: str, name: str, min_cols: int, *, pad: bool = False) -> np.ndarray:
-    """Numbers of the ``key`` lines as a (count, width) float64 table (same width on every line, or
-    shorter lines padded with 0 when ``pad``)."""
+def _table(
+    text: str, key: str, name: str, min_cols: int, *, pad: bool = False, trim: bool = False
+) -> np.ndarray:
+    """Numbers of the ``key`` lines as a (count, width) float64 table (same width on every line;
+    shorter lines padded with 0 when ``pad``; lines cut to ``min_cols`` values when ``trim`` and
+    the widths differ, with a RepairWarning when values beyond a 4th are dropped)."""
     lines = _KEY_LINES[key].findall(text)
     if not lines:
         return np.zeros((0, min_cols), dtype=np.float64)
     rows = [ln.split() for ln in lines]
     lens = np.fromiter((len(r) for r in rows), dtype=np.int64, count=len(rows))
+    if trim and (lens != lens[0]).any() and lens.min() >= min_cols:
+        extra = int((lens > min_cols + 1).sum())
+        if extra:
+            warnings.warn(
+                f"{name}: only {extra} of {lens.size} OBJ '{key}' lines carry colours; the "
+                "colours are ignored.",
+                RepairWarning,
+                stacklevel=3,
+            )
+        rows = [r[:min_cols] for r in rows]
+        lens = np.full(len(rows), min_cols, dtype=np.int64)
     if pad and (lens != lens[0]).any():
         width = int(lens.max())
         rows = [r + ["0"] * (width - len(r)) for r in rows]
@@ -146,7 +161,7 @@ def read_obj(raw: bytes, name: str) -> RawGeometry:
     text = text.replace("\r\n", "\n").replace("\r", "\n").replace("\\\n", " ")
     text = _COMMENT.sub("", text)
 
-    pts = _table(text, "v", name, 3)
+    pts = _table(text, "v", name, 3, trim=True)
     if pts.shape[0] == 0:
         raise InvalidInputError(f"{name}: OBJ file has no vertices ('v' lines).")
     if pts.shape[1] < 3:

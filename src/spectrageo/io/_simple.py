@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._common import check_alloc, exc_text, text_colors
+from ._common import check_alloc, exc_text, quiet_trimesh, text_colors
 from ._raw import RawGeometry
 
 # ------------------------------------------------------------------------------------------ XYZ
@@ -457,7 +457,8 @@ def read_stl(raw: bytes, name: str) -> RawGeometry:
                 "triangle count nor ascii 'solid' text; truncated or not STL)."
             )
     try:
-        d = stl.load_stl_binary(io.BytesIO(raw)) if is_binary else stl.load_stl(io.BytesIO(raw))
+        with quiet_trimesh():  # a bad ascii normal is logged with a traceback; normals are unused
+            d = stl.load_stl_binary(io.BytesIO(raw)) if is_binary else stl.load_stl(io.BytesIO(raw))
     except Exception as exc:  # noqa: BLE001 - trimesh raises many types (even ImportError) on garbage
         raise InvalidInputError(f"{name}: malformed or truncated STL ({exc_text(exc)}).") from exc
     parts = list(d["geometry"].values()) if "geometry" in d else [d]
