@@ -68,9 +68,9 @@ def _f1(removed: np.ndarray, lab: np.ndarray) -> float:
 
 
 def _rpca(P: np.ndarray) -> tuple[np.ndarray, dict]:
-    from spectrageo.outliers import remove_outliers
+    from spectrageo.outliers import detect_outliers
 
-    r = remove_outliers(P, method="rpca", return_points=False)
+    r = detect_outliers(P, method="rpca")
     return ~r.keep, r.info
 
 
@@ -126,10 +126,10 @@ P, lab = z["P"], z["lab"]
 del z
 t = time.perf_counter()
 if {method!r} == "rpca":
-    from spectrageo.outliers import remove_outliers
-    remove_outliers(P[:2000], method="rpca", return_points=False)  # load the compiled kernels
+    from spectrageo.outliers import detect_outliers
+    detect_outliers(P[:2000], method="rpca")  # load the compiled kernels
     t = time.perf_counter()
-    removed = ~remove_outliers(P, method="rpca", return_points=False).keep
+    removed = ~detect_outliers(P, method="rpca").keep
 else:
     import open3d as o3d
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))

@@ -38,10 +38,10 @@ def f1(removed):
 OURS = (
     MAKE
     + """
-from spectrageo.outliers import remove_outliers
+from spectrageo.outliers import detect_outliers, remove_outliers
 remove_outliers(P[:2000], method={method!r})  # compile the kernels outside the timing
 t = time.perf_counter()
-r = remove_outliers(P, method={method!r}, k=10, return_points=False)
+r = detect_outliers(P, method={method!r}, k=10)
 dt = time.perf_counter() - t
 RESULT = {{"time_s": dt, "f1": f1(~r.keep), "info": {{k: str(v) for k, v in r.info.items()}}}}
 """

@@ -131,14 +131,14 @@ def load_cases(data: Path) -> list[tuple]:
 
 
 def run_config(cfg: dict, cases: list[tuple]) -> list[dict]:
-    from spectrageo.outliers import RPCAOptions, remove_outliers
+    from spectrageo.outliers import RPCAOptions, detect_outliers
 
     opts = RPCAOptions(**{name: cfg[name] for name in KWARGS})
     rows = []
     with patched(cfg):
         for label, pat, frac, Q, lab in cases:
             t0, c0 = time.perf_counter(), time.process_time()
-            r = remove_outliers(Q, method="rpca", k=10, return_points=False, options=opts)
+            r = detect_outliers(Q, method="rpca", k=10, options=opts)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             rem = ~r.keep
             tp = int(np.count_nonzero(rem & lab))
@@ -217,9 +217,9 @@ def search(data: Path, sweeps: int) -> None:
     t_start = time.perf_counter()
     cases = load_cases(data)
     print(f"{len(cases)} cases loaded in {time.perf_counter() - t_start:.0f} s", flush=True)
-    from spectrageo.outliers import remove_outliers
+    from spectrageo.outliers import detect_outliers
 
-    remove_outliers(np.random.default_rng(0).random((300, 3)), k=10, return_points=False)
+    detect_outliers(np.random.default_rng(0).random((300, 3)), k=10)
     memo: dict[str, dict] = {}
     case_path = OUT_DIR / "cases.csv"
     # resume: configurations already measured in an earlier run of the same search

@@ -18,6 +18,7 @@ from spectrageo.geometry import (
     mean_curvature,
     mean_edge_length,
     pca_normals,
+    pca_normals_eigen,
     update_vertices,
     vertex_normals,
 )
@@ -120,7 +121,8 @@ def test_pca_normals_sphere_orientation():
     cos = np.einsum("ij,ij->i", n, V)
     assert np.all(np.abs(cos) > 0.99)
     assert (cos > 0).all() or (cos < 0).all()  # consistent
-    n2, ev = pca_normals(V, 10, orient="centroid", return_eigenvalues=True)
+    r = pca_normals_eigen(V, 10, orient="centroid")
+    n2, ev = r.normals, r.eigenvalues
     assert np.all(np.einsum("ij,ij->i", n2, V) > 0.99)
     assert np.all(np.diff(ev, axis=1) >= -1e-15)
 

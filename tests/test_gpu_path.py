@@ -23,7 +23,7 @@ from spectrageo import _device as devmod
 from spectrageo._device import resolve_backend, resolve_device
 from spectrageo._errors import InvalidInputError
 from spectrageo.cli.main import main
-from spectrageo.outliers import RPCAOptions, remove_outliers, rpca_scores
+from spectrageo.outliers import RPCAOptions, detect_outliers, remove_outliers, rpca_scores
 
 from conftest import shared_file
 
@@ -139,8 +139,8 @@ def test_other_methods_run_on_cpu_only(method):
 @pytest.mark.parametrize("pattern", [None, "uniform", "halo"])
 def test_torch_path_matches_numba_on_bunny(bunny, pattern):
     P = bunny if pattern is None else noise.corrupt_outliers(bunny, pattern=pattern, rng=0)[0]
-    a = remove_outliers(P, workers=1, return_points=False)
-    b = remove_outliers(P, workers=1, return_points=False, device=TORCH_CPU)
+    a = detect_outliers(P, workers=1)
+    b = detect_outliers(P, workers=1, device=TORCH_CPU)
     assert np.max(np.abs(a.scores - b.scores)) <= TOL
     assert a.info["n_iter"] == b.info["n_iter"]
     assert a.info["n_refined"] == b.info["n_refined"]
@@ -289,8 +289,8 @@ def test_resolve_device_cuda():
 @pytest.mark.parametrize("pattern", [None, "uniform"])
 def test_cuda_matches_cpu_on_bunny(bunny, pattern):
     P = bunny if pattern is None else noise.corrupt_outliers(bunny, pattern=pattern, rng=0)[0]
-    a = remove_outliers(P, return_points=False)
-    b = remove_outliers(P, return_points=False, device="cuda")
+    a = detect_outliers(P)
+    b = detect_outliers(P, device="cuda")
     assert np.max(np.abs(a.scores - b.scores)) <= TOL
     assert a.info["n_iter"] == b.info["n_iter"]
     _check_masks(a, b, TOL)

@@ -140,7 +140,7 @@ def test_hausdorff_to_plane_is_height():
     V, F = cube(3)
     V = V - 0.5
     sphere_pts = np.array([[0.0, 0.0, 1.5], [0.0, 0.0, 0.25], [2.0, 2.0, 2.0]])
-    d = metrics.point_to_surface(sphere_pts, V, F, return_closest=True)
+    d = metrics.point_to_surface_closest(sphere_pts, V, F)
     assert d.distances[0] == pytest.approx(1.0)
     assert d.distances[1] == pytest.approx(0.25)
     assert d.distances[2] == pytest.approx(np.sqrt(3 * 1.5**2))

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from spectrageo import io, noise
-from spectrageo.outliers import RPCAOptions, remove_outliers, rpca_scores
+from spectrageo.outliers import RPCAOptions, detect_outliers, rpca_scores
 from spectrageo.outliers._clusters import cluster_outliers
 
 from conftest import shared_file
@@ -95,11 +95,11 @@ def test_blobs_on_a_real_scan(shared_data):
     """Tuning scan: the cluster rule lifts the F1 on blobs and flags almost nothing on the scan."""
     path = shared_file(shared_data, "scans", "bunny", "bun000.ply.gz")
     P = io.read(path, kind="points").points
-    clean = remove_outliers(P, return_points=False)
+    clean = detect_outliers(P)
     assert clean.info["n_cluster_outliers"] <= 0.002 * P.shape[0]
     Q, lab = noise.corrupt_outliers(P, pattern="blobs", fraction=0.1, rng=0)
-    on = remove_outliers(Q, return_points=False)
-    off = remove_outliers(Q, return_points=False, options=RPCAOptions(clusters=False))
+    on = detect_outliers(Q)
+    off = detect_outliers(Q, options=RPCAOptions(clusters=False))
     f_on, f_off = _f1(~on.keep, lab), _f1(~off.keep, lab)
     assert f_on >= 0.93 and f_on >= f_off + 0.1
     assert on.info["n_cluster_outliers"] > 0 and off.info["n_cluster_outliers"] == 0

@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 from spectrageo._errors import InvalidInputError
 from spectrageo.noise import OUTLIER_PATTERNS, add_outliers, corrupt_outliers
 from spectrageo.noise._core import mean_spacing
-from spectrageo.outliers import remove_outliers, sor_scores
+from spectrageo.outliers import detect_outliers, remove_outliers, sor_scores
 
 
 def _plane(n_side=50, seed=0):
@@ -148,7 +148,7 @@ _PLANE_F1 = {
 def test_remove_outliers_rules_on_patterns(pattern, rule):
     P = _plane(55)
     Q, lab = corrupt_outliers(P, pattern=pattern, fraction=0.1, rng=0)
-    r = remove_outliers(Q, return_points=False, threshold_rule=rule)
+    r = detect_outliers(Q, threshold_rule=rule)
     assert _f1(~r.keep, lab) >= _PLANE_F1[pattern]
 
 
@@ -225,14 +225,14 @@ def test_valley_threshold_single_population_and_degenerate():
 def test_remove_outliers_reports_contamination_and_rule():
     P = _plane(40)
     Q, lab = corrupt_outliers(P, pattern="mixed", fraction=0.2, rng=0)
-    r = remove_outliers(Q, return_points=False, threshold_rule="valley")
+    r = detect_outliers(Q, threshold_rule="valley")
     assert r.info["threshold_rule"] == "valley"
     assert abs(r.info["contamination"] - lab.mean()) <= 0.03
-    default = remove_outliers(Q, return_points=False)  # the default rule is the valley
+    default = detect_outliers(Q)  # the default rule is the valley
     assert default.info["threshold_rule"] == "valley" and default.threshold == r.threshold
-    old = remove_outliers(Q, return_points=False, threshold_rule="density")
+    old = detect_outliers(Q, threshold_rule="density")
     assert old.info["threshold_rule"] == "density" and np.array_equal(old.scores, r.scores)
-    given = remove_outliers(Q, return_points=False, threshold=1.0)
+    given = detect_outliers(Q, threshold=1.0)
     assert given.info["threshold_rule"] == "given" and given.threshold == 1.0
     with pytest.raises(InvalidInputError, match="threshold_rule"):
         remove_outliers(Q, threshold_rule="median")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from spectrageo._errors import InvalidInputError
-from spectrageo.outliers import RPCAOptions, remove_outliers, rpca_scores
+from spectrageo.outliers import RPCAOptions, detect_outliers, rpca_scores
 
 
 def _cloud(n=600, seed=0):
@@ -41,9 +41,9 @@ def test_legacy_keywords_warn_and_give_the_same_scores():
     with pytest.warns(DeprecationWarning, match=r"RPCAOptions\(max_iter=\.\.\., refine=\.\.\.\)"):
         old = rpca_scores(P, 8, refine=False, max_iter=50, workers=1)
     np.testing.assert_array_equal(old.scores, new.scores)
-    with pytest.warns(DeprecationWarning, match="remove_outliers"):
-        r_old = remove_outliers(P, k=8, clusters=False, return_points=False)
-    r_new = remove_outliers(P, k=8, options=RPCAOptions(clusters=False), return_points=False)
+    with pytest.warns(DeprecationWarning, match="detect_outliers"):
+        r_old = detect_outliers(P, k=8, clusters=False)
+    r_new = detect_outliers(P, k=8, options=RPCAOptions(clusters=False))
     np.testing.assert_array_equal(r_old.keep, r_new.keep)
     with pytest.raises(TypeError, match="no_such_option"):
         rpca_scores(P, 8, no_such_option=1)

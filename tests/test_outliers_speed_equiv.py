@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from spectrageo import noise
 from spectrageo._errors import InvalidInputError
-from spectrageo.outliers import RPCAOptions, remove_outliers, rpca_scores
+from spectrageo.outliers import RPCAOptions, detect_outliers, rpca_scores
 from spectrageo.outliers import _grid as grid
 from spectrageo.outliers import _kernels as kern
 from spectrageo.outliers._common import (
@@ -221,8 +221,8 @@ def test_float32_state_matches_float64():
 def test_default_fast_path_matches_reference(seed):
     """Default (float32, ranking stop) against the reference path: same decisions, same F1."""
     Q, lab = _surface_with_outliers(4000, seed=seed)
-    ref = remove_outliers(Q, return_points=False, options=EXACT)
-    fast = remove_outliers(Q, return_points=False)
+    ref = detect_outliers(Q, options=EXACT)
+    fast = detect_outliers(Q)
     assert fast.info["converged"] and fast.info["n_iter"] <= ref.info["n_iter"]
     # scores in spacing units: nearly all within a twentieth of a spacing
     diff = np.abs(fast.scores - ref.scores)
@@ -231,8 +231,8 @@ def test_default_fast_path_matches_reference(seed):
     f_ref, f_fast = _f1(~ref.keep, lab), _f1(~fast.keep, lab)
     assert f_fast > 0.8 and abs(f_fast - f_ref) < 0.01
     # and the opt-in valley rule on the same scores
-    v_ref = remove_outliers(Q, return_points=False, threshold_rule="valley", options=EXACT)
-    v_fast = remove_outliers(Q, return_points=False, threshold_rule="valley")
+    v_ref = detect_outliers(Q, threshold_rule="valley", options=EXACT)
+    v_fast = detect_outliers(Q, threshold_rule="valley")
     assert abs(_f1(~v_fast.keep, lab) - _f1(~v_ref.keep, lab)) < 0.01
 
 
@@ -240,8 +240,8 @@ def test_aggressive_rank_rule_keeps_the_decisions():
     """rank_tol = 0.05 (16x the default) stops the ALM two iterations early on a generated sheet;
     the keep mask and F1 stay those of the reference path."""
     Q, lab = _surface_with_outliers(4000, seed=11)
-    ref = remove_outliers(Q, return_points=False, options=EXACT)
-    fast = remove_outliers(Q, return_points=False, options=RPCAOptions(rank_tol=0.05))
+    ref = detect_outliers(Q, options=EXACT)
+    fast = detect_outliers(Q, options=RPCAOptions(rank_tol=0.05))
     assert fast.info["n_iter"] < ref.info["n_iter"]
     assert np.quantile(np.abs(fast.scores - ref.scores), 0.99) < 0.05
     assert np.mean(fast.keep != ref.keep) < 0.002
@@ -258,8 +258,8 @@ def test_default_fast_path_on_real_scan(shared_data, pattern):
 
     P = io.read(shared_data / "scans/bunny/bun000.ply.gz", kind="points").points
     Q, lab = noise.corrupt_outliers(P, pattern=pattern, fraction=0.1, rng=0)
-    ref = remove_outliers(Q, return_points=False, options=EXACT)
-    fast = remove_outliers(Q, return_points=False)
+    ref = detect_outliers(Q, options=EXACT)
+    fast = detect_outliers(Q)
     assert fast.info["n_iter"] <= ref.info["n_iter"]
     diff = np.abs(fast.scores - ref.scores)
     assert np.quantile(diff[~lab], 0.99) < 0.05
@@ -300,7 +300,7 @@ def test_scores_do_not_depend_on_the_thread_count(dtype):
     points, enough to move the automatic threshold of a tiled run)."""
     Q, _ = _surface_with_outliers(45000, seed=16)
     opts = RPCAOptions(dtype=dtype)
-    runs = [remove_outliers(Q, workers=w, options=opts, return_points=False) for w in (1, 2, 3)]
+    runs = [detect_outliers(Q, workers=w, options=opts) for w in (1, 2, 3)]
     for r in runs[1:]:
         np.testing.assert_array_equal(r.scores, runs[0].scores)
         np.testing.assert_array_equal(r.keep, runs[0].keep)

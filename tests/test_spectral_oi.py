@@ -24,10 +24,12 @@ from spectrageo.spectral import (
     lowpass,
     lowpass_whole,
     orthogonal_iteration,
+    orthogonal_iteration_result,
     overlapped_submeshes,
     reassemble,
     shifted_factor,
     submesh_eigenbases,
+    submesh_eigenbases_result,
     submesh_laplacian,
 )
 
@@ -74,8 +76,8 @@ def test_oi_converges_to_dense_eigh_on_fandisk_submesh(fan):
     w, U = np.linalg.eigh(L.toarray())
     k = _gap_k(w, 20, 60)
     rng = np.random.default_rng(0)
-    res = orthogonal_iteration(
-        L, rng.standard_normal((L.shape[0], k)), zeta=4, n_iter=500, tol=1e-11, full_output=True
+    res = orthogonal_iteration_result(
+        L, rng.standard_normal((L.shape[0], k)), zeta=4, n_iter=500, tol=1e-11
     )
     assert res.converged and res.residual <= 1e-11
     assert res.n_iter < 500
@@ -94,7 +96,7 @@ def test_oi_on_grid_graph_matches_analytic_spectrum():
     L = laplacian_from_adjacency(C)
     k = _gap_k(lam, 8, 30)
     U0 = np.random.default_rng(1).standard_normal((L.shape[0], k))
-    res = orthogonal_iteration(L, U0, zeta=3, n_iter=2000, tol=1e-12, full_output=True)
+    res = orthogonal_iteration_result(L, U0, zeta=3, n_iter=2000, tol=1e-12)
     assert res.converged
     np.testing.assert_allclose(res.eigenvalues, lam[:k], atol=1e-9)
     _, U = np.linalg.eigh(L.toarray())
@@ -161,9 +163,10 @@ def test_submesh_eigenbases_exact_and_tracked(fan):
     # tracked OI run to convergence: same subspaces where the spectrum has a gap at k (a count of
     # 20 keeps the run short: the convergence factor at 70 columns is ~0.99 per iteration)
     k = 20
-    info: list = []
     opts = SubmeshOptions(n_iter=3000, tol=1e-11)
-    tracked = list(submesh_eigenbases(C, subs, k, method="oi", options=opts, info=info))
+    sb = submesh_eigenbases_result(C, subs, k, method="oi", options=opts)
+    info = sb.info
+    tracked = list(zip(range(len(info)), sb.eigenvalues, sb.eigenvectors))
     assert all(r.converged for r in info[1:]) and info[0].n_iter == 0  # first one: exact (thesis)
     assert all(r.n_iter > 1 for r in info[1:])  # tracked, not recomputed exactly
     checked = 0
@@ -194,8 +197,9 @@ def test_one_step_oi_lowpass_close_to_exact(fan):
 @pytest.mark.slow
 def test_doi_meets_thresholds_for_every_submesh(fan):
     V, F, C, subs = fan
-    info: list = []
-    out = list(submesh_eigenbases(C, subs, 0.1, method="doi", signal=V, info=info))
+    sb = submesh_eigenbases_result(C, subs, 0.1, method="doi", signal=V)
+    info = sb.info
+    out = list(zip(range(len(info)), sb.eigenvalues, sb.eigenvectors))
     assert len(info) == len(out) == len(subs)
     sizes = []
     for (i, w, U), r in zip(out, info):
@@ -208,17 +212,14 @@ def test_doi_meets_thresholds_for_every_submesh(fan):
         sizes.append(r.size)
     assert len(set(sizes)) > 1  # the subspace size adapts per submesh
     # tighter band -> more components
-    info2: list = []
-    for _ in submesh_eigenbases(
+    info2 = submesh_eigenbases_result(
         C,
         subs,
         0.1,
         method="doi",
         signal=V,
         options=SubmeshOptions(eps_low=0.005, eps_high=0.008),
-        info=info2,
-    ):
-        pass
+    ).info
     assert all(r.residual <= 0.008 and r.converged for r in info2)
     assert np.mean([r.size for r in info2]) > np.mean(sizes)
 
@@ -267,7 +268,7 @@ def test_oi_nonconvergence_is_reported(fan):
     L = submesh_laplacian(C, subs.parts[0])
     U0 = np.random.default_rng(0).standard_normal((700, 30))
     with pytest.warns(ConvergenceWarning, match="Orthogonal iteration"):
-        res = orthogonal_iteration(L, U0, n_iter=2, tol=1e-12, full_output=True)
+        res = orthogonal_iteration_result(L, U0, n_iter=2, tol=1e-12)
     assert not res.converged and res.n_iter == 2 and res.residual > 1e-12
     with pytest.raises(ConvergenceError):
         orthogonal_iteration(L, U0, n_iter=2, tol=1e-12, on_nonconvergence="raise")
@@ -453,8 +454,9 @@ def test_validation_submesh_eigenbases(fan):
         submesh_eigenbases(C, subs, 0.1, method="doi", signal=V[:10])
     with pytest.raises(InvalidInputError, match="`signal` contains NaN"):
         submesh_eigenbases(C, subs, 0.1, method="doi", signal=np.full_like(V, np.nan))
-    with pytest.raises(InvalidInputError, match="`info` must be a list"):
-        submesh_eigenbases(C, subs, 0.1, info=())
+    with pytest.warns(DeprecationWarning, match="submesh_eigenbases_result"):
+        with pytest.raises(InvalidInputError, match="`info` must be a list"):
+            submesh_eigenbases(C, subs, 0.1, info=())
     with pytest.raises(InvalidInputError, match="`n_iter` must be > 0"):
         SubmeshOptions(n_iter=0)
     with pytest.raises(InvalidInputError, match="`delta` must be > 0"):

@@ -65,7 +65,7 @@ from spectrageo.evaluate.outliers import (
 )
 from spectrageo.geometry.primitives import mean_edge_length
 from spectrageo.noise.generator import generate
-from spectrageo.outliers import remove_outliers
+from spectrageo.outliers import detect_outliers
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
@@ -282,7 +282,7 @@ def outlier_scan(cs: list[dict], data: Path) -> list[dict]:
             ("radius", {"method": "radius"}),
         ):
             t0 = time.perf_counter()
-            r = remove_outliers(Q, return_points=False, **kw)
+            r = detect_outliers(Q, **kw)
             dt = time.perf_counter() - t0
             rows.append(_row(base, m, f"{r.method}, auto ({r.threshold:.3g})", ~r.keep, lab, dt))
             if base["kind"] != "clean":
@@ -292,7 +292,7 @@ def outlier_scan(cs: list[dict], data: Path) -> list[dict]:
                 tau = _oracle_threshold(s, lab)
                 rows.append(_row(base, f"{m}-oracle", f"{r.method}, {tau:.3g}", s >= tau, lab, dt))
         t0 = time.perf_counter()
-        rp = remove_outliers(Q, method="sor", k=PCL_MEAN_K, return_points=False)
+        rp = detect_outliers(Q, method="sor", k=PCL_MEAN_K)
         rows.append(
             _row(base, "pcl-sor", "meanK=50, std=1", ~rp.keep, lab, time.perf_counter() - t0)
         )
@@ -406,7 +406,7 @@ def main() -> None:
     if scans:
         warm_pts = np.random.default_rng(0).random((200, 3))  # numba compilation outside timings
         for m in ("rpca", "sor", "radius"):
-            remove_outliers(warm_pts, method=m, return_points=False)
+            detect_outliers(warm_pts, method=m)
     for i, (name, cs) in enumerate(scans.items(), 1):
         print(f"[outliers {i}/{len(scans)}] {name} ({len(cs)} cases)", flush=True)
         orows += outlier_scan(cs, data)

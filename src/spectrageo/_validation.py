@@ -200,3 +200,12 @@ def options_with_legacy(options: Any, legacy: dict, cls: type, func: str) -> Any
         stacklevel=3,
     )
     return dataclasses.replace(options, **legacy)
+
+
+def deprecated_flag(func: str, flag: str, replacement: str) -> None:
+    """:class:`DeprecationWarning` for the return-shape flag ``flag`` of ``func``, naming ``replacement``."""
+    warnings.warn(
+        f"{func}({flag}=...) is deprecated; use {replacement} instead.",
+        DeprecationWarning,
+        stacklevel=3,
+    )

@@ -141,7 +141,7 @@ def evaluate_outliers(
     """
     from .. import io, noise
     from ..geometry import pca_normals
-    from ..outliers import remove_outliers
+    from ..outliers import detect_outliers
 
     data = Path(data_dir)
     if not data.is_dir():
@@ -157,7 +157,7 @@ def evaluate_outliers(
         # load the compiled kernels (numba cache) outside the timings
         warm = np.random.default_rng(0).random((200, 3))
         for m in ("rpca", "sor", "radius"):
-            remove_outliers(warm, method=m, k=10, return_points=False)
+            detect_outliers(warm, method=m, k=10)
     for label, rel in progress(scans, desc="outlier scans", total=len(scans)):
         path = data / rel
         if not path.exists():
@@ -179,7 +179,7 @@ def evaluate_outliers(
                 for m in methods:
                     if m in ("rpca", "sor", "radius"):
                         t0 = time.perf_counter()
-                        r = remove_outliers(Q, method=m, k=10, return_points=False)
+                        r = detect_outliers(Q, method=m, k=10)
                         dt = time.perf_counter() - t0
                         rows.append(
                             _row(base, m, f"k=10, auto ({r.threshold:.3g})", ~r.keep, lab, dt)
@@ -249,7 +249,7 @@ def evaluate_splits(
     (``flagged``).
     """
     from .. import io, noise
-    from ..outliers import remove_outliers
+    from ..outliers import detect_outliers
 
     data = Path(data_dir)
     bad = [s for s in splits if s not in SPLITS]
@@ -279,7 +279,7 @@ def evaluate_splits(
                 }
                 for m in ("rpca", "sor", "radius"):
                     t0 = time.perf_counter()
-                    r = remove_outliers(Q, method=m, k=10, return_points=False)
+                    r = detect_outliers(Q, method=m, k=10)
                     dt = time.perf_counter() - t0
                     rows.append(_row(base, m, f"k=10, auto ({r.threshold:.3g})", ~r.keep, lab, dt))
                     if pat != "clean":
@@ -292,7 +292,7 @@ def evaluate_splits(
                         )
                 # PCL's tutorial setting: setMeanK(50), setStddevMulThresh(1.0)
                 t0 = time.perf_counter()
-                rp = remove_outliers(Q, method="sor", k=PCL_MEAN_K, return_points=False)
+                rp = detect_outliers(Q, method="sor", k=PCL_MEAN_K)
                 dt = time.perf_counter() - t0
                 rows.append(_row(base, "pcl-sor", "meanK=50, std=1", ~rp.keep, lab, dt))
                 if o3d_ok:

@@ -2,7 +2,7 @@
 
 from .data import Mesh, MeshAnimation, PointCloud, PointCloudSequence
 from .neighbors import knn
-from .pointcloud import pca_normals
+from .pointcloud import PCANormals, pca_normals, pca_normals_eigen
 from .primitives import (
     boundary_edges,
     boundary_loops,
@@ -37,6 +37,7 @@ from .update import update_vertices
 __all__ = [
     "Mesh",
     "MeshAnimation",
+    "PCANormals",
     "PointCloud",
     "PointCloudSequence",
     "RepairReport",
@@ -60,6 +61,7 @@ __all__ = [
     "knn",
     "merge_duplicate_vertices",
     "pca_normals",
+    "pca_normals_eigen",
     "remove_unreferenced",
     "unreferenced_vertices",
     "update_vertices",

@@ -2,18 +2,28 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 
-from .._validation import as_points, check_choice, check_positive
+from .._validation import as_points, check_choice, check_positive, deprecated_flag
 from .neighbors import knn
 
 _CHUNK = 200_000
 
 
+@dataclass(frozen=True, eq=False)
+class PCANormals:
+    """Result of :func:`pca_normals_eigen`: ``normals`` (n, 3) and ascending ``eigenvalues`` (n, 3)."""
+
+    normals: np.ndarray
+    eigenvalues: np.ndarray
+
+
 def pca_normals(
-    P, k: int = 10, *, orient: str = "mst", viewpoint=None, return_eigenvalues: bool = False
+    P, k: int = 10, *, orient: str = "mst", viewpoint=None, return_eigenvalues: bool | None = None
 ):
     """Unit normals (n, 3) of a point cloud from each point's kNN covariance (Eq. 6.31).
 
@@ -22,9 +32,17 @@ def pca_normals(
     ``"mst"`` propagates signs along a minimum spanning tree weighted by ``1 - |n_i . n_j|``
     (Hoppe et al.), each component's highest point facing +z; ``"viewpoint"`` faces ``viewpoint``
     (default far above the bounding box); ``"centroid"`` points away from the centroid; ``"none"``
-    keeps the largest-magnitude entry positive. ``return_eigenvalues`` also returns the ascending
-    eigenvalues (n, 3).
+    keeps the largest-magnitude entry positive. ``return_eigenvalues`` is deprecated: use
+    :func:`pca_normals_eigen`.
     """
+    if return_eigenvalues is not None:
+        deprecated_flag("pca_normals", "return_eigenvalues", "pca_normals_eigen() (a PCANormals)")
+    r = pca_normals_eigen(P, k, orient=orient, viewpoint=viewpoint)
+    return (r.normals, r.eigenvalues) if return_eigenvalues else r.normals
+
+
+def pca_normals_eigen(P, k: int = 10, *, orient: str = "mst", viewpoint=None) -> PCANormals:
+    """:func:`pca_normals` with the ascending covariance eigenvalues (n, 3); returns a :class:`PCANormals`."""
     P = as_points(P, "P")
     check_positive(k, "k", integer=True)
     check_choice(orient, "orient", ("mst", "viewpoint", "centroid", "none"))
@@ -58,7 +76,7 @@ def pca_normals(
         normals *= np.where(np.einsum("ij,ij->i", normals, vp - P) < 0, -1.0, 1.0)[:, None]
     elif orient == "mst" and idx is not None:
         normals = _orient_mst(P, normals, idx)
-    return (normals, evals) if return_eigenvalues else normals
+    return PCANormals(normals, evals)
 
 
 def _orient_mst(P: np.ndarray, N: np.ndarray, idx: np.ndarray) -> np.ndarray:

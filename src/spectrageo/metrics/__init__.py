@@ -32,6 +32,7 @@ from .surface import (
     compare_surfaces,
     hausdorff,
     point_to_surface,
+    point_to_surface_closest,
     surface_distance_per_vertex,
     surface_samples,
 )
@@ -56,6 +57,7 @@ __all__ = [
     "kg_error",
     "nmsve",
     "point_to_surface",
+    "point_to_surface_closest",
     "rotation_error_deg",
     "sted",
     "sted_components",

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import as_faces, as_points, check_positive
+from .._validation import as_faces, as_points, check_positive, deprecated_flag
 from . import _kernels
 
 _LEAF_SIZE = 4
@@ -87,18 +87,30 @@ def point_to_surface(
     V_ref,
     F_ref,
     *,
-    return_closest: bool = False,
+    return_closest: bool | None = None,
 ) -> SurfaceDistance:
     """Exact distance from each point of ``P`` (q, 3) to the triangle surface ``(V_ref, F_ref)``.
 
-    Degenerate triangles count as the union of their edges; ``return_closest`` adds the closest
-    points. Returns a :class:`SurfaceDistance`.
+    Degenerate triangles count as the union of their edges. Returns a :class:`SurfaceDistance`
+    without ``closest_points`` (:func:`point_to_surface_closest` adds them; ``return_closest``
+    is deprecated).
     """
+    if return_closest is not None:
+        deprecated_flag("point_to_surface", "return_closest", "point_to_surface_closest()")
+    return _point_to_surface(P, V_ref, F_ref, bool(return_closest))
+
+
+def point_to_surface_closest(P, V_ref, F_ref) -> SurfaceDistance:
+    """:func:`point_to_surface` with the closest surface points (q, 3) in ``closest_points``."""
+    return _point_to_surface(P, V_ref, F_ref, True)
+
+
+def _point_to_surface(P, V_ref, F_ref, closest: bool) -> SurfaceDistance:
     P = as_points(P, "P")
     V_ref = as_points(V_ref, "V_ref")
     F_ref = as_faces(F_ref, V_ref.shape[0], "F_ref")
     d, t = _TriangleIndex(V_ref, F_ref).query(P)
-    cp = _kernels.closest_points(P, t, V_ref, F_ref) if return_closest else None
+    cp = _kernels.closest_points(P, t, V_ref, F_ref) if closest else None
     return SurfaceDistance(d, t, cp)
 
 

@@ -5,7 +5,7 @@ choice takes ``rng`` (seed or Generator; None is seed 0); inputs are never modif
 """
 
 from ._core import NoiseResult
-from .animation import ANIMATION_KINDS, animation_noise, spatial_mask
+from .animation import ANIMATION_KINDS, animation_noise, animation_noise_result, spatial_mask
 from .corruption import (
     OUTLIER_PATTERNS,
     CorruptionResult,
@@ -19,6 +19,7 @@ from .static import (
     KINDS,
     anisotropic,
     apply,
+    apply_result,
     gaussian,
     impulsive,
     quantize,
@@ -36,8 +37,10 @@ __all__ = [
     "NoiseResult",
     "add_outliers",
     "animation_noise",
+    "animation_noise_result",
     "anisotropic",
     "apply",
+    "apply_result",
     "corrupt_outliers",
     "gaussian",
     "generate",

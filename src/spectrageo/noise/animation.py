@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import as_faces, as_frames, as_rng, check_choice
+from .._validation import as_faces, as_frames, as_rng, check_choice, deprecated_flag
 from ..geometry.primitives import vertex_normals
 from . import static
 from ._core import NoiseResult, check_fraction, check_level, mean_spacing
@@ -78,14 +78,35 @@ def animation_noise(
     rng=None,
     fraction: float | None = None,
     direction: str = "normal",
-    return_result: bool = False,
+    return_result: bool | None = None,
 ):
     """Noise on every frame of an animation; returns the noisy frames (T, n, 3).
 
     ``"gaussian"``, ``"uniform"``, ``"quantization"`` per frame; ``"impulsive"`` a new subset per
-    frame; ``"spatial-mask"`` as :func:`spatial_mask`. ``return_result=True`` returns the
-    :class:`NoiseResult`.
+    frame; ``"spatial-mask"`` as :func:`spatial_mask`. :func:`animation_noise_result` returns the
+    :class:`NoiseResult` (``return_result`` is deprecated).
     """
+    if return_result is not None:
+        deprecated_flag(
+            "animation_noise", "return_result", "animation_noise_result() (the NoiseResult)"
+        )
+    res = animation_noise_result(
+        frames, F, kind=kind, level=level, rng=rng, fraction=fraction, direction=direction
+    )
+    return res if return_result else res.vertices
+
+
+def animation_noise_result(
+    frames,
+    F,
+    *,
+    kind: str = "gaussian",
+    level: float = 0.3,
+    rng=None,
+    fraction: float | None = None,
+    direction: str = "normal",
+) -> NoiseResult:
+    """:func:`animation_noise` returning the :class:`NoiseResult` (frames and ground truth)."""
     check_choice(kind, "kind", ANIMATION_KINDS)
     if fraction is not None and kind not in ("impulsive", "spatial-mask", "spatial_mask"):
         raise InvalidInputError(
@@ -94,7 +115,7 @@ def animation_noise(
     A = as_frames(frames)
     F = as_faces(F, A.shape[1], "F")
     if kind in ("spatial-mask", "spatial_mask"):
-        res = spatial_mask(
+        return spatial_mask(
             A,
             F,
             fraction=0.2 if fraction is None else fraction,
@@ -102,23 +123,15 @@ def animation_noise(
             rng=rng,
             direction=direction,
         )
-        return res if return_result else res.vertices
     check_level(level)
     rng = as_rng(rng)
     per = [
-        static.apply(
-            A[t],
-            F,
-            kind=kind,
-            level=level,
-            rng=rng,
-            fraction=fraction,
-            direction=direction,
-            return_result=True,
-        )  # fmt: skip
+        static.apply_result(
+            A[t], F, kind=kind, level=level, rng=rng, fraction=fraction, direction=direction
+        )
         for t in range(A.shape[0])
     ]
-    res = NoiseResult(
+    return NoiseResult(
         np.stack([p.vertices for p in per]),
         np.stack([p.displacement for p in per]),
         np.stack([p.mask for p in per]),
@@ -126,4 +139,3 @@ def animation_noise(
         None,
         per[0].kind,
     )
-    return res if return_result else res.vertices

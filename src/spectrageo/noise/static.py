@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._errors import InvalidInputError
-from .._validation import as_rng, check_choice
+from .._validation import as_rng, check_choice, deprecated_flag
 from ._core import NoiseResult, check_fraction, check_level, mean_spacing, prepare
 
 
@@ -225,13 +225,34 @@ def apply(
     fraction: float | None = None,
     direction: str = "normal",
     normals=None,
-    return_result: bool = False,
+    return_result: bool | None = None,
 ):
     """Noise of one ``kind`` (gaussian, uniform, impulsive, quantization); returns the noisy (n, 3) vertices.
 
-    ``fraction`` (default 0.1) is for ``"impulsive"`` only; ``return_result=True`` returns the
-    :class:`NoiseResult` instead.
+    ``fraction`` (default 0.1) is for ``"impulsive"`` only. :func:`apply_result` returns the
+    :class:`NoiseResult` (``return_result`` is deprecated).
     """
+    if return_result is not None:
+        deprecated_flag("apply", "return_result", "apply_result() (the NoiseResult)")
+    res = apply_result(
+        V, F, kind=kind, level=level, rng=rng, fraction=fraction, direction=direction,
+        normals=normals,
+    )  # fmt: skip
+    return res if return_result else res.vertices
+
+
+def apply_result(
+    V,
+    F=None,
+    *,
+    kind: str = "gaussian",
+    level: float = 0.3,
+    rng=None,
+    fraction: float | None = None,
+    direction: str = "normal",
+    normals=None,
+) -> NoiseResult:
+    """:func:`apply` returning the :class:`NoiseResult` (noisy vertices and ground truth)."""
     check_choice(kind, "kind", KINDS)
     if fraction is not None and kind != "impulsive":
         raise InvalidInputError(
@@ -251,4 +272,4 @@ def apply(
         )
     else:
         res = quantize(V, F, level=level)
-    return res if return_result else res.vertices
+    return res

@@ -15,6 +15,7 @@ from .sequence import SequenceResult, clean_sequence, weighted_laplacian
 from .static import (
     OutlierResult,
     auto_threshold,
+    detect_outliers,
     radius_scores,
     remove_outliers,
     sor_scores,
@@ -30,6 +31,7 @@ __all__ = [
     "auto_threshold",
     "bilateral_point_filter",
     "clean_sequence",
+    "detect_outliers",
     "knn_patch_matrix",
     "knn_triangles",
     "radius_scores",

@@ -10,7 +10,13 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from .._validation import check_choice, check_positive, coordinate_array, options_with_legacy
+from .._validation import (
+    check_choice,
+    check_positive,
+    coordinate_array,
+    deprecated_flag,
+    options_with_legacy,
+)
 from ..geometry import PointCloud
 from ._common import SortedCloud, check_k, knn_grid, numba_threads
 from ._thresholds import (  # noqa: F401 - the VALLEY_* constants are re-exported
@@ -29,6 +35,7 @@ from .rpca import RPCAOptions, rpca_scores
 __all__ = [
     "OutlierResult",
     "auto_threshold",
+    "detect_outliers",
     "radius_scores",
     "remove_outliers",
     "sor_scores",
@@ -133,7 +140,7 @@ def remove_outliers(
     threshold: float | None = None,
     smoothed: bool = False,
     nonfinite: str = "raise",
-    return_points: bool = True,
+    return_points: bool | None = None,
     workers: int = -1,
     threshold_rule: str = DEFAULT_THRESHOLD_RULE,
     device: Any = "cpu",
@@ -166,8 +173,8 @@ def remove_outliers(
         RPCA only: also return the low-rank smoothed points.
     nonfinite : {"raise", "remove"}
         Array rows with NaN/inf coordinates: raise, or mark them as outliers (score ``inf``).
-    return_points : bool
-        Build ``result.points`` (the kept points with their attributes).
+    return_points : bool, optional
+        Deprecated: :func:`detect_outliers` skips ``result.points``.
     workers : int
         Threads of the neighbour search and of the RPCA solver (-1: all cores).
     threshold_rule : {"valley", "density", "otsu"}
@@ -188,6 +195,36 @@ def remove_outliers(
     InvalidInputError
         Empty or malformed input, fewer than ``k + 1`` finite points, or options of another method.
     """
+    if return_points is not None:
+        deprecated_flag("remove_outliers", "return_points", "detect_outliers() (no `points`)")
+    args = (method, k, threshold, smoothed, nonfinite, workers, threshold_rule, device, options)
+    build = return_points is None or bool(return_points)
+    return _outliers(cloud, *args, build, legacy, "remove_outliers")
+
+
+def detect_outliers(
+    cloud: Any,
+    *,
+    method: str = "rpca",
+    k: int = 10,
+    threshold: float | None = None,
+    smoothed: bool = False,
+    nonfinite: str = "raise",
+    workers: int = -1,
+    threshold_rule: str = DEFAULT_THRESHOLD_RULE,
+    device: Any = "cpu",
+    options: RPCAOptions | None = None,
+    **legacy: Any,
+) -> OutlierResult:
+    """:func:`remove_outliers` without the kept cloud (``points`` None); parameters as there."""
+    args = (method, k, threshold, smoothed, nonfinite, workers, threshold_rule, device, options)
+    return _outliers(cloud, *args, False, legacy, "detect_outliers")
+
+
+def _outliers(
+    cloud, method, k, threshold, smoothed, nonfinite, workers, threshold_rule, device, options,
+    build_points: bool, legacy: dict, name: str,
+) -> OutlierResult:  # fmt: skip
     check_choice(method, "method", METHODS)
     check_choice(nonfinite, "nonfinite", ("raise", "remove"))
     check_choice(threshold_rule, "threshold_rule", THRESHOLD_RULES)
@@ -206,7 +243,7 @@ def remove_outliers(
             f"options {given} apply to method='rpca' only; got method={method!r}."
         )
     if method == "rpca":
-        options = options_with_legacy(options, legacy, RPCAOptions, "remove_outliers")
+        options = options_with_legacy(options, legacy, RPCAOptions, name)
     X, finite, pc = _finite_rows(cloud, nonfinite)
     k = check_k(k, X.shape[0])
     info: dict[str, Any] = {}
@@ -257,7 +294,7 @@ def remove_outliers(
     else:
         keep, scores = keep_f, s
     points = None
-    if return_points and keep.any():
+    if build_points and keep.any():
         points = pc.select(keep) if pc is not None else PointCloud(X[keep_f])
     return OutlierResult(
         keep=keep,

@@ -19,7 +19,7 @@ from .orthogonal import (
     DOI_EPS_LOW,
     SubmeshOptions,
     _check_iteration,
-    submesh_eigenbases,
+    _submesh_stream,
 )
 from .partition import as_adjacency, overlapped_submeshes, reassemble
 
@@ -148,17 +148,8 @@ def lowpass(
         t_max=o.t_max,
         ritz=False,
     )
-    for i, _w, U in submesh_eigenbases(
-        W,
-        subs,
-        keep,
-        method=method,
-        laplacian=kind,
-        signal=Xm if method == "doi" else None,
-        options=sub_opts,
-        rng=rng,
-        info=record,
-    ):
+    signal = Xm if method == "doi" else None
+    for i, _w, U in _submesh_stream(W, subs, keep, method, kind, signal, sub_opts, rng, record, {}):
         xi = Xm[subs.parts[i]]
         values[i] = U @ (U.T @ xi)
     out = reassemble(values, subs, weights=o.weights)

@@ -15,7 +15,13 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from .._errors import ConvergenceWarning, InvalidInputError
 from .._progress import progress
-from .._validation import as_rng, check_choice, check_positive, options_with_legacy
+from .._validation import (
+    as_rng,
+    check_choice,
+    check_positive,
+    deprecated_flag,
+    options_with_legacy,
+)
 from ..linalg._common import check_on_nonconvergence, report_nonconvergence, single_thread_blas
 from ._shifted import (
     DELTA_REL,
@@ -34,11 +40,14 @@ __all__ = [
     "DOIResult",
     "OIResult",
     "ShiftedFactor",
+    "SubmeshBases",
     "SubmeshOptions",
     "dynamic_orthogonal_iteration",
     "orthogonal_iteration",
+    "orthogonal_iteration_result",
     "shifted_factor",
     "submesh_eigenbases",
+    "submesh_eigenbases_result",
 ]
 
 #: default thresholds of DOI on the relative low-pass residual ``||V - U U^T V||_F / ||V - mean(V)||_F``
@@ -157,7 +166,7 @@ def orthogonal_iteration(
     n_iter: int = 1,
     factor=None,
     tol: float | None = None,
-    full_output: bool = False,
+    full_output: bool | None = None,
     on_nonconvergence: str = "warn",
 ):
     """Orthogonal iteration ``U <- Onorm(T^zeta U)``, ``T = (L + delta I)^-1`` (Eq. 4.7, Algorithm 6).
@@ -172,9 +181,36 @@ def orthogonal_iteration(
     delta, zeta, n_iter, factor
         Shift (default ``1e-2 mean(diag(L))``), power, iterations, reused :class:`ShiftedFactor`.
     tol, full_output, on_nonconvergence
-        Ritz-residual tolerance; ``full_output`` returns an :class:`OIResult` instead of the
-        (n, k) basis; the policy when ``tol`` is not reached.
+        Ritz-residual tolerance; deprecated (:func:`orthogonal_iteration_result` returns the
+        :class:`OIResult`); the policy when ``tol`` is not reached.
     """
+    if full_output is not None:
+        deprecated_flag(
+            "orthogonal_iteration", "full_output", "orthogonal_iteration_result() (the OIResult)"
+        )
+    args = (L, U0, delta, zeta, n_iter, factor, tol, on_nonconvergence)
+    result = _orthogonal_iteration(*args, bool(full_output))
+    return result if full_output else result.eigenvectors
+
+
+def orthogonal_iteration_result(
+    L,
+    U0,
+    *,
+    delta: float | None = None,
+    zeta: int = 4,
+    n_iter: int = 1,
+    factor=None,
+    tol: float | None = None,
+    on_nonconvergence: str = "warn",
+) -> OIResult:
+    """:func:`orthogonal_iteration` returning the :class:`OIResult` (with the final residual)."""
+    return _orthogonal_iteration(L, U0, delta, zeta, n_iter, factor, tol, on_nonconvergence, True)
+
+
+def _orthogonal_iteration(
+    L, U0, delta, zeta, n_iter, factor, tol, on_nonconvergence, full_output: bool
+) -> OIResult:
     L = _as_laplacian(L)
     n = L.shape[0]
     U = _check_basis(U0, n)
@@ -192,7 +228,7 @@ def orthogonal_iteration(
     result = OIResult(theta, U, it, bool(tol is not None and res <= tol), float(res))
     if tol is not None:
         report_nonconvergence(result, on_nonconvergence, f"Orthogonal iteration (tol={tol:g})")
-    return result if full_output else U
+    return result
 
 
 def _oi(L, U, factor, zeta: int, n_iter: int, tol, want_residual: bool, ritz: bool = True):
@@ -452,9 +488,45 @@ def submesh_eigenbases(
     method, laplacian, signal
         Solver; ``L = D - C`` on the pattern (``"binary"``) or the values of ``C``; the DOI signal.
     options, rng, info
-        :class:`SubmeshOptions` (old keywords warn), random starts, and a list that receives one
-        :class:`OIResult` / :class:`DOIResult` per submesh.
+        :class:`SubmeshOptions` (old keywords warn), random starts; ``info`` is deprecated
+        (:func:`submesh_eigenbases_result` returns the per-submesh results).
     """
+    if info is not None:
+        deprecated_flag("submesh_eigenbases", "info", "submesh_eigenbases_result() (its `info`)")
+    return _submesh_stream(C, subs, n_keep, method, laplacian, signal, options, rng, info, legacy)
+
+
+@dataclass(frozen=True, eq=False)
+class SubmeshBases:
+    """Result of :func:`submesh_eigenbases_result`, per submesh in order: ``eigenvalues``
+    (k_i,), ``eigenvectors`` (n_i, k_i) and ``info`` (:class:`OIResult` / :class:`DOIResult`).
+    """
+
+    eigenvalues: tuple
+    eigenvectors: tuple
+    info: tuple
+
+
+def submesh_eigenbases_result(
+    C,
+    subs: Submeshes,
+    n_keep: int | float,
+    *,
+    method: str = "oi",
+    laplacian: str = "binary",
+    signal=None,
+    options: SubmeshOptions | None = None,
+    rng=None,
+    **legacy,
+) -> SubmeshBases:
+    """All bases of :func:`submesh_eigenbases` at once, with one result per submesh."""
+    info: list = []
+    args = (C, subs, n_keep, method, laplacian, signal, options, rng)
+    out = list(_submesh_stream(*args, info, legacy))
+    return SubmeshBases(tuple(w for _, w, _ in out), tuple(U for *_, U in out), tuple(info))
+
+
+def _submesh_stream(C, subs, n_keep, method, laplacian, signal, options, rng, info, legacy):
     o = options_with_legacy(options, legacy, SubmeshOptions, "submesh_eigenbases")
     check_choice(method, "method", ("oi", "doi", "exact"))
     check_choice(laplacian, "laplacian", ("binary", "weighted"))
