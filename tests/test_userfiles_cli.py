@@ -409,8 +409,7 @@ def test_isolated_triangles_give_a_plain_cause(tmp_path, capsys):
 
 def test_point_rows_without_coordinates_in_register_and_elsewhere(tmp_path, capsys):
     """A scan saved as .xyz with NaN rows (no measurement): register leaves them out and says
-    so; a command that needs every row refuses with advice a command line can follow (the
-    reader's "pass nan_points='drop'" names a Python argument no command has)."""
+    so, and so does convert (one policy for every command on point clouds)."""
     V, _F = icosphere(3)
     rows = np.r_[V, [[np.nan, np.nan, np.nan]], V[:5] * 1.01]
     scan = tmp_path / "scan.xyz"
@@ -422,7 +421,8 @@ def test_point_rows_without_coordinates_in_register_and_elsewhere(tmp_path, caps
     assert "1 of" in err and "left out" in err
     assert json.loads((tmp_path / "T.json").read_text())
     code, _, err = run_cli(capsys, "convert", scan, tmp_path / "o.ply")
-    assert code == 2 and "remove those rows first" in err and "nan_points" not in err
+    assert code == 0 and "1 of" in err and "left out" in err and "nan_points" not in err
+    assert io.read(tmp_path / "o.ply").n_points == rows.shape[0] - 1
 
 
 @pytest.mark.parametrize("area", ["compress", "compress-animation", "outliers", "complete"])

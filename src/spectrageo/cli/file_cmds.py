@@ -116,6 +116,20 @@ def cmd_noise(args) -> int:
 
 
 # --------------------------------------------------------------------------- metrics
+def _read_measured(path):
+    """The file as read by the other commands, or unwelded where welding would refuse it (every
+    face collapsed): a metric measures a wrecked result instead of refusing it."""
+    from .._errors import InvalidInputError
+
+    try:
+        return _read(path)[0]
+    except InvalidInputError as exc:
+        try:
+            return _read(path, weld=False)[0]
+        except InvalidInputError:
+            raise exc from None
+
+
 def cmd_metrics(args) -> int:
     from .. import metrics
     from .._validation import check_positive
@@ -124,8 +138,7 @@ def cmd_metrics(args) -> int:
     radius = getattr(args, "radius", None)
     if radius is not None:
         check_positive(radius, "radius")
-    res, _ = _read(args.result)
-    ref, _ = _read(args.reference)
+    res, ref = _read_measured(args.result), _read_measured(args.reference)
     if isinstance(res, MeshAnimation) and isinstance(ref, MeshAnimation):
         if radius is not None:
             raise err("`radius` applies to meshes and point clouds, not to animations.")

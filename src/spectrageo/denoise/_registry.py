@@ -89,8 +89,11 @@ def denoise(
     trust = options.pop("trust", TRUST) if info.trusted else options.get("trust")
     if trust is not None:
         check_positive(trust, "trust")
-    from ..geometry.repair import is_soup
+    from ..geometry.repair import degenerate_faces, is_soup
     from ..geometry.repair import weld as weld_mesh
+
+    if degenerate_faces(V, F).all():  # no face of non-zero area: nothing to filter
+        return V.copy()
 
     # the gate runs on the input as given (a clean input comes back bit for bit), except on a
     # triangle soup, which is gated after welding

@@ -20,9 +20,11 @@ def status(msg: str, *, always: bool = False) -> None:
         print(msg, file=sys.stderr, flush=True)
 
 
-def read_reported(path, *, kind=None, weld=None, nan_points=None, no_weld_option=False):
+def read_reported(path, *, kind=None, weld=None, nan_points="drop", no_weld_option=False):
     """Read through :func:`spectrageo.io.read_with_report` and say on stderr what was repaired
-    (``no_weld_option``: the command has ``--no-weld``, which the message then mentions)."""
+    (``no_weld_option``: the command has ``--no-weld``, which the message then mentions). The
+    policy of every command: point-cloud rows with NaN/inf coordinates are dropped and counted
+    on stderr; mesh vertices cannot be dropped and refuse."""
     from .. import io
 
     obj, rep = io.read_with_report(path, kind=kind, weld=weld, nan_points=nan_points)

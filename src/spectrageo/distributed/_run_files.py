@@ -92,8 +92,14 @@ def run_denoise(args) -> int:
         if np.array_equal(Vd, obj.vertices):
             # the do-no-harm gate (spectrageo.denoise._guard) found no noise, or only detail
             from ..denoise._guard import coarse_shape, has_shared_edge
+            from ..geometry.repair import degenerate_faces
 
-            if not has_shared_edge(obj.faces):
+            if degenerate_faces(obj.vertices, obj.faces).all():
+                status(
+                    "no face of non-zero area (the vertices lie on one point or one line), "
+                    "nothing to filter: the vertices are written unchanged"
+                )
+            elif not has_shared_edge(obj.faces):
                 status(
                     "separate triangles (no edge shared by two faces), nothing to filter: the "
                     "vertices are written unchanged"

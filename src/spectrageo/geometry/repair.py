@@ -47,21 +47,18 @@ def merge_duplicate_vertices(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Merge vertices closer than ``tol``; returns ``(V_new, F_new, index_map)``, first
     occurrences keeping their relative order.
+
+    Groups are the connected components of "distance <= ``tol``"; memory grows linearly with the
+    vertex count, however many vertices coincide.
     """
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F", allow_empty=True)
+    if V.shape[0] == 0:
+        return V, F, np.zeros(0, dtype=np.int64)
     if tol > 0:
-        from scipy.sparse.csgraph import connected_components
-        from scipy.spatial import cKDTree
-
-        pairs = cKDTree(V).query_pairs(tol, output_type="ndarray")
-        import scipy.sparse as sp
-
-        G = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(V), len(V)))
-        _, labels = connected_components(G, directed=False)
+        labels = _near_components(V, float(tol))
     else:
-        _, labels = np.unique(V, axis=0, return_inverse=True)
-        labels = labels.ravel()
+        labels = np.unique(V, axis=0, return_inverse=True)[1].ravel()
     # representative = first occurrence of each label, in input order
     _, first = np.unique(labels, return_index=True)
     rep_sorted = np.sort(first)
@@ -69,6 +66,91 @@ def merge_duplicate_vertices(
     new_of_label[labels[rep_sorted]] = np.arange(rep_sorted.size)
     index_map = new_of_label[labels]
     return V[rep_sorted], index_map[F], index_map
+
+
+#: Cell pairs of :func:`_near_components` with more point pairs than this go through a k-d tree.
+_PAIR_BLOCK = 256
+#: Point pairs compared per vectorised step of :func:`_near_components`.
+_PAIR_CHUNK = 1 << 20
+
+
+def _near_components(U: np.ndarray, tol: float) -> np.ndarray:
+    """Component label (u,) of each point of ``U`` under "distance <= ``tol``".
+
+    Points in one cell of side ``tol / 2`` are within ``tol`` of each other; only cells whose
+    keys lie within ``2 + sqrt(3)`` can hold other pairs, which are tested exactly. A ``tol``
+    below ``2**-36`` of the extent merges exact duplicates only.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    lo = U.min(axis=0)
+    side = tol / 2.0
+    if float((U.max(axis=0) - lo).max()) > side * 2.0**36:
+        return np.unique(U, axis=0, return_inverse=True)[1].ravel()
+    key = np.floor((U - lo) / side).astype(np.int64)
+    dims = key.max(axis=0) + 1
+    if float(np.prod(dims.astype(np.float64))) < 2.0**62:  # one int64 per cell: a fast unique
+        flat = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
+        _, first, cell_of = np.unique(flat, return_index=True, return_inverse=True)
+        cells = key[first].astype(np.float64)
+    else:
+        cells, cell_of = np.unique(key.astype(np.float64), axis=0, return_inverse=True)
+    cell_of = cell_of.ravel()
+    n_cells = cells.shape[0]
+    cand = cKDTree(cells).query_pairs(2.0 + np.sqrt(3.0) + 1e-3, output_type="ndarray")
+    if cand.size == 0:
+        return cell_of
+    order = np.argsort(cell_of, kind="stable")
+    start = np.searchsorted(cell_of[order], np.arange(n_cells + 1))
+    size = np.diff(start)
+    a, b = cand[:, 0], cand[:, 1]
+    prod = size[a] * size[b]
+    small = prod <= _PAIR_BLOCK
+    joined = [np.zeros(0, dtype=np.int64)] * 2
+    sa, sb, sp = a[small], b[small], prod[small]
+    ends = np.cumsum(sp)
+    c0 = 0
+    while c0 < sp.size:  # every point pair of the small cell pairs, in bounded chunks
+        c1 = int(np.searchsorted(ends, ends[c0] - sp[c0] + _PAIR_CHUNK, side="right"))
+        c1 = max(c1, c0 + 1)
+        pa, pb, pp = sa[c0:c1], sb[c0:c1], sp[c0:c1]
+        pair = np.repeat(np.arange(pp.size), pp)
+        r = np.arange(pair.size) - np.repeat(np.cumsum(pp) - pp, pp)
+        nb = size[pb][pair]
+        i = order[start[pa][pair] + r // nb]
+        j = order[start[pb][pair] + r % nb]
+        hit = pair[((U[i] - U[j]) ** 2).sum(axis=1) <= tol * tol]
+        joined = [np.concatenate([joined[0], pa[hit]]), np.concatenate([joined[1], pb[hit]])]
+        c0 = c1
+    G = coo_matrix((np.ones(joined[0].size), (joined[0], joined[1])), shape=(n_cells, n_cells))
+    comp = connected_components(G, directed=False)[1]
+    parent = np.arange(int(comp.max()) + 1)
+
+    def find(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for x, y in cand[~small]:  # large cell pairs: one k-d tree query unless already joined
+        rx, ry = find(int(comp[x])), find(int(comp[y]))
+        if rx == ry:
+            continue
+        A = U[order[start[x] : start[x + 1]]]
+        B = U[order[start[y] : start[y + 1]]]
+        if A.shape[0] > B.shape[0]:
+            A, B = B, A
+        d = cKDTree(B).query(A, k=1, distance_upper_bound=2.0 * tol)[0]
+        if (d <= tol).any():
+            parent[rx] = ry
+    while True:  # flatten the union-find forest
+        nxt = parent[parent]
+        if np.array_equal(nxt, parent):
+            break
+        parent = nxt
+    return parent[comp][cell_of]
 
 
 def remove_unreferenced(V, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

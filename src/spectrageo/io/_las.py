@@ -15,7 +15,8 @@ header size, point offset, VLRs and EVLRs, point format and record length, count
 legacy count 0 or equal), finite non-zero scales. LAS records must all be present with no whole
 record beyond the count; LAZ needs a well-formed ``laszip encoded`` VLR and a chunk table inside
 the file whose chunks match the point count and the compressed bytes, so a damaged table cannot
-make lazrs allocate gigabytes (a process abort, not an exception).
+make lazrs allocate gigabytes (a process abort, not an exception), and no point beyond the count
+(layered chunks state theirs; arithmetic-coded ones must need every byte for their points).
 """
 
 from __future__ import annotations
@@ -238,6 +239,12 @@ def _check_laz_chunks(raw: bytes, name: str, lay: LasLayout) -> None:
     if chunk_size != 0xFFFFFFFF:  # lazrs sizes a buffer for a whole chunk, whatever n is
         check_alloc(chunk_size * lay.record_length, name, f"a LAZ chunk of {chunk_size} points")
     if n == 0:
+        cto = _u(raw, "q", off) if off + 8 <= size else -1
+        if off + 8 <= cto <= size - 8 and _u(raw, "I", cto + 4):
+            raise InvalidInputError(
+                f"{name}: LAZ header declares 0 points, but its chunk table lists "
+                f"{_u(raw, 'I', cto + 4)} chunks of compressed points (header point count wrong?)."
+            )
         return
     if off + 8 > size:
         raise InvalidInputError(f"{name}: truncated LAZ: no chunk table offset after the header.")
@@ -287,11 +294,70 @@ def _check_laz_chunks(raw: bytes, name: str, lay: LasLayout) -> None:
     items = [_u(vlr, "H", 34 + 6 * i) for i in range(n_items)]
     items_sz = [_u(vlr, "H", 34 + 6 * i + 2) for i in range(n_items)]
     items_v = [_u(vlr, "H", 34 + 6 * i + 4) for i in range(n_items)]
+    counts = [int(p) for p, _ in table]
+    if not variable:
+        counts = [chunk_size] * (n_chunks - 1) + [n - (n_chunks - 1) * chunk_size]
     if any(v >= 3 and t in _LAYERS for t, v in zip(items, items_v)):
         n_layers = sum(
             (sz if t == 14 else _LAYERS[t]) for t, sz in zip(items, items_sz) if t in _LAYERS
         )
-        _check_layers(raw, name, off + 8, table, lay.record_length, n_layers)
+        _check_layers(raw, name, off + 8, table, lay, n_layers, counts)
+    else:
+        _check_last_chunk(raw, name, lay, table, counts, cto)
+
+
+class _Hidden(io.RawIOBase):
+    """``raw`` as a stream that ends at ``limit`` for reads starting before ``resume``."""
+
+    def __init__(self, raw: bytes, limit: int, resume: int):
+        self.raw, self.limit, self.resume, self.pos = raw, limit, resume, 0
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def tell(self) -> int:
+        return self.pos
+
+    def seek(self, pos: int, whence: int = 0) -> int:
+        base = (0, self.pos, len(self.raw))[whence]
+        self.pos = base + pos
+        return self.pos
+
+    def readinto(self, buf) -> int:
+        end = len(self.raw) if self.pos >= self.resume else self.limit
+        k = max(0, min(len(buf), end - self.pos))
+        buf[:k] = self.raw[self.pos : self.pos + k]
+        self.pos += k
+        return k
+
+
+def _check_last_chunk(raw: bytes, name: str, lay: LasLayout, table, counts, cto: int) -> None:
+    """Refuse points stored beyond the header's count. An arithmetic-coded chunk (point formats
+    0-5) is written so that decoding its points reads every byte of it: the last chunk's points
+    must not decode with its final byte hidden."""
+    import lazrs
+
+    src = _Hidden(raw, cto - 1, cto)
+    src.seek(lay.offset)
+    out = bytearray(counts[-1] * lay.record_length)
+    try:
+        with _native_stderr_held():
+            dec = lazrs.LasZipDecompressor(src, lay.laszip)
+            dec.seek(sum(counts[:-1]))
+            dec.decompress_many(out)
+    except (lazrs.LazrsError, ValueError, OSError, RuntimeError):
+        return  # every byte is needed (or the data are damaged: the reader reports that)
+    except BaseException as exc:
+        if type(exc).__name__ != "PanicException":
+            raise
+        return
+    raise InvalidInputError(
+        f"{name}: LAZ header declares {lay.n} points, but the compressed data of its last chunk "
+        f"hold more than its {counts[-1]} (header point count too small?)."
+    )
 
 
 # layered (LAZ 1.4, item version 3) items -> number of layers per chunk: Point14 9, RGB14 1,
@@ -299,13 +365,21 @@ def _check_laz_chunks(raw: bytes, name: str, lay: LasLayout) -> None:
 _LAYERS = {10: 9, 11: 1, 12: 2, 13: 1, 14: 0}
 
 
-def _check_layers(raw: bytes, name: str, start: int, table, rec_len: int, n_layers: int) -> None:
-    """Each layered chunk: the first point raw, a u32 point count, ``n_layers`` u32 layer sizes,
-    then the layers. The sizes are checked against the chunk's bytes: lazrs allocates a buffer per
-    layer from them (0xFFFFFFFF made it abort)."""
-    pos = start
+def _check_layers(
+    raw: bytes, name: str, start: int, table, lay: LasLayout, n_layers: int, counts
+) -> None:
+    """Each layered chunk: the first point raw, a u32 point count (``counts[k]`` from the header),
+    ``n_layers`` u32 layer sizes, then the layers. The sizes are checked against the chunk's bytes:
+    lazrs allocates a buffer per layer from them."""
+    pos, rec_len = start, lay.record_length
     for k, (_count, nbytes) in enumerate(table):
         head = rec_len + 4 + 4 * n_layers
+        held = _u(raw, "I", pos + rec_len) if nbytes >= rec_len + 4 else counts[k]
+        if held != counts[k]:
+            raise InvalidInputError(
+                f"{name}: LAZ header declares {lay.n} points, so chunk {k} holds {counts[k]}; "
+                f"the chunk says {held} (header point count wrong?)."
+            )
         sizes = (
             struct.unpack_from(f"<{n_layers}I", raw, pos + rec_len + 4) if nbytes >= head else ()
         )

@@ -20,40 +20,53 @@ def _keys(keys) -> str:
     return ", ".join(shown[:10]) + (f", ... ({len(shown)} in all)" if len(shown) > 10 else "")
 
 
-def _npz_array(d, key: str, name: str) -> np.ndarray:
-    """Array ``key`` of the archive: the member's declared size is checked against the memory cap,
-    the member read (zipfile stops at the declared size and checks the CRC), then parsed by
-    :func:`._simple.parse_npy`, which checks the header's shape against the bytes."""
+#: Zip compression methods the standard library decodes: stored, deflate, bzip2, LZMA.
+ZIP_METHODS = {0: "stored", 8: "deflate", 12: "bzip2", 14: "LZMA"}
+
+
+def npz_array(d, key: str, name: str) -> np.ndarray:
+    """Array ``key`` of the archive: the member's compression method and declared size (against
+    the memory cap) are checked, the member read (zipfile stops at the declared size and checks
+    the CRC), then parsed by :func:`._simple.parse_npy`, which checks the header's shape against
+    the bytes."""
+    import lzma
+
     from ._simple import parse_npy
 
     zf = d.zip
     member = key if key in zf.namelist() else key + ".npy"
+    where = f"{name}: cannot read array {key!r}"
     try:
         info = zf.getinfo(member)
+        if info.compress_type not in ZIP_METHODS:
+            known = ", ".join(f"{k} ({v})" for k, v in ZIP_METHODS.items())
+            raise InvalidInputError(
+                f"{where}: zip compression method {info.compress_type} is not supported "
+                f"(supported: {known})."
+            )
         check_alloc(info.file_size, name, f"array {key!r}")
         raw = zf.read(member)
     except InvalidInputError:
         raise
+    except (lzma.LZMAError, zlib.error, EOFError) as exc:
+        raise InvalidInputError(
+            f"{where}: its {ZIP_METHODS[info.compress_type]} data are corrupted or truncated."
+        ) from exc
     except (
         ValueError,
         OSError,
-        EOFError,
         zipfile.BadZipFile,
-        zlib.error,
         KeyError,
         NotImplementedError,
         RuntimeError,
         OverflowError,
     ) as exc:
-        raise InvalidInputError(f"{name}: cannot read array {key!r} ({exc_text(exc)}).") from exc
-    return parse_npy(raw, f"{name}: cannot read array {key!r}")
+        raise InvalidInputError(f"{where} ({exc_text(exc)}).") from exc
+    return parse_npy(raw, where)
 
 
-def read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCloudSequence:
-    data = read_bytes(p, gz)
-    if not data:
-        raise InvalidInputError(f"{p.name}: empty file.")
-    name = p.name
+def open_npz(data: bytes, name: str):
+    """``np.load`` of the archive bytes ``data`` (a ``NpzFile``), or a clear error."""
     try:
         d = np.load(io.BytesIO(data), allow_pickle=False)
     except (
@@ -73,7 +86,15 @@ def read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointClo
         raise InvalidInputError(f"{name}: not a valid .npz archive ({why}).") from exc
     if not isinstance(d, np.lib.npyio.NpzFile):
         raise InvalidInputError(f"{name}: not a .npz archive (a single .npy array).")
-    with d:
+    return d
+
+
+def read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointCloudSequence:
+    data = read_bytes(p, gz)
+    if not data:
+        raise InvalidInputError(f"{p.name}: empty file.")
+    name = p.name
+    with open_npz(data, name) as d:
         keys = set(d.files)
         if kind in ("mesh", "points"):
             raise InvalidInputError(
@@ -89,11 +110,11 @@ def read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointClo
                 raise InvalidInputError(
                     f"{name}: animation .npz lacks key 'vertices' (has {_keys(keys)})."
                 )
-            frames = _npz_array(d, vkey, name)
+            frames = npz_array(d, vkey, name)
             _check_frames(frames, name, vkey)
             if kind == "sequence":
                 return PointCloudSequence([PointCloud(f) for f in frames.astype(np.float64)])
-            faces = _npz_array(d, "faces", name)
+            faces = npz_array(d, "faces", name)
             if faces.ndim != 2 or faces.shape[1] != 3:
                 raise InvalidInputError(
                     f"{name}: 'faces' must have shape (m, 3); got {faces.shape}."
@@ -105,12 +126,12 @@ def read_npz(p: Path, gz: bool, *, kind: str | None) -> MeshAnimation | PointClo
             except InvalidInputError as exc:
                 raise InvalidInputError(f"{name}: {exc}") from exc
         if "points" in keys:
-            pts = _npz_array(d, "points", name)
+            pts = npz_array(d, "points", name)
             if pts.ndim == 3:
                 _check_frames(pts, name, "points")
                 return PointCloudSequence([PointCloud(f) for f in pts.astype(np.float64)])
             if pts.ndim == 2 and "counts" in keys:
-                counts = _npz_array(d, "counts", name)
+                counts = npz_array(d, "counts", name)
                 if (
                     counts.ndim != 1
                     or counts.dtype.kind not in "iu"

@@ -24,6 +24,7 @@ from ._common import (
     sort_codes,
     spacing_from,
 )
+from ._grid import check_span, resolvable
 from ._rpca_solver import replay_blocks, solve_blocks
 from ._rpca_types import PatchRPCAResult, report
 
@@ -59,6 +60,7 @@ def score_cloud(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
     if nb.n_zero:
         return scores_deduplicated(X, k, score_cloud, dict(opts, knn=None))
     h = spacing_from(nb.dmean)
+    check_span(Xs, h, opts["dtype"])
     idx = nb.idx
     del nb  # the distances are not needed any more
     clusters_s = cluster_outliers(Xs, idx, h) if opts["clusters"] else None  # step 8
@@ -207,9 +209,12 @@ def has_duplicates(X: np.ndarray) -> bool:
 def scores_deduplicated(
     X: np.ndarray, k: int, score: Callable[..., PatchRPCAResult], kw: dict
 ) -> PatchRPCAResult:
-    """``score(U, k, **kw)`` on the unique positions ``U``; every copy gets its position's score."""
-    U, inverse = np.unique(X, axis=0, return_inverse=True)
+    """``score(U, k, **kw)`` on the unique positions ``U`` (points closer than float64 resolves
+    count as copies: :func:`~._grid.resolvable`); every copy gets its position's score."""
+    U, inverse = np.unique(resolvable(X), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
+    if U.shape[0] == X.shape[0]:  # nothing merged: the search met no copy to remove
+        raise InvalidInputError("the point cloud has points the neighbour search cannot separate.")
     if U.shape[0] < k + 1:
         raise InvalidInputError(
             f"`k` = {k} neighbours need at least {k + 1} distinct points; the cloud has "
