@@ -264,6 +264,14 @@ def test_3mf_dtd_refused(tmp_path):
         io.read(_3mf(tmp_path / "x.3mf", model))
 
 
+def test_3mf_index_beyond_int64_is_a_clear_error(tmp_path):
+    model = _HEAD + _TRI.replace('v3="2"', 'v3="18446744073709551616"')
+    model += '</resources><build><item objectid="1"/></build></model>'
+    with pytest.raises(InvalidInputError, match=r"vertex index is beyond the 64-bit") as err:
+        io.read(_3mf(tmp_path / "x.3mf", model))
+    assert "OverflowError" not in str(err.value)
+
+
 def test_3mf_any_attribute_layout_reads_the_same(tmp_path):
     """Vertices with attributes in another order and triangles with property attributes are read
     like the common layout."""

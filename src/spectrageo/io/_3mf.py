@@ -157,7 +157,12 @@ class _Object:
                 if None in self._t:
                     raise ValueError("a <triangle> lacks v1, v2 or v3")
                 self._tc.append(np.array(self._t, dtype=np.int64))
-        except (ValueError, TypeError, OverflowError) as exc:
+        except OverflowError as exc:
+            raise InvalidInputError(
+                f"{name}: 3MF object {self.oid}: a triangle's vertex index is beyond the 64-bit "
+                "integer range; indices must lie in [0, number of vertices)."
+            ) from exc
+        except (ValueError, TypeError) as exc:
             raise InvalidInputError(
                 f"{name}: 3MF object {self.oid}: missing or malformed vertex/triangle attributes "
                 f"({exc_text(exc)})."
