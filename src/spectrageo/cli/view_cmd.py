@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
@@ -76,9 +77,15 @@ def cmd_view(args) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        srv.stop()  # closes the socket and removes the temporary folder
-        for sig, handler in old.items():
+        for sig, handler in old.items():  # a second SIGTERM while stopping ends the process
             signal.signal(sig, handler)
+        clean = srv.stop()  # cancels the jobs, closes the sockets, removes the temporary folder
+    if not clean:  # a job is still inside a library call: leave without the interpreter's
+        # shutdown, which can abort the process under a thread running native code
+        print("spectrageo view: stopped while a computation was running.", file=sys.stderr)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
     return 0
 
 

@@ -6,6 +6,7 @@ import base64
 import functools
 import hashlib
 import hmac
+import ipaddress
 import json
 import mimetypes
 import os
@@ -17,7 +18,7 @@ import traceback
 import uuid
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from urllib.parse import parse_qs, unquote, urlsplit
+from urllib.parse import parse_qs, unquote
 
 import numpy as np
 
@@ -25,7 +26,7 @@ from .._errors import InvalidInputError, SpectrageoError
 from . import _analysis
 from ._files import clean_name, content_disposition, file_suffix
 from ._jobs import ViewerBusyError, _error_text
-from ._limits import CHUNK, MAX_JSON_BODY, ViewerLimits
+from ._limits import CHUNK, MAX_JSON_BODY, MIN_BODY_RATE, ViewerLimits
 from ._session import Model, ViewerSession, _ext
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
@@ -34,6 +35,12 @@ TOKEN_PLACEHOLDER = b"__SPECTRAGEO_TOKEN__"
 LINGER_S = 1.0  # at most this long and ...
 LINGER_BYTES = 16 << 20  # ... this much of an unread body is drained after a refusal, so that
 # the client can read the answer before the connection is reset
+IDLE_GRACE_S = 1.0  # a connection waiting this long for its request can give way to a new one
+LOOPBACK_NAMES = ("127.0.0.1", "localhost")
+# Host = host [":" port]: a name or IPv4 address, or a bracketed IPv6 address (RFC 9110 7.2)
+_HOST = re.compile(
+    r"(?:(?P<name>[A-Za-z0-9.-]+)|\[(?P<v6>[0-9A-Fa-f:.]+)\])(?::(?P<port>[0-9]{1,5}))?"
+)
 
 
 def _header_value(v) -> str:
@@ -205,14 +212,32 @@ class _Handler(BaseHTTPRequestHandler):
         return n
 
     def _read_into(self, out, n: int) -> None:
+        """Read ``n`` body bytes into ``out``: each pause at most ``request_timeout``, the whole
+        body within ``request_timeout + n / MIN_BODY_RATE`` seconds (else 408)."""
         left = n
-        while left > 0:
-            c = self.rfile.read(min(left, CHUNK))
-            if not c:
-                raise ConnectionError("the client closed the connection during the upload")
-            out.write(c)
-            left -= len(c)
-            self._unread = left
+        start = time.monotonic()
+        deadline = start + self.timeout + n / MIN_BODY_RATE
+        try:
+            while left > 0:
+                rest = deadline - time.monotonic()
+                if rest <= 0:
+                    raise TimeoutError
+                self.connection.settimeout(min(self.timeout, rest))
+                c = self.rfile.read1(min(left, CHUNK))
+                if not c:
+                    raise ConnectionError("the client closed the connection during the upload")
+                out.write(c)
+                left -= len(c)
+                self._unread = left
+        except TimeoutError:
+            raise _Refused(
+                408,
+                f"request body not received in time: {n - left} of {n} bytes in "
+                f"{time.monotonic() - start:.0f} s (request_timeout {self.timeout:g} s, then "
+                f"{MIN_BODY_RATE >> 10} KiB/s at least).",
+            ) from None
+        finally:
+            self.connection.settimeout(self.timeout)
 
     def _receive(self, suffix: str) -> Path:
         """Stream the body (at most ``max_upload_mb``) to a private temporary file."""
@@ -253,11 +278,11 @@ class _Handler(BaseHTTPRequestHandler):
     do_POST = do_OPTIONS = do_PUT = do_DELETE = do_PATCH = _dispatch_command
 
     def _parts(self) -> list[str]:
-        return [unquote(p) for p in urlsplit(self.path).path.split("/") if p]
+        return [unquote(p) for p in self.path.split("?", 1)[0].split("/") if p]
 
     def _dispatch(self, method: str) -> None:
-        url = urlsplit(self.path)
-        q = {k: v[-1] for k, v in parse_qs(url.query).items()}
+        path, _, query = self.path.partition("?")
+        q = {k: v[-1] for k, v in parse_qs(query).items()}
         parts = self._parts()
         self._bad_framing = False
         try:
@@ -280,7 +305,7 @@ class _Handler(BaseHTTPRequestHandler):
             elif parts and parts[0] == "api":
                 self._api(method, parts[1:], q)
             else:
-                self._json({"error": f"not found: {url.path}"}, 404)
+                self._json({"error": f"not found: {path}"}, 404)
         except _Refused as exc:
             self._json({"error": str(exc)}, exc.status, exc.headers)
         except (TimeoutError, ConnectionError):
@@ -299,9 +324,10 @@ class _Handler(BaseHTTPRequestHandler):
             self._linger()
 
     def _precheck(self, parts: list[str]) -> None:
-        """Host for everything; same origin and the session token for the API."""
-        if not self._host_ok():
-            raise _Refused(403, "forbidden host")
+        """Request target and Host for everything; same origin and the session token for the API."""
+        if not self.path.startswith("/"):  # absolute-form ("http://host/..."), "*", authority
+            raise _Refused(400, "the request target must be a path starting with '/'.")
+        self._check_host()
         if not parts or parts[0] != "api":
             return
         origin = self.headers.get("Origin")
@@ -318,9 +344,28 @@ class _Handler(BaseHTTPRequestHandler):
         port = self.server.server_address[1]
         return {f"http://{h}:{port}" for h in ("127.0.0.1", "localhost", "[::1]")}
 
-    def _host_ok(self) -> bool:
-        host = (self.headers.get("Host") or "").rsplit(":", 1)[0].strip("[]")
-        return host in ("127.0.0.1", "localhost", "::1", "")
+    def _check_host(self) -> None:
+        """Exactly one ``Host: host[:port]`` naming the loopback (none only in HTTP/1.0): 400 when
+        malformed or repeated, 403 for another host (DNS rebinding)."""
+        values = self.headers.get_all("Host") or []
+        if len(values) > 1:
+            raise _Refused(400, f"the request has {len(values)} Host headers; send exactly one.")
+        if not values:
+            if self.request_version == "HTTP/1.0":
+                return
+            raise _Refused(400, "the request needs a Host header.")
+        m = _HOST.fullmatch(values[0].strip())
+        if m is None or (m["port"] is not None and int(m["port"]) > 65535):
+            raise _Refused(400, f"malformed Host header {values[0].strip()[:60]!r}.")
+        if m["v6"] is not None:
+            try:
+                ok = ipaddress.IPv6Address(m["v6"]) == ipaddress.IPv6Address("::1")
+            except ValueError:
+                raise _Refused(400, f"malformed Host header {values[0].strip()[:60]!r}.") from None
+        else:
+            ok = m["name"].lower() in LOOPBACK_NAMES
+        if not ok:
+            raise _Refused(403, "forbidden host")
 
     def _static(self, parts: list[str]) -> None:
         p = (STATIC_DIR / "/".join(parts)).resolve()
@@ -488,17 +533,23 @@ def _outlier_methods() -> list[str]:
 
 
 class _HTTPServer(ThreadingHTTPServer):
-    """Threaded server with a connection cap and a deadline for receiving request headers."""
+    """Threaded server: a thread per connection, at most ``max_connections`` of them; a request's
+    line and headers must arrive within a deadline, and when the server is full, connections that
+    have waited ``IDLE_GRACE_S`` for a request give way to new ones (oldest first)."""
 
     daemon_threads = True
     block_on_close = False
+    request_queue_size = 128  # listen backlog: a burst of connections waits in no SYN retries
 
     def __init__(self, address, handler, *, max_connections: int):
         super().__init__(address, handler)
         self.max_connections = max_connections
         self._active = 0
         self._lock = threading.Lock()
-        self._deadlines: dict[socket.socket, float] = {}
+        self._deadlines: dict[socket.socket, float] = {}  # connections waiting for a request
+        self._waiting_since: dict[socket.socket, float] = {}
+        self._evicted: set[socket.socket] = set()  # closed by us, their threads ending
+        self._conns: dict[socket.socket, threading.Thread] = {}
         self._closed = threading.Event()
         self._reaper = threading.Thread(target=self._reap, daemon=True, name="spectrageo-reaper")
         self._reaper.start()
@@ -509,10 +560,17 @@ class _HTTPServer(ThreadingHTTPServer):
 
     def process_request(self, request, client_address):
         with self._lock:
-            full = self._active >= self.max_connections
-            if not full:
+            full = self._active - len(self._evicted) >= self.max_connections
+            victim = self._idle_victim_locked() if full else None
+            if victim is not None:
+                self._evicted.add(victim)
+                self._deadlines.pop(victim, None)
+                self._waiting_since.pop(victim, None)
+            if not full or victim is not None:
                 self._active += 1
-        if full:
+        if victim is not None:
+            _shutdown(victim)
+        elif full:
             self._refuse(request)
             return
         try:
@@ -522,13 +580,23 @@ class _HTTPServer(ThreadingHTTPServer):
                 self._active -= 1
             raise
 
+    def _idle_victim_locked(self):
+        old = time.monotonic() - IDLE_GRACE_S
+        idle = [(t, id(s), s) for s, t in self._waiting_since.items() if t <= old]
+        return min(idle)[2] if idle else None
+
     def process_request_thread(self, request, client_address):
+        with self._lock:
+            self._conns[request] = threading.current_thread()
         try:
             super().process_request_thread(request, client_address)
         finally:
             with self._lock:
                 self._active -= 1
                 self._deadlines.pop(request, None)
+                self._waiting_since.pop(request, None)
+                self._evicted.discard(request)
+                self._conns.pop(request, None)
 
     def _refuse(self, request) -> None:
         body = b'{"error": "too many connections; try again"}'
@@ -545,11 +613,14 @@ class _HTTPServer(ThreadingHTTPServer):
 
     def watch(self, sock, seconds: float) -> None:
         with self._lock:
-            self._deadlines[sock] = time.monotonic() + seconds
+            now = time.monotonic()
+            self._deadlines[sock] = now + seconds
+            self._waiting_since[sock] = now
 
     def unwatch(self, sock) -> None:
         with self._lock:
             self._deadlines.pop(sock, None)
+            self._waiting_since.pop(sock, None)
 
     def _reap(self) -> None:
         while not self._closed.wait(0.2):
@@ -558,12 +629,30 @@ class _HTTPServer(ThreadingHTTPServer):
                 late = [s for s, t in self._deadlines.items() if t < now]
                 for s in late:
                     del self._deadlines[s]
+                    self._waiting_since.pop(s, None)
             for s in late:
-                try:
-                    s.shutdown(socket.SHUT_RDWR)
-                except OSError:
-                    pass
+                _shutdown(s)
+
+    def close_connections(self, timeout: float) -> bool:
+        """Shut every open connection down and wait up to ``timeout`` s for their threads;
+        whether they all ended."""
+        with self._lock:
+            conns = dict(self._conns)
+        for s in conns:
+            _shutdown(s)
+        end = time.monotonic() + timeout
+        for t in conns.values():
+            if t is not threading.current_thread():
+                t.join(max(end - time.monotonic(), 0.0))
+        return not any(t.is_alive() for t in conns.values() if t is not threading.current_thread())
 
     def server_close(self):
         self._closed.set()
         super().server_close()
+
+
+def _shutdown(sock: socket.socket) -> None:
+    try:
+        sock.shutdown(socket.SHUT_RDWR)
+    except OSError:
+        pass

@@ -25,8 +25,16 @@ class Job:
         self.error: str | None = None
         self.started = time.perf_counter()
         self.finished: float | None = None
+        self.cancelled = False
+
+    def cancel(self) -> None:
+        """Ask the job to stop: it ends with an error at its next :meth:`update` (or before it
+        starts, when still queued)."""
+        self.cancelled = True
 
     def update(self, progress: float | None = None, message: str | None = None) -> None:
+        if self.cancelled:
+            raise JobCancelled(f"{self.desc}: cancelled, the viewer is stopping.")
         if progress is not None:
             self.progress = float(min(max(progress, 0.0), 1.0))
         if message is not None:
@@ -51,6 +59,10 @@ class Job:
 
 class ViewerBusyError(SpectrageoError):
     """The job queue is full (HTTP 429); viewer-internal, the library never raises it."""
+
+
+class JobCancelled(SpectrageoError):
+    """A job stopped by :meth:`Job.cancel`; viewer-internal."""
 
 
 class _JobPool:
@@ -89,11 +101,20 @@ class _JobPool:
             finally:
                 self._slots.release()
 
-    def close(self) -> None:
+    def close(self, timeout: float = 0.0) -> bool:
+        """Refuse new work, let the workers end after the queued jobs, and wait up to ``timeout``
+        seconds for them; whether they all ended."""
         with self._lock:
-            self._closed = True
-            for _ in self._threads:
-                self._q.put(None)
+            if not self._closed:
+                self._closed = True
+                for _ in self._threads:
+                    self._q.put(None)
+            threads = list(self._threads)
+        end = time.monotonic() + timeout
+        for t in threads:
+            if t is not threading.current_thread():
+                t.join(max(end - time.monotonic(), 0.0))
+        return not any(t.is_alive() for t in threads if t is not threading.current_thread())
 
 
 def _error_text(exc: BaseException) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import zlib
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -14,6 +15,7 @@ from .._errors import InvalidInputError
 MAX_NAME = 200  # characters of a model name (longer ones are cut, keeping the extension)
 MAX_JSON_BODY = 1 << 20  # bytes of a JSON request body
 CHUNK = 1 << 20  # bytes per read while streaming an upload to disk
+MIN_BODY_RATE = 256 << 10  # bytes per second a body must average (beyond request_timeout)
 ENV_PREFIX = "SPECTRAGEO_VIEW_"
 
 
@@ -30,13 +32,15 @@ class ViewerLimits:
         Models kept loaded; beyond it the least recently used is unloaded (``--max-models``).
     max_memory_mb : float
         Budget of the models' arrays in MiB (``--max-memory``); beyond it least recently used
-        models are unloaded, never the newest nor one a job is using.
+        models are unloaded, never the newest nor one a job is using. An upload may decompress
+        to, and its reader allocate, at most a quarter of it (:attr:`max_read_bytes`).
     max_jobs, max_queued : int
         Computations running at once, and waiting for a worker (then 429).
     max_uploads : int
         Uploads received at once; further ones get 429 before their body is read.
     request_timeout : float
-        Seconds to receive a request's headers and longest pause within a body.
+        Seconds to receive a request's headers and longest pause within a body; a whole body
+        must arrive within it plus one second per ``MIN_BODY_RATE`` bytes (else 408).
     max_connections : int
         Open connections at once; further ones get 503 and are closed.
     """
@@ -92,37 +96,73 @@ class ViewerLimits:
     def max_memory_bytes(self) -> int:
         return int(self.max_memory_mb * 2**20)
 
+    @property
+    def max_read_bytes(self) -> int:
+        """What one upload may decompress to and its reader allocate at once: a quarter of the
+        memory budget (reading holds the inflated bytes and the arrays decoded from them)."""
+        return self.max_memory_bytes // 4
+
     def to_json(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)} | {
             "max_upload_bytes": self.max_upload_bytes
         }
 
 
-def _check_expansion(path: Path, name: str, cap: int) -> None:
-    """Refuse a gzip or zip upload that expands beyond ``cap`` bytes (the models' memory budget).
+def _mb(n: int) -> str:
+    return f"{n / 2**20:g} MB"
 
-    gzip is counted as a stream; for zip archives the central directory's sizes are summed.
+
+def _gzip_size(path: Path, stop: int) -> int:
+    """Bytes that the gzip members of ``path`` inflate to, counted in a stream (no output kept)
+    until the end or beyond ``stop``; NUL padding between members is skipped."""
+    total, d, fresh = 0, zlib.decompressobj(16 + zlib.MAX_WBITS), True
+    with open(path, "rb") as f:
+        while raw := f.read(CHUNK):
+            while raw:
+                if fresh:
+                    raw = raw.lstrip(b"\0")
+                    if not raw:
+                        break
+                    fresh = False
+                total += len(d.decompress(raw, 16 * CHUNK))
+                if total > stop:
+                    return total
+                raw = d.unconsumed_tail
+                if d.eof:
+                    raw, d, fresh = d.unused_data, zlib.decompressobj(16 + zlib.MAX_WBITS), True
+    return total if fresh else total + len(d.flush(1 << 16))
+
+
+def _check_expansion(path: Path, name: str, limits: ViewerLimits) -> None:
+    """Refuse a gzip or zip upload that expands beyond the memory budget, or beyond what one
+    upload may decompress to (:attr:`ViewerLimits.max_read_bytes`), before it is read.
+
+    gzip is counted as a stream (no output kept); for zip archives the central directory's sizes
+    are summed.
     """
-    import gzip
     import zipfile
-    import zlib
 
+    cap, read_cap = limits.max_memory_bytes, limits.max_read_bytes
     with open(path, "rb") as f:
         magic = f.read(4)
-    too_big = f"{name} decompresses to more than {cap / 2**20:g} MB (the viewer's --max-memory)."
     try:
         if magic[:2] == b"\x1f\x8b":
-            n = 0
-            with gzip.open(path, "rb") as g:
-                while chunk := g.read(CHUNK):
-                    n += len(chunk)
-                    if n > cap:
-                        raise InvalidInputError(too_big)
+            n = _gzip_size(path, cap)
         elif magic == b"PK\x03\x04":
             with zipfile.ZipFile(path) as z:
-                if sum(i.file_size for i in z.infolist()) > cap:
-                    raise InvalidInputError(too_big)
+                n = sum(i.file_size for i in z.infolist())
+        else:
+            return
     except (OSError, EOFError, zlib.error, zipfile.BadZipFile) as exc:
         raise InvalidInputError(
             f"could not read {name}: corrupt compressed data ({exc})."
         ) from None
+    if n > cap:
+        raise InvalidInputError(
+            f"{name} decompresses to more than {_mb(cap)} (the viewer's --max-memory)."
+        )
+    if n > read_cap:
+        raise InvalidInputError(
+            f"{name} decompresses to more than {_mb(read_cap)}, a quarter of the viewer's "
+            f"--max-memory of {_mb(cap)} (the most one upload may decompress to)."
+        )

@@ -153,9 +153,14 @@ class ViewerSession:
         self._counter = 0
         self._pool = _JobPool(self.limits.max_jobs, self.limits.max_queued)
 
-    def close(self) -> None:
-        """Stop the job workers (a running computation finishes in its daemon thread)."""
-        self._pool.close()
+    def close(self, timeout: float = 0.0) -> bool:
+        """Cancel the jobs (queued ones end at once, running ones at their next progress update)
+        and wait up to ``timeout`` seconds for the workers; whether they all ended."""
+        with self._lock:
+            jobs = list(self.jobs.values())
+        for j in jobs:
+            j.cancel()
+        return self._pool.close(timeout)
 
     # ---- models
     def add(self, obj, name: str, source: str = "") -> Model:
@@ -208,11 +213,14 @@ class ViewerSession:
     def load_file(self, path: str | os.PathLike, name: str) -> Model:
         """Read an uploaded file saved at ``path``; ``name`` is the user's name of it."""
         from .. import io
+        from ..io._common import lowered_cap
 
         name = clean_name(name)
-        _check_expansion(Path(path), name, self.limits.max_memory_bytes)
+        _check_expansion(Path(path), name, self.limits)
+        advice = f"a quarter of the viewer's --max-memory of {self.limits.max_memory_mb:g} MB"
         try:
-            obj = io.read(Path(path))
+            with lowered_cap(self.limits.max_read_bytes, advice):
+                obj = io.read(Path(path))
         except Exception as exc:  # noqa: BLE001 - any reader failure is a bad upload
             text = str(exc) if isinstance(exc, SpectrageoError) else f"{type(exc).__name__}: {exc}"
             text = text.replace(str(path), name).replace(Path(path).name, name)
@@ -251,6 +259,7 @@ class ViewerSession:
             job.queued = False
             job.message = desc
             try:
+                job.update()  # a job cancelled while queued ends here
                 job.result = fn(job)
                 job.progress = 1.0
                 job.state = "done"

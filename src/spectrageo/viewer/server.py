@@ -23,11 +23,12 @@ API (every JSON answer is an object; errors are ``{"error": message}`` with stat
 ``GET  /api/job/JOB``                     ``{"state", "progress", "message", "elapsed", "result"|"error"}``
 ========================================  =====================================================
 
-Security (docs/usage.md, "Viewer"; docs/decisions.md#viewer-security-model): only loopback
-``Host`` names are answered; every ``/api/`` request needs the page's per-session token in the
-``X-Spectrageo-Token`` header, and a foreign ``Origin``, a cross-site ``Sec-Fetch-Site`` or a CORS
-preflight gets 403 before the body is read. Upload names are data (:func:`clean_name`); bodies,
-uploads, jobs, models and connections are bounded by :class:`ViewerLimits`.
+Security (docs/usage.md, "Viewer"; docs/decisions.md#viewer-security-model): only requests with
+one well-formed loopback ``Host`` and a path as target are answered; every ``/api/`` request
+needs the page's per-session token in the ``X-Spectrageo-Token`` header, and a foreign
+``Origin``, a cross-site ``Sec-Fetch-Site`` or a CORS preflight gets 403 before the body is read.
+Upload names are data (:func:`clean_name`); bodies, uploads, jobs, models and connections are
+bounded by :class:`ViewerLimits`.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ import functools
 import secrets
 import shutil
 import threading
+import time
 from dataclasses import replace
 
 from ._files import _make_temp_dir, clean_name, content_disposition, remove_stale_temp_dirs
@@ -93,6 +95,7 @@ class ViewerServer:
         atexit.register(self._atexit)
         self._serving = False
         self._closed = False
+        self._clean = True
         self.httpd = None
         try:
             self.session = ViewerSession(self.limits, tmp_dir=self.tmp_dir)
@@ -150,11 +153,21 @@ class ViewerServer:
     def serve_forever(self) -> None:
         self._serve()
 
-    def stop(self) -> None:
-        """Stop serving, close the socket, stop the job workers and remove the temporary folder."""
+    def stop(self, timeout: float = 5.0) -> bool:
+        """Stop accepting, cancel the jobs, close the connections and remove the temporary folder,
+        waiting up to ``timeout`` seconds for the job and connection threads.
+
+        Returns
+        -------
+        bool
+            Whether every such thread ended. A computation inside a library call ends only with
+            it; a process exiting while one runs native code can abort, so the CLI then leaves
+            with ``os._exit``.
+        """
         if self._closed:
-            return
+            return self._clean
         self._closed = True
+        end = time.monotonic() + timeout
         if self.httpd is not None:
             # shutdown() waits for serve_forever() to return; when it ran in this thread (the CLI,
             # interrupted by Ctrl+C or SIGTERM) it has already stopped -- possibly before it
@@ -163,11 +176,16 @@ class ViewerServer:
                 if self._thread is not threading.current_thread():
                     self.httpd.shutdown()
             self.httpd.server_close()
+        clean = True
         session = getattr(self, "session", None)
         if session is not None:
-            session.close()
+            clean = session.close(timeout)
+        if self.httpd is not None:
+            clean = self.httpd.close_connections(max(end - time.monotonic(), 0.0)) and clean
         shutil.rmtree(self.tmp_dir, ignore_errors=True)
         atexit.unregister(self._atexit)
+        self._clean = clean
+        return clean
 
     close = stop
 
