@@ -101,15 +101,17 @@ def cmd_info_sgc(args) -> int:
     from .. import compress
 
     data = _read_sgc(args.file)
+    name = Path(args.file).name
     try:
         d = {"file": str(args.file), **compress.info(data)}
     except InvalidInputError as mesh_err:  # an animation file (.sga): its own header
         try:
             d = {"file": str(args.file), **compress.info_animation(data)}
-        except InvalidInputError:
+        except InvalidInputError as anim_err:
             if compress._sga_format.is_animation(data) or str(args.file).lower().endswith(".sga"):
-                raise
-            raise mesh_err from None  # neither: report it as the mesh file it is named
+                raise InvalidInputError(f"{name}: {anim_err}") from anim_err
+            # neither: report it as the mesh file it is named
+            raise InvalidInputError(f"{name}: {mesh_err}") from None
     if args.json:
         print(json.dumps(d, indent=2))
     else:

@@ -216,10 +216,7 @@ def decode(data, *, partial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     _container.check_memory(c.method, n, m, ".sgc header")
     F = _connectivity.decode_faces(c.chunks[0][1], n, m)
     mod = _module(c.method)
-    if c.method == "spectral":
-        X = mod.decode(c.params, c.chunks[1:], F, n, c.method, complete=c.complete)
-    else:
-        X = mod.decode(c.params, c.chunks[1:], F, n, c.method)
+    X = mod.decode(c.params, c.chunks[1:], F, n, c.method, complete=c.complete)
     V = X * c.scale + np.asarray(c.origin)
     if not np.isfinite(V).all():
         raise InvalidInputError(".sgc data decodes to non-finite coordinates (corrupted).")

@@ -409,9 +409,16 @@ def _unpack(params: bytes):
     return af, ratio, step, seed, scheme
 
 
-def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str) -> np.ndarray:
+def decode(
+    params: bytes, chunks, F: np.ndarray, n: int, method: str, *, complete: bool = True
+) -> np.ndarray:
+    """Coordinates (n, 3) from the feature stream; a ``complete`` file (not a prefix read with
+    ``partial=True``) must hold its fine deltas, and its coarse deltas exactly when the ratio
+    is not zero."""
     af, ratio, step, seed, scheme = _unpack(params)
     tags = [t for t, _ in chunks]
+    if complete and (TAG_DELTA_FINE not in tags or (ratio > 0) != (TAG_DELTA_COARSE in tags)):
+        raise InvalidInputError(".sgc feature stream lacks delta chunks its parameters call for.")
     need = [TAG_MASK, TAG_ANCHORS]
     allowed = {TAG_MASK, TAG_ANCHORS, TAG_DELTA_FINE, TAG_DELTA_COARSE}
     if any(t not in allowed for t in tags) or len(set(tags)) != len(tags):
