@@ -72,6 +72,7 @@ SECTIONS = [
         "lowpoly/clean_coarse_validation_after",
         [*_script("lowpoly/clean_coarse"), "--split", "validation", "--tag", "validation_after"],
     ),
+    ("clean_resolutions", _script("clean_resolutions")),
     ("planar_rule", [*_script("planar_rule"), "--out", str(HERE / "_out" / "planar_rule.md")]),
     ("fold_rule", [*_script("fold_rule"), "--out", str(HERE / "_out" / "fold_rule.md")]),
     ("unfold_fine", _script("unfold_fine")),
