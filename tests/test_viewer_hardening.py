@@ -262,6 +262,10 @@ def test_stop_cancels_queued_jobs_and_reports_stuck_ones():
     with ViewerServer([], port=0, max_jobs=1, max_queued=3) as s:
         gate = threading.Event()
         running = s.session.start("slow", lambda job: gate.wait(30))
+        t0 = time.perf_counter()
+        while running.queued and time.perf_counter() - t0 < 10:  # a worker has picked it up
+            time.sleep(0.01)
+        assert not running.queued
         queued = [s.session.start("later", lambda job: {"ran": True}) for _ in range(3)]
         t0 = time.perf_counter()
         assert s.stop(timeout=0.5) is False  # the running job ignores cancellation
