@@ -93,7 +93,7 @@ def _outputs(out) -> set:
 
 def _generality_options(args) -> dict | None:
     """Keyword arguments of ``evaluate_generality`` from ``evaluate denoise --split ...``; None
-    when no protocol option is given (the pairs evaluation runs as before)."""
+    when no protocol option is given (then the pairs evaluation runs)."""
     given = {
         "--levels": args.levels,
         "--max-vertices": args.max_vertices,

@@ -17,7 +17,7 @@ Chunk 0 is the connectivity, then the geometry coarse to fine. From version 3 th
 chained: chunk ``i``'s covers ``(i u8, tag u8, length u32)``, its payload and the checksum before
 it (the header's for chunk 0), so each chunk is bound to its place and to everything before it
 and the last one covers the whole file; chunks swapped, duplicated, dropped or taken from another
-file are refused. Versions 1 and 2 checksum each payload alone (read as before). Every length and
+file are refused. Versions 1 and 2 checksum each payload alone and are read with those checks. Every length and
 checksum, the counts (:data:`MAX_COUNT`) and ``origin`` / ``scale`` (finite, ``scale > 0``) are
 verified before a payload is interpreted, so damaged or foreign data raise
 :class:`~spectrageo.InvalidInputError`; with ``partial=True`` a prefix decodes from its complete
