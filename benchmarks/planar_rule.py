@@ -8,7 +8,10 @@ Tuning cases: the shared denoising pairs (noisy and original), the tuning meshes
 ``spectrageo evaluate denoise`` (rocker-arm, knot2, spot, casting) and seven trimesh test models
 (``tests/data/trimesh``), each clean and with the five generated kinds at levels 0.1, 0.3 and
 0.5, and synthetic CAD-like shapes (cylinders and tubes sampled on their rims only, a cone, a
-capsule) at level 0.3. ``PLANAR_SHARE`` is the geometric midpoint between the largest share of a
+capsule) at level 0.3, and quadric-decimated versions (Open3D ``simplify_quadric_decimation``)
+of the CAD models (trimesh models and casting) at 1,000 and 2,000 faces, clean and noisy at the
+three levels; the decimated clean versions are listed apart with the default ``denoise``'s
+verdict on them (they do not enter the midpoint). ``PLANAR_SHARE`` is the geometric midpoint between the largest share of a
 noisy case that needs the filter (dense kinds and the pairs) and the smallest share of a clean
 CAD tessellation.
 """
@@ -23,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from spectrageo import io
+from spectrageo.denoise import denoise
 from spectrageo.denoise._guard import PLANAR_SHARE, SPIKE_SHARE, despike, planar_share
 from spectrageo.evaluate.denoise import TUNING_MESHES, TUNING_PAIRS
 from spectrageo.metrics import theta_deg
@@ -41,6 +45,8 @@ TRIMESH_TUNING = (
 LEVELS = (0.1, 0.3, 0.5)
 #: pairs whose original is not a CAD tessellation (a scan; a sphere with carved features)
 ORGANIC_PAIRS = ("Bunny", "SharpSphere")
+#: face counts of the decimated versions of the clean CAD models
+DECIMATED_FACES = (1000, 2000)
 
 
 def synthetic():
@@ -59,14 +65,36 @@ def synthetic():
         yield f"synthetic/{k}", np.asarray(m.vertices, float), np.asarray(m.faces)
 
 
+def decimated(name: str, V, F):
+    """Quadric-decimated versions of a clean CAD model at ``DECIMATED_FACES`` faces (those below
+    its own face count)."""
+    import open3d as o3d
+
+    for faces in DECIMATED_FACES:
+        if faces >= F.shape[0]:
+            continue
+        m = o3d.geometry.TriangleMesh(
+            o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(np.asarray(F, np.int32))
+        )
+        d = m.simplify_quadric_decimation(target_number_of_triangles=faces)
+        d.remove_unreferenced_vertices()
+        Vd, Fd = np.asarray(d.vertices, float), np.asarray(d.triangles, np.int64)
+        if Fd.shape[0]:
+            yield f"{name}@quadric{faces}", Vd, Fd, True
+
+
 def models(data: Path):
     """(name, clean V, F, is_cad) of every tuning model with generated noise."""
     for rel in TUNING_MESHES:
         m = io.read(data / rel)
-        yield rel, m.vertices, m.faces, rel.startswith("saliency/casting")
+        cad = rel.startswith("saliency/casting")
+        yield rel, m.vertices, m.faces, cad
+        if cad:
+            yield from decimated(rel, m.vertices, m.faces)
     for name in TRIMESH_TUNING:
         m = io.read(TRIMESH / name)
         yield f"trimesh/{name}", m.vertices, m.faces, True
+        yield from decimated(f"trimesh/{name}", m.vertices, m.faces)
     for name, V, F in synthetic():
         yield name, V, F, True
 
@@ -93,8 +121,14 @@ def main() -> None:
         (clean_cad if cad else clean_other).append(
             (planar_share(m0.vertices, m0.faces), f"{name} (original)")
         )
+    decimated_rows: list[str] = []
     for name, V, F, cad in models(data):
-        (clean_cad if cad else clean_other).append((planar_share(V, F), name))
+        if "@quadric" in name:
+            out = denoise(V, F)
+            verdict = "unchanged" if np.array_equal(out, V) else "changed"
+            decimated_rows.append(f"{name} {planar_share(V, F):.3f} ({verdict})")
+        else:
+            (clean_cad if cad else clean_other).append((planar_share(V, F), name))
         synth = name.startswith("synthetic/")
         for i, kind in enumerate(GENERATOR_KINDS):
             for j, lv in enumerate((0.3,) if synth else LEVELS):
@@ -123,6 +157,7 @@ def main() -> None:
         f"- geometric midpoint: {np.sqrt(hi[0] * lo[0]):.3f}; `PLANAR_SHARE` = {PLANAR_SHARE}",
         "- clean CAD tessellations: " + ", ".join(f"{n} {p:.3f}" for p, n in sorted(clean_cad)),
         "- other clean tuning meshes: " + ", ".join(f"{n} {p:.3f}" for p, n in sorted(clean_other)),
+        "- decimated clean CAD models (share, default `denoise`): " + ", ".join(decimated_rows),
         "",
         "Impulse repair on planar tessellations (first pass flags >= 1 % of the vertices): kept "
         "when the share of coplanar pairs rises. theta = mean normal error in degrees.",

@@ -7,6 +7,7 @@ import numpy as np
 from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_positive
 from ._guard import (
+    FOLD_MIN_VERTICES,
     MIN_NOISE,
     PLANAR_SHARE,
     SPARSE_TAIL,
@@ -89,6 +90,15 @@ def denoise(
     trust = options.pop("trust", TRUST) if info.trusted else options.get("trust")
     if trust is not None:
         check_positive(trust, "trust")
+    args = dict(pre=pre, min_noise=min_noise, impulses=impulses, trust=trust, options=options)
+    out = _gated(info, V, F, weld=weld, **args)
+    if min_noise > 0 and not np.array_equal(out, V):
+        out = _keep_clean_parts(info, V, F, out, weld=weld, **args)
+    return out
+
+
+def _gated(info, V, F, *, pre, weld, min_noise, impulses, trust, options) -> np.ndarray:
+    """The do-no-harm gate (Eqs. N1-N13) and the method, on the whole mesh ``(V, F)``."""
     from ..geometry.repair import degenerate_faces, is_soup
     from ..geometry.repair import weld as weld_mesh
 
@@ -157,6 +167,55 @@ def denoise(
             Vw, sigma = rep.vertices, sigma_r
     out = _run(info, Vw, Fw, pre=pre, trust=trust, sigma=sigma, folded=folded, options=options)
     return w.expand(out) if welded else out
+
+
+def _part_is_clean(V, F, min_noise: float) -> bool:
+    """The gate's verdict on one part alone: planar (Eq. N9), or below ``min_noise`` or coarse
+    (Eqs. N11-N13), and not folded (Eq. N10)."""
+    if is_folded(V, F):
+        return False
+    if planar_share(V, F) >= PLANAR_SHARE:
+        return True
+    return noise_estimate(V, F=F).level < min_noise or coarse_shape(V, F).coarse
+
+
+def _keep_clean_parts(info, V, F, out, *, weld, **args) -> np.ndarray:
+    """Parts (components of the welded mesh of at least ``FOLD_MIN_VERTICES`` vertices, the floor
+    under which Eq. N10 counts no folds; two or more of them) that the gate calls clean on their own get the result of denoising them alone,
+    which is the input itself unless sparse impulses were repaired; the other vertices keep
+    ``out``. See docs/decisions.md#denoise-gate-parts."""
+    from scipy.sparse.csgraph import connected_components
+
+    from ..geometry.repair import weld as weld_mesh
+    from ..graph import adjacency_matrix
+
+    w = weld_mesh(V, F) if weld else None
+    Vw, Fw = (w.vertices, w.faces) if w is not None else (V, F)
+    imap = w.index_map if w is not None else np.arange(V.shape[0])
+    if Fw.shape[0] == 0:
+        return out
+    _, lab = connected_components(adjacency_matrix(Fw, Vw.shape[0]), directed=False)
+    used = np.zeros(Vw.shape[0], dtype=bool)
+    used[Fw.ravel()] = True
+    sizes = np.bincount(lab[used], minlength=lab.max() + 1)
+    parts = np.flatnonzero(sizes >= FOLD_MIN_VERTICES)
+    if parts.size < 2:
+        return out
+    out = np.array(out, dtype=np.float64, copy=True)
+    face_part = lab[Fw[:, 0]]
+    for c in parts:
+        keep = np.flatnonzero((lab == c) & used)
+        Fc = np.searchsorted(keep, Fw[face_part == c])
+        Vc = Vw[keep]
+        if not _part_is_clean(Vc, Fc, args["min_noise"]):
+            continue
+        alone = _gated(info, Vc, Fc, weld=False, **args)
+        mine = np.flatnonzero(lab[imap] == c)
+        if np.array_equal(alone, Vc):
+            out[mine] = V[mine]
+        else:
+            out[mine] = alone[np.searchsorted(keep, imap[mine])]
+    return out
 
 
 def _run(info, V, F, *, pre, trust, sigma, folded, options) -> np.ndarray:
