@@ -20,9 +20,11 @@ HELP = {
     "compress": (
         "Compress a triangle mesh into a .sgc file: spectral (block spectral coding on\n"
         "overlapped submeshes, Sec. 5.2.1, progressive), feature (feature-aware delta\n"
-        "coordinates, Algorithm 9) or saliency (Algorithm 10). Vertex and face order are kept\n"
-        "unless --reorder. --bpv counts the whole file; --error is the RMS vertex error as a\n"
-        "fraction of the bounding-box diagonal; both are met within 5 %.\n"
+        "coordinates, Algorithm 9), saliency (Algorithm 10) or predictive (grid quantisation\n"
+        "and parallelogram prediction). Vertex and face order are kept unless --reorder. --bpv\n"
+        "counts the whole file; --error is the RMS vertex error as a fraction of the\n"
+        "bounding-box diagonal; both are met within 5 %. --max-error bounds the largest vertex\n"
+        "deviation, hence the symmetric Hausdorff distance (any bound with predictive).\n"
         "Animations (.npz or a folder of frames) go to a .sga file: eigen-trajectory coding of\n"
         "delta coordinates (Sec. 5.2.2: pca, pca-q, pca-qs, pca-qp, blocks [default]),\n"
         "eigen-trajectories in the partitioned GFT basis (pca-spectral: Sec. 5.2.1 + 5.2.2) or\n"
@@ -30,6 +32,7 @@ HELP = {
         "is the whole file in bits per vertex per frame, --error the KG error in percent.",
         "spectrageo compress fandisk.off fandisk.sgc --bpv 20\n"
         "spectrageo compress part.obj part.sgc --method feature --error 0.002\n"
+        "spectrageo compress part.obj part.sgc --method predictive --max-error 1e-4 --reorder\n"
         "spectrageo compress crane.npz crane.sga --method pca-qp --bpvf 4\n"
         "spectrageo compress frames/ anim.sga --error 0.1   # KG error in percent",
     ),

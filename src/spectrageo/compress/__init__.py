@@ -3,11 +3,12 @@
 * :func:`encode` / :func:`decode` / :func:`info` for static meshes: ``"spectral"`` (block
   spectral coding on overlapped submeshes, Algorithms 6-8, Eq. 5.42-5.45; progressive),
   ``"feature"`` (feature-aware high-pass quantisation, Algorithm 9, Eq. 5.53-5.54) and
-  ``"saliency"`` (saliency classes choose the deltas sent, Algorithm 10).
+  ``"saliency"`` (saliency classes choose the deltas sent, Algorithm 10) and ``"predictive"``
+  (uniform grid, parallelogram prediction, adaptive range coding: :mod:`._predictive`).
 * :func:`encode_animation` / :func:`decode_animation` / :func:`info_animation`,
   :class:`StreamEncoder` / :class:`StreamDecoder` for animations (Sections 5.2.2 and 5.2.4).
 * Rate control: ``bpv=`` / ``bpvf=`` (whole file) or ``error=``, met within 5 % by bisection of
-  the quantisation step; ``feature`` and ``saliency`` also choose their level of detail (see
+  the quantisation step; ``max_error=`` bounds the largest vertex displacement; ``feature`` and ``saliency`` also choose their level of detail (see
   :mod:`spectrageo.compress._feature`).
 * Vertex and face order are kept exactly unless ``reorder=True`` (:func:`info` then reports
   ``"reordered": true``).
@@ -27,7 +28,7 @@ from .._errors import InvalidInputError
 from .._validation import as_faces, as_points, check_choice
 from . import _connectivity, _container, _sga
 from ._rate import RATE_TOLERANCE as RATE_TOLERANCE
-from ._rate import STEP_MAX, STEP_MIN, bisect_step, error_step
+from ._rate import STEP_MAX, STEP_MIN, bisect_step, check_connectivity_floor, error_step
 from ._sga_format import ALL_METHODS, is_animation
 
 __all__ = [
@@ -43,25 +44,27 @@ __all__ = [
     "info_animation",
 ]
 
-METHODS = ("spectral", "feature", "saliency")
+METHODS = ("spectral", "feature", "saliency", "predictive")
 TAG_CONNECTIVITY = 1
 
 #: default quantisation step (fraction of the bounding-box diagonal) when no rate is requested
-DEFAULT_STEP = {"spectral": 1e-3, "feature": 4e-4, "saliency": 4e-4}
+DEFAULT_STEP = {"spectral": 1e-3, "feature": 4e-4, "saliency": 4e-4, "predictive": 5e-4}
 
 
 def _module(method: str):
     if method == "spectral":
         from . import _spectral as m
+    elif method == "predictive":
+        from . import _predictive as m
     else:
         from . import _feature as m
     return m
 
 
-def _check_rate(bpv, error) -> None:
-    if bpv is not None and error is not None:
-        raise InvalidInputError("give at most one of `bpv` and `error`.")
-    for name, v in (("bpv", bpv), ("error", error)):
+def _check_rate(bpv, error, max_error=None) -> None:
+    if sum(x is not None for x in (bpv, error, max_error)) > 1:
+        raise InvalidInputError("give at most one of `bpv`, `error` and `max_error`.")
+    for name, v in (("bpv", bpv), ("error", error), ("max_error", max_error)):
         if v is None:
             continue
         if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
@@ -79,6 +82,7 @@ def encode(
     error: float | None = None,
     reorder: bool = False,
     step: float | None = None,
+    max_error: float | None = None,
     **options: Any,
 ) -> bytes:
     """Compress a triangle mesh into ``.sgc`` bytes.
@@ -88,7 +92,7 @@ def encode(
     V : (n, 3) float
     F : (m, 3) int
         Every vertex index in ``0..n-1``; vertices that no face uses are coded too.
-    method : {"spectral", "feature", "saliency"}
+    method : {"spectral", "feature", "saliency", "predictive"}
     bpv : float, optional
         Target size in bits per vertex of the whole file (header and connectivity included).
     error : float, optional
@@ -100,8 +104,12 @@ def encode(
         Let the codec renumber vertices and faces (smaller connectivity); the decoded mesh is then
         the same surface with another vertex and face order.
     step : float, optional
-        Quantisation step as a fraction of the diagonal, used when neither ``bpv`` nor ``error``
-        is given (default :data:`DEFAULT_STEP`).
+        Quantisation step as a fraction of the diagonal, used when no target is given (default
+        :data:`DEFAULT_STEP`).
+    max_error : float, optional
+        Bound on the largest vertex displacement ``max ||v - v'||`` over the diagonal, hence on
+        the symmetric vertex-to-surface Hausdorff distance. ``predictive`` keeps every coordinate
+        within ``max_error / sqrt(3)``; the other methods take the largest step that keeps it.
     **options
         Method parameters. ``spectral``: ``submesh_size`` (300), ``overlap`` (0.1), ``k``
         (dictionary size per submesh, default ``submesh_size``: the quantiser, not a cut-off,
@@ -115,9 +123,9 @@ def encode(
         The ``.sgc`` file content.
     """
     check_choice(method, "method", METHODS)
-    _check_rate(bpv, error)
-    if step is not None and (bpv is not None or error is not None):
-        raise InvalidInputError("`step` cannot be combined with `bpv` or `error`.")
+    _check_rate(bpv, error, max_error)
+    if step is not None and (bpv is not None or error is not None or max_error is not None):
+        raise InvalidInputError("`step` cannot be combined with `bpv`, `error` or `max_error`.")
     if step is not None and not (isinstance(step, int | float) and STEP_MIN <= step <= STEP_MAX):
         raise InvalidInputError(f"`step` must be in [{STEP_MIN}, {STEP_MAX}]; got {step!r}.")
     V = as_points(V, "V")
@@ -127,13 +135,16 @@ def encode(
     if not isinstance(reorder, bool | np.bool_):
         raise InvalidInputError(f"`reorder` must be True or False; got {reorder!r}.")
     if reorder:
-        V, F, _perm = _connectivity.reorder(V, F)
+        V, F, _perm, conn = _connectivity.reorder_coded(V, F)
+    else:
+        conn = _connectivity.encode_faces(F)
     lo, hi = V.min(axis=0), V.max(axis=0)
     origin = 0.5 * (lo + hi)
     diag = float(np.linalg.norm(hi - lo))
     scale = diag if diag > 0 else 1.0
     X = (V - origin) / scale
-    conn = _connectivity.encode_faces(F)
+    if bpv is not None:  # a target below the connectivity's share is refused before any search
+        check_connectivity_floor(float(bpv), len(conn), V.shape[0], bool(reorder))
     mod = _module(method)
     plan = mod.make_plan(X, F, method, options)
 
@@ -151,6 +162,8 @@ def encode(
         return c.to_bytes()
 
     n = V.shape[0]
+    if max_error is not None:
+        return build(_max_error_step(plan, X, float(max_error), method))
     if bpv is None and error is None:
         return build(DEFAULT_STEP[method] if step is None else float(step))
     # the delta codecs choose their level of detail (Algorithm 9 step 5, Algorithm 10 steps
@@ -185,6 +198,35 @@ def encode(
     if best is None:
         raise failure
     return build(best[2], best[1])
+
+
+def _max_error_step(plan, X: np.ndarray, bound: float, method: str) -> float:
+    """The step for ``max_error``: the largest (log-bisected) whose decoded vertices all lie within
+    ``bound`` of the input."""
+
+    def worst(s) -> float:
+        d = plan.reconstruct(s) - X
+        return float(np.sqrt(np.max(np.sum(d * d, axis=1)))) if d.size else 0.0
+
+    if method == "predictive":
+        return plan.for_max_error(bound)
+    floor = worst(None)
+    if floor > bound or worst(STEP_MIN) > bound:
+        raise InvalidInputError(
+            f"`max_error` = {bound:g} is below what method {method!r} reaches here (largest "
+            f"deviation {max(floor, worst(STEP_MIN)):.3g} at the finest step); use "
+            "method='predictive', which reaches any bound."
+        )
+    lo, hi = math.log(STEP_MIN), math.log(STEP_MAX)
+    if worst(STEP_MAX) <= bound:
+        return STEP_MAX
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if worst(math.exp(mid)) <= bound:
+            lo = mid
+        else:
+            hi = mid
+    return math.exp(lo)
 
 
 def _parse(data, partial: bool):
@@ -234,7 +276,7 @@ def info(data) -> dict:
     size = len(data)
     conn = len(c.chunks[0][1])
     params = mod.describe(c.params, c.method)
-    if c.method != "spectral":
+    if c.method in ("feature", "saliency"):
         params["sent_share"] = round(mod.sent_share(c.chunks[1:], c.n_vertices), 6)
     return {
         "format": "sgc",

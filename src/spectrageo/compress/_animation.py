@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._errors import InvalidInputError
+from .._progress import progress
 from .._validation import as_faces, as_frames
 from . import _connectivity, _container
 from ._container import Reader, varint
@@ -229,8 +230,9 @@ def _select_rows(P: np.ndarray, s: float, n: int, nf: int, rd: float) -> np.ndar
     width = int(q.max() - off) + 1
     bits = np.empty(live.size)
     if width * live.size <= 1 << 24:
-        cnt = np.zeros((live.size, width))
-        np.add.at(cnt, (np.repeat(np.arange(live.size), q.shape[1]), (q - off).ravel()), 1.0)
+        idx = (np.arange(live.size)[:, None] * width + (q - off)).ravel()
+        cnt = np.bincount(idx, minlength=live.size * width).reshape(live.size, width)
+        cnt = cnt.astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
             pl = np.where(cnt > 0, cnt * np.log2(cnt / q.shape[1]), 0.0)
         bits[:] = -pl.sum(axis=1)
@@ -248,69 +250,119 @@ def _basis_steps(P_rows: np.ndarray, s: float, n: int, nf: int) -> np.ndarray:
     return st.astype(np.float32).astype(np.float64)
 
 
-def encode_block(plan: _BlockPlan, method: str, step: float, ratio: float, rd: float) -> list:
-    """Chunks of one block segment for the quantisation ``step`` (or kept count for ``pca``)."""
+@dataclass
+class BlockSymbols:
+    """Quantised content of one block of the quantised methods (all but ``pca``): what the
+    entropy coder codes, and the re-orthonormalised dictionaries both ends compute from it."""
+
+    rows: list[np.ndarray]  # 3 x (k,) kept rows of U^_x
+    st: list[np.ndarray]  # 3 x (k,) dictionary column steps
+    qU: list[np.ndarray]  # 3 x (nf, k) int64 quantised dictionaries
+    Q: list[np.ndarray]  # 3 x (nf, k) orthonormal dictionaries
+    q: list[np.ndarray]  # 3 x (k, n) int64 quantised coefficients
+    qa: np.ndarray  # (nf, n_a, 3) int64 quantised anchor positions
+
+
+def quantise_block(plan: _BlockPlan, method: str, step: float, ratio: float, rd: float):
+    """:class:`BlockSymbols` of one block at the quantisation ``step`` (not ``pca``)."""
     nf = plan.nf
     n = plan.P[0].shape[1]
-    basis_head = bytearray()
-    basis_syms, basis_groups = [], []
-    coef_head = bytearray()
-    coef_syms, coef_groups = [], []
-    g_basis = g_coef = 0
-    fixed = method == "pca"
+    rows_l, st_l, qU_l, Q_l, q_l = [], [], [], [], []
     for c in range(3):
-        U, P, D = plan.U[c], plan.P[c], plan.delta[c]
-        if fixed:
-            count = min(int(step), nf * n)
-            k = -(-count // n)
-            rows = np.arange(k)
-            st = np.full(k, 2.0 ** (1 - PCA_BITS))
-        else:
-            rows = _select_rows(P, step, n, nf, rd)
-            k = rows.size
-            st = _basis_steps(P[rows], step, n, nf)
-        Uk = U[:, rows]
-        qU = np.rint(Uk / st).astype(np.int64)
+        rows = _select_rows(plan.P[c], step, n, nf, rd)
+        st = _basis_steps(plan.P[c][rows], step, n, nf)
+        qU = np.rint(plan.U[c][:, rows] / st).astype(np.int64)
         Q = _orthonormal(qU * st)
-        basis_head += varint(k) + st.astype("<f4").tobytes() + rows.astype("<u4").tobytes()
-        basis_syms.append(qU.T.ravel())
-        basis_groups.append(np.repeat(np.arange(k) + g_basis, nf))
-        g_basis += k
-        Pk = Q.T @ D.T  # exact projection on the transmitted dictionary (k, n)
-        if fixed:
-            flat = Pk.ravel()[:count]
-            lo = np.float32(flat.min() if flat.size else 0.0)
-            hi = np.float32(flat.max() if flat.size else 0.0)
-            span = float(hi) - float(lo)
-            qs = (
-                np.rint((flat - float(lo)) / span * ((1 << PCA_BITS) - 1)).astype("<u2")
-                if span > 0
-                else np.zeros(flat.size, "<u2")
-            )
-            coef_head += varint(count) + np.array([lo, hi], "<f4").tobytes()
-            coef_syms.append(qs.tobytes())
-        else:
-            q = np.rint(Pk / step).astype(np.int64)
-            coef_syms.append(q.ravel())
-            coef_groups.append(np.repeat(np.arange(k) + g_coef, n))
-            g_coef += k
-    basis = bytes(basis_head) + encode_groups(
-        np.concatenate(basis_syms), np.concatenate(basis_groups), g_basis
-    )
-    if fixed:
-        coef = bytes(coef_head) + zstd_compress(b"".join(coef_syms))
-    else:
-        coef = encode_groups(np.concatenate(coef_syms), np.concatenate(coef_groups), g_coef)
-    chunks = [(TAG_BASIS, basis), (TAG_COEFF, coef)]
-    sa = _anchor_step(method, step, ratio)
-    qa = np.rint(plan.anchor_pos / sa).astype(np.int64)  # (nf, na, 3)
+        Pk = Q.T @ plan.delta[c].T  # exact projection on the transmitted dictionary (k, n)
+        rows_l.append(rows)
+        st_l.append(st)
+        qU_l.append(qU)
+        Q_l.append(Q)
+        q_l.append(np.rint(Pk / step).astype(np.int64))
+    qa = np.rint(plan.anchor_pos / _anchor_step(method, step, ratio)).astype(np.int64)
+    return BlockSymbols(rows_l, st_l, qU_l, Q_l, q_l, qa)
+
+
+def _anchor_chunk(qa: np.ndarray) -> bytes:
+    """Anchor trajectories (nf, n_a, 3): frame differences, coded per coordinate and first frame."""
+    nf = qa.shape[0]
     d = np.diff(qa, axis=0, prepend=np.zeros((1,) + qa.shape[1:], np.int64))
     grp = np.broadcast_to(
         (np.minimum(np.arange(nf), 1)[:, None, None] * 3 + np.arange(3)[None, None, :]),
         d.shape,
     )
-    chunks.append((TAG_ANCHOR_POS, encode_groups(d.ravel(), grp.ravel(), 6)))
-    return chunks
+    return encode_groups(d.ravel(), grp.ravel(), 6)
+
+
+def code_block(sym: BlockSymbols, nf: int, n: int) -> list:
+    """Chunks of one block segment holding ``sym``."""
+    head = bytearray()
+    basis_syms, basis_groups, coef_syms, coef_groups = [], [], [], []
+    g = 0
+    for c in range(3):
+        k = sym.rows[c].size
+        head += varint(k) + sym.st[c].astype("<f4").tobytes() + sym.rows[c].astype("<u4").tobytes()
+        basis_syms.append(sym.qU[c].T.ravel())
+        basis_groups.append(np.repeat(np.arange(k) + g, nf))
+        coef_syms.append(sym.q[c].ravel())
+        coef_groups.append(np.repeat(np.arange(k) + g, n))
+        g += k
+    basis = bytes(head) + encode_groups(np.concatenate(basis_syms), np.concatenate(basis_groups), g)
+    coef = encode_groups(np.concatenate(coef_syms), np.concatenate(coef_groups), g)
+    return [(TAG_BASIS, basis), (TAG_COEFF, coef), (TAG_ANCHOR_POS, _anchor_chunk(sym.qa))]
+
+
+def dequantise_block(sym: BlockSymbols, method: str, step: float, ratio: float) -> tuple:
+    """``(delta~ list of (n, nf), anchor positions (nf, n_a, 3))`` of ``sym`` (Eq. 5.49-5.50),
+    with the fixed-order product of :func:`spectrageo.linalg._fixed.matmul` (no BLAS)."""
+    from ..linalg._fixed import matmul
+
+    deltas = [matmul(sym.Q[c], sym.q[c].astype(np.float64) * step).T for c in range(3)]
+    return deltas, sym.qa * _anchor_step(method, step, ratio)
+
+
+def encode_block(plan: _BlockPlan, method: str, step: float, ratio: float, rd: float) -> list:
+    """Chunks of one block segment for the quantisation ``step`` (or kept count for ``pca``)."""
+    if method != "pca":
+        return code_block(
+            quantise_block(plan, method, step, ratio, rd), plan.nf, plan.P[0].shape[1]
+        )
+    nf = plan.nf
+    n = plan.P[0].shape[1]
+    basis_head = bytearray()
+    basis_syms, basis_groups = [], []
+    coef_head = bytearray()
+    coef_syms = []
+    g_basis = 0
+    for c in range(3):
+        U, D = plan.U[c], plan.delta[c]
+        count = min(int(step), nf * n)
+        k = -(-count // n)
+        rows = np.arange(k)
+        st = np.full(k, 2.0 ** (1 - PCA_BITS))
+        qU = np.rint(U[:, rows] / st).astype(np.int64)
+        Q = _orthonormal(qU * st)
+        basis_head += varint(k) + st.astype("<f4").tobytes() + rows.astype("<u4").tobytes()
+        basis_syms.append(qU.T.ravel())
+        basis_groups.append(np.repeat(np.arange(k) + g_basis, nf))
+        g_basis += k
+        flat = (Q.T @ D.T).ravel()[:count]
+        lo = np.float32(flat.min() if flat.size else 0.0)
+        hi = np.float32(flat.max() if flat.size else 0.0)
+        span = float(hi) - float(lo)
+        qs = (
+            np.rint((flat - float(lo)) / span * ((1 << PCA_BITS) - 1)).astype("<u2")
+            if span > 0
+            else np.zeros(flat.size, "<u2")
+        )
+        coef_head += varint(count) + np.array([lo, hi], "<f4").tobytes()
+        coef_syms.append(qs.tobytes())
+    basis = bytes(basis_head) + encode_groups(
+        np.concatenate(basis_syms), np.concatenate(basis_groups), g_basis
+    )
+    coef = bytes(coef_head) + zstd_compress(b"".join(coef_syms))
+    qa = np.rint(plan.anchor_pos / _anchor_step(method, step, ratio)).astype(np.int64)
+    return [(TAG_BASIS, basis), (TAG_COEFF, coef), (TAG_ANCHOR_POS, _anchor_chunk(qa))]
 
 
 def decode_block(chunks, p: Params, nf: int, n: int, anchors: np.ndarray, step: float) -> tuple:
@@ -340,52 +392,48 @@ def decode_block(chunks, p: Params, nf: int, n: int, anchors: np.ndarray, step: 
         rows_all.append(rows)
     groups = np.concatenate([np.repeat(np.arange(sum(ks)), nf)]) if sum(ks) else np.zeros(0, int)
     qU = decode_groups(r.rest(), groups, sum(ks), "dictionary")
-    Qs = []
+    qUs, Qs = [], []
     pos = 0
     for c in range(3):
         k = ks[c]
-        Uq = qU[pos : pos + k * nf].reshape(k, nf).T * steps[c]
+        qUs.append(qU[pos : pos + k * nf].reshape(k, nf).T)
         pos += k * nf
-        Qs.append(_orthonormal(Uq))
-    deltas = []
-    if p.method == "pca":
-        r = Reader(chunks[1][1], "coefficients")
-        heads = []
-        for c in range(3):
-            count = r.varint()
-            lo, hi = np.frombuffer(r.take(8), "<f4").astype(np.float64)
-            if count > ks[c] * n or count <= (ks[c] - 1) * n and ks[c] > 0 or not math.isfinite(hi):
-                raise InvalidInputError(".sga coefficients are malformed (bad count).")
-            heads.append((count, lo, hi))
-        total = sum(h[0] for h in heads)
-        raw = zstd_decompress(r.rest(), 2 * total, "coefficients")
-        if len(raw) != 2 * total:
-            raise InvalidInputError(".sga coefficients are malformed (wrong size).")
-        vals = np.frombuffer(raw, "<u2").astype(np.float64)
-        pos = 0
-        for c in range(3):
-            count, lo, hi = heads[c]
-            P = np.zeros(ks[c] * n)
-            P[:count] = lo + vals[pos : pos + count] * ((hi - lo) / ((1 << PCA_BITS) - 1))
-            pos += count
-            deltas.append(matmul(Qs[c], P.reshape(ks[c], n)).T)
-    else:
-        groups = np.repeat(np.arange(sum(ks)), n)
-        q = decode_groups(chunks[1][1], groups, sum(ks), "coefficients").astype(np.float64)
-        pos = 0
-        for c in range(3):
-            k = ks[c]
-            P = q[pos : pos + k * n].reshape(k, n) * step
-            pos += k * n
-            deltas.append(matmul(Qs[c], P).T)
+        Qs.append(_orthonormal(qUs[c] * steps[c]))
     na = anchors.size
     grp = np.broadcast_to(
         (np.minimum(np.arange(nf), 1)[:, None, None] * 3 + np.arange(3)[None, None, :]),
         (nf, na, 3),
     )
     d = decode_groups(chunks[2][1], grp.ravel(), 6, "anchor trajectories")
-    apos = np.cumsum(d.reshape(nf, na, 3), axis=0) * _anchor_step(p.method, step, p.anchor_ratio)
-    return deltas, apos
+    qa = np.cumsum(d.reshape(nf, na, 3), axis=0)
+    if p.method != "pca":
+        q = decode_groups(chunks[1][1], np.repeat(np.arange(sum(ks)), n), sum(ks), "coefficients")
+        qs = np.split(q, np.cumsum([k * n for k in ks])[:2])
+        qs = [qs[c].reshape(ks[c], n) for c in range(3)]
+        sym = BlockSymbols(rows_all, steps, qUs, Qs, qs, qa)
+        return dequantise_block(sym, p.method, step, p.anchor_ratio)
+    r = Reader(chunks[1][1], "coefficients")
+    heads = []
+    for c in range(3):
+        count = r.varint()
+        lo, hi = np.frombuffer(r.take(8), "<f4").astype(np.float64)
+        if count > ks[c] * n or count <= (ks[c] - 1) * n and ks[c] > 0 or not math.isfinite(hi):
+            raise InvalidInputError(".sga coefficients are malformed (bad count).")
+        heads.append((count, lo, hi))
+    total = sum(h[0] for h in heads)
+    raw = zstd_decompress(r.rest(), 2 * total, "coefficients")
+    if len(raw) != 2 * total:
+        raise InvalidInputError(".sga coefficients are malformed (wrong size).")
+    vals = np.frombuffer(raw, "<u2").astype(np.float64)
+    deltas = []
+    pos = 0
+    for c in range(3):
+        count, lo, hi = heads[c]
+        P = np.zeros(ks[c] * n)
+        P[:count] = lo + vals[pos : pos + count] * ((hi - lo) / ((1 << PCA_BITS) - 1))
+        pos += count
+        deltas.append(matmul(Qs[c], P.reshape(ks[c], n)).T)
+    return deltas, qa * _anchor_step(p.method, step, p.anchor_ratio)
 
 
 # ----------------------------------------------------------------------------- decoding
@@ -447,20 +495,27 @@ def reconstruct_block(st: StreamState, chunks, nf: int, step: float, serial: boo
             raise InvalidInputError(".sga data decodes to non-finite coordinates (corrupted).")
         return X * st.scale + st.origin
     deltas, apos = decode_block(chunks, st.params, nf, st.n, st.anchors, step)
-    X = np.empty((nf, st.n, 3))
+    X = solve_frames(st.solver, deltas, apos, serial)
+    if not np.isfinite(X).all():
+        raise InvalidInputError(".sga data decodes to non-finite coordinates (corrupted).")
+    return X * st.scale + st.origin
+
+
+def solve_frames(solver: _Solver, deltas: list, apos: np.ndarray, serial: bool) -> np.ndarray:
+    """Normalised frames (nf, n, 3) from ``delta~`` and the anchor positions (Eq. 5.51)."""
+    nf = apos.shape[0]
+    X = np.empty((nf, deltas[0].shape[0], 3))
     D = np.concatenate(deltas, axis=1)  # (n, 3 nf): columns c*nf + t
     A = np.concatenate([apos[:, :, c].T for c in range(3)], axis=1)
     if serial:  # Eq. (5.51) once per frame
         for t in range(nf):
             cols = [c * nf + t for c in range(3)]
-            X[t] = st.solver.solve(D[:, cols], A[:, cols])
+            X[t] = solver.solve(D[:, cols], A[:, cols])
     else:  # one multi-right-hand-side solve for the block
-        S = st.solver.solve(D, A)
+        S = solver.solve(D, A)
         for c in range(3):
             X[:, :, c] = S[:, c * nf : (c + 1) * nf].T
-    if not np.isfinite(X).all():
-        raise InvalidInputError(".sga data decodes to non-finite coordinates (corrupted).")
-    return X * st.scale + st.origin
+    return X
 
 
 def iter_blocks(st: StreamState, segs, partial: bool, serial: bool | None):
@@ -528,7 +583,8 @@ class AnimationEncoder:
         self.rd = rd
         self.plans = []
         prev = None
-        for t0 in range(0, self.T, self.blk):
+        starts = range(0, self.T, self.blk)
+        for t0 in progress(starts, desc="compress: analysing blocks", total=len(starts)):
             Xb = X[t0 : t0 + self.blk]
             plan = analyse_block(Xb, self.L, self.anchors, t0, prev, n_iter if basis else 0)
             self.plans.append(plan)
@@ -548,7 +604,8 @@ class AnimationEncoder:
             self.n_iter,
         )
 
-    def build(self, step: float) -> bytes:
+    def build(self, step: float, symbols: list | None = None) -> bytes:
+        """The file at ``step``; ``symbols``: the blocks' :class:`BlockSymbols` at that step."""
         m = self.F.shape[0]
         p = self.params(step)
         out = [
@@ -558,8 +615,12 @@ class AnimationEncoder:
         ]
         off = len(out[0])
         entries = []
-        for b, plan in enumerate(self.plans):
-            chunks = encode_block(plan, self.method, step, self.ratio, self.rd)
+        blocks = enumerate(self.plans)
+        for b, plan in progress(blocks, desc="compress: coding blocks", total=len(self.plans)):
+            if symbols is None:
+                chunks = encode_block(plan, self.method, step, self.ratio, self.rd)
+            else:
+                chunks = code_block(symbols[b], plan.nf, self.n)
             seg = block_segment(
                 self.method,
                 self.n,

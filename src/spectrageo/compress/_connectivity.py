@@ -94,11 +94,18 @@ def reorder(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
     along one sweep, e.g. range maps, can cost well under a bit per vertex); then the input is
     returned with the identity permutation.
     """
+    return reorder_coded(V, F)[:3]
+
+
+def reorder_coded(V: np.ndarray, F: np.ndarray):
+    """:func:`reorder` and the connectivity code of its faces: ``(V', F', perm, code)``."""
     F = np.asarray(F, dtype=np.int64)
     identity = np.arange(V.shape[0], dtype=np.int64)
+    code = encode_faces(F)
     if len(F) == 0:
-        return V, F, identity
+        return V, F, identity, code
     perm, G = _conn_traverse.canonical(F, V.shape[0])
-    if len(encode_faces(F)) <= len(encode_faces(G)):
-        return V, F, identity
-    return V[perm], G, perm
+    code_g = encode_faces(G)
+    if len(code) <= len(code_g):
+        return V, F, identity, code
+    return V[perm], G, perm, code_g

@@ -4,7 +4,7 @@ Layout (little endian)::
 
     magic    b"SGC\\x1a"                                  4 bytes
     version  u8  (FORMAT_VERSION)
-    method   u8  (0 spectral, 1 feature, 2 saliency)
+    method   u8  (0 spectral, 1 feature, 2 saliency, 3 predictive)
     flags    u8  (bit 0: vertices/faces were reordered by the codec)
     n_chunks u8
     n_vertices u32, n_faces u32
@@ -46,6 +46,7 @@ METHOD_IDS = {
     "spectral": 0,
     "feature": 1,
     "saliency": 2,
+    "predictive": 3,
     # mesh animations (.sga, :mod:`spectrageo.compress._animation`)
     "pca": 16,
     "pca-q": 17,

@@ -29,6 +29,7 @@ from ._animation import (
 )
 from ._layered import LayeredEncoder, LayeredState
 from ._rate import bisect_step
+from ._rate_animation import QUANTISED, rate_search
 from ._sga_format import (
     KIND_INDEX,
     Params,
@@ -54,6 +55,8 @@ def encode_animation(
         return _layered.encode(frames, F, step=step, bpvf=bpvf, error=error, **options)
     A, F = check_encode_args(frames, F, method, step, bpvf, error)
     enc = make_encoder(A, F, method, options)
+    if method in QUANTISED and (bpvf is not None or error is not None):
+        return rate_search(enc, A, bpvf, error)[1]
     return encode_at_rate(enc.build, A, method, step, bpvf, error)
 
 

@@ -23,11 +23,13 @@ the serial segment byte for byte. ``basis="exact"`` and the one-block methods (`
 parallelism) have no chain.
 
 Rate control (``bpvf`` / ``error``) searches one quantisation step (or, for ``pca``, one kept
-count) for the whole file, like the serial encoder: the analysed blocks stay on the workers, every
-probe codes all blocks in parallel at the probed step, and the serial search routine picks the
-next probe from the assembled file's size (``bpvf``) or from the KG error of its decoding
-(``error``; decoded here, on the driver, as the serial encoder does), so the result is again the
-serial file.
+count) for the whole file, like the serial encoder. The quantised methods (``pca-q``, ``pca-qs``,
+``pca-qp``, ``blocks``) take the step the serial model search of
+:mod:`spectrageo.compress._rate_animation` finds (run here, on the driver) and code the blocks on
+the cluster at that step once; for ``pca`` the analysed blocks stay on the workers, every probe
+codes all blocks in parallel at the probed count, and the serial search routine picks the next
+probe from the assembled file's size or the KG error of its decoding. Either way the result is
+the serial file.
 
 Refused: ``method="layered"`` (Section 5.2.4): its encoder is a closed loop, frame ``t`` is coded
 against a prediction from the two previous *decoded* frames, and refresh frames correct the
@@ -254,6 +256,7 @@ def encode_animation_blocks(
         The ``.sga`` file content.
     """
     from ..compress import _animation as an
+    from ..compress._rate_animation import QUANTISED, rate_search
 
     require_dask()
     A, F, o = _check_call(frames, F, method, step, bpvf, error, options)
@@ -271,7 +274,11 @@ def encode_animation_blocks(
         n_workers = len(client.scheduler_info().get("workers", {}))
         budget = thread_budget(n_workers, scheduler)
         enc = _BlockEncoder(client, A, F, method, o, progress, budget)
-        data = an.encode_at_rate(enc.build, A, method, step, bpvf, error)
+        if method in QUANTISED and (bpvf is not None or error is not None):
+            # the serial model search picks the step (the serial file's), the cluster codes it
+            data = enc.build(rate_search(an.make_encoder(A, F, method, o), A, bpvf, error)[0])
+        else:
+            data = an.encode_at_rate(enc.build, A, method, step, bpvf, error)
         del enc
     if path is not None:
         from ..io import atomic_write

@@ -52,6 +52,8 @@ def _compress_animation(args) -> int:
         )
     if args.bpv is not None:
         raise InvalidInputError("animations take --bpvf (bits per vertex per frame), not --bpv.")
+    if getattr(args, "max_error", None) is not None:
+        raise InvalidInputError("--max-error is for meshes; animations take --error (KG).")
     if args.reorder:
         raise InvalidInputError("--reorder is for meshes; animations always keep vertex order.")
     anim, _rep = read_reported(args.input, kind="animation", weld=False)
@@ -122,6 +124,7 @@ def run_compress(args) -> int:
         method=method,
         bpv=args.bpv,
         error=args.error,
+        max_error=getattr(args, "max_error", None),
         reorder=args.reorder,
         **({"step": args.step} if args.step is not None else {}),
     )

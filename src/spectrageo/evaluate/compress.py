@@ -1,11 +1,13 @@
 """``spectrageo evaluate compress``: rate-distortion of the .sgc codecs against Draco and zstd.
 
-Per mesh of :data:`SPLITS` and rate point: bits per vertex of the whole file, RMS error and
-symmetric Hausdorff distance over the diagonal, NMSVE (Eq. 4.32), theta (order-keeping methods
+Per mesh of :data:`SPLITS` and rate point: bits per vertex of the whole file, RMS error,
+symmetric Hausdorff distance and symmetric RMS vertex-to-surface distance over the diagonal, NMSVE (Eq. 4.32), theta (order-keeping methods
 only), order kept, encode / decode times. Methods: ``spectral`` (:data:`STEPS`),
-``spectral-reorder``, ``feature`` and ``uniform-delta`` (Algorithm 9 and its baseline, at
+``spectral-reorder`` (:data:`STEPS`), ``predictive`` and ``predictive-reorder``
+(:data:`MAX_ERRORS`), ``feature`` and ``uniform-delta`` (Algorithm 9 and its baseline, at
 :data:`GEOMETRY_BPV` through the rate control), ``saliency`` (Algorithm 10); peers when installed:
-Draco (DracoPy, 8-16 bits, default and order-preserving) and quantisation + zstd.
+Draco (DracoPy, :data:`DRACO_BITS`, default mode at compression level 10 and
+order-preserving) and quantisation + zstd.
 
 Splits (:mod:`spectrageo.datasets.splits`, task ``compress``): the codecs' defaults were chosen on
 :data:`TUNING_SPLIT`; :data:`VALIDATION_SPLIT` is held out for them but not for the connectivity
@@ -37,16 +39,28 @@ TUNING_SPLIT = _files("compress", "tuning")
 VALIDATION_SPLIT = tuple(f for f in _files("compress", "validation") if f not in COMPRESS_LARGE)
 LARGE = COMPRESS_LARGE
 SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
-METHODS = ("spectral", "spectral-reorder", "feature", "uniform-delta", "saliency")
+METHODS = (
+    "spectral",
+    "spectral-reorder",
+    "predictive",
+    "predictive-reorder",
+    "feature",
+    "uniform-delta",
+    "saliency",
+)
 PEERS = ("draco", "draco-ordered", "quant-zstd")
 STEPS = {
     "spectral": (3e-3, 1e-3, 3e-4, 1e-4),
     "spectral-reorder": (1e-2, 3e-3, 1e-3, 3e-4, 1e-4),
 }
+#: ``max_error`` requests of the predictive points: about 1 to 30 bits per vertex (reordered)
+MAX_ERRORS = (2e-2, 1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 5e-6, 2e-6)
 #: geometry rates (bits per vertex above the connectivity) of the feature, uniform-delta and
 #: saliency points
 GEOMETRY_BPV = (2, 3, 4, 6, 8, 12, 16, 20)
-DRACO_BITS = (8, 10, 12, 14, 16)
+DRACO_BITS = (6, 7, 8, 10, 12, 14, 16)
+#: Draco's compression level in its default (reordering) mode: its strongest
+DRACO_LEVEL = 10
 ZSTD_BITS = (8, 10, 12, 14, 16)
 COLUMNS = (
     "split",
@@ -58,6 +72,7 @@ COLUMNS = (
     "conn_bpv",
     "rms",
     "hausdorff",
+    "rms_surface",
     "nmsve",
     "theta_deg",
     "order_kept",
@@ -68,10 +83,18 @@ COLUMNS = (
 
 
 def _metrics(V, F, V2, F2, ordered: bool) -> dict:
-    from ..metrics import hausdorff, nmsve, theta_deg
+    from ..metrics import nmsve, surface_distance_per_vertex, theta_deg
 
     diag = float(np.linalg.norm(V.max(0) - V.min(0))) or 1.0
-    out = {"hausdorff": hausdorff(V2, F2, V, F, symmetric=True).hd_symmetric / diag}
+    # exact vertex-to-surface distances both ways (vertices used by a face)
+    d = np.r_[
+        surface_distance_per_vertex(V2[np.unique(F2)], V, F),
+        surface_distance_per_vertex(V[np.unique(F)], V2, F2),
+    ]
+    out = {
+        "hausdorff": float(d.max()) / diag,
+        "rms_surface": float(np.sqrt(np.mean(d * d))) / diag,
+    }
     if ordered:
         out["rms"] = float(np.sqrt(np.mean(np.sum((V2 - V) ** 2, axis=1)))) / diag
         out["nmsve"] = nmsve(V2, V, F)
@@ -81,17 +104,17 @@ def _metrics(V, F, V2, F2, ordered: bool) -> dict:
     return out
 
 
-def _ours(method: str, V, F, step: float | None, bpv: float | None = None):
+def _ours(method: str, V, F, step: float | None, bpv: float | None = None, max_error=None):
     from .. import compress
 
     opts = {}
     name = method
     if method == "uniform-delta":
         name, opts = "feature", {"feature_fraction": 1.0, "ratio": 1.0}
-    elif method == "spectral-reorder":
-        name, opts = "spectral", {"reorder": True}
+    elif method.endswith("-reorder"):
+        name, opts = method.removesuffix("-reorder"), {"reorder": True}
     t0 = time.perf_counter()
-    data = compress.encode(V, F, method=name, step=step, bpv=bpv, **opts)
+    data = compress.encode(V, F, method=name, step=step, bpv=bpv, max_error=max_error, **opts)
     t1 = time.perf_counter()
     V2, F2 = compress.decode(data)
     t2 = time.perf_counter()
@@ -116,7 +139,7 @@ def _draco(V, F, bits: int, ordered: bool):
         V,
         F.astype(np.uint32),
         quantization_bits=bits,
-        compression_level=1 if ordered else 7,
+        compression_level=1 if ordered else DRACO_LEVEL,
         preserve_order=ordered,
     )
     t1 = time.perf_counter()
@@ -192,6 +215,10 @@ def evaluate(
                     (m, f"bpv=conn+{g:g}", _ours, (m, V, F, None, conn_bpv + g))
                     for g in GEOMETRY_BPV
                 ]
+            elif m.startswith("predictive"):
+                jobs += [
+                    (m, f"max_error={e:g}", _ours, (m, V, F, None, None, e)) for e in MAX_ERRORS
+                ]
             elif m in METHODS:
                 jobs += [(m, f"step={s:g}", _ours, (m, V, F, s)) for s in STEPS[m]]
             elif m.startswith("draco") and peers and have("DracoPy"):
@@ -241,20 +268,21 @@ def evaluate(
     return rows
 
 
-def equal_error_rows(rows: list[dict]) -> list[dict]:
-    """Our size at each Draco point's Hausdorff: order kept against ``draco-ordered``
-    (best of the order-keeping methods), ``spectral-reorder`` against ``draco``."""
-    ours_ordered = ("spectral", "feature", "saliency")
+def equal_error_rows(rows: list[dict], key: str = "hausdorff") -> list[dict]:
+    """Our size at each Draco point's error ``key`` (``hausdorff`` or ``rms_surface``): order
+    kept against ``draco-ordered`` (best of the order-keeping methods), the best reordering one
+    against ``draco``."""
+    ours_ordered = ("spectral", "predictive", "feature", "saliency")
+    ours_reorder = ("spectral-reorder", "predictive-reorder")
     out = []
     for split, model in dict.fromkeys((r["split"], r["model"]) for r in rows):
         mine = [r for r in rows if (r["split"], r["model"]) == (split, model)]
-        for peer, ours in (("draco-ordered", ours_ordered), ("draco", ("spectral-reorder",))):
+        for peer, ours in (("draco-ordered", ours_ordered), ("draco", ours_reorder)):
             for p in (r for r in mine if r["method"] == peer):
                 best, who = float("nan"), "-"
                 for m in ours:
                     b = rate_at_error(
-                        [(r["bpv"], r["hausdorff"]) for r in mine if r["method"] == m],
-                        p["hausdorff"],
+                        [(r["bpv"], r[key]) for r in mine if r["method"] == m], p[key]
                     )
                     if np.isfinite(b) and not b >= best:
                         best, who = b, m
@@ -263,7 +291,7 @@ def equal_error_rows(rows: list[dict]) -> list[dict]:
                         "split": split,
                         "model": model,
                         "peer": f"{peer} {p['setting']}",
-                        "hausdorff": p["hausdorff"],
+                        key: p[key],
                         "peer_bpv": p["bpv"],
                         "ours": who,
                         "ours_bpv": best,
@@ -316,21 +344,7 @@ def feature_rows(rows: list[dict]) -> list[dict]:
 
 
 def format_markdown(rows: list[dict]) -> str:
-    cols = (
-        "model",
-        "method",
-        "setting",
-        "bpv",
-        "conn_bpv",
-        "rms",
-        "hausdorff",
-        "nmsve",
-        "theta_deg",
-        "order_kept",
-        "encode_s",
-        "decode_s",
-        "sent_share",
-    )
+    cols = tuple(c for c in COLUMNS if c not in ("split", "n_vertices"))
     splits = sorted({r["split"] for r in rows})
     lines = [
         "## Static mesh compression",
@@ -356,6 +370,16 @@ def format_markdown(rows: list[dict]) -> str:
         *markdown_table(
             equal_error_rows(rows),
             ("split", "model", "peer", "hausdorff", "peer_bpv", "ours", "ours_bpv", "ratio"),
+        ),
+        "",
+        "### Size at Draco's RMS error",
+        "",
+        "As above at equal `rms_surface`: the root mean square of the exact vertex-to-surface "
+        "distances both ways (defined with and without a vertex correspondence).",
+        "",
+        *markdown_table(
+            equal_error_rows(rows, "rms_surface"),
+            ("split", "model", "peer", "rms_surface", "peer_bpv", "ours", "ours_bpv", "ratio"),
         ),
         "",
         "### Feature-aware against uniform high-pass quantisation (equal rate)",

@@ -1,0 +1,140 @@
+"""The ``predictive`` static codec: uniform quantisation and parallelogram prediction.
+
+Normalised coordinates are rounded to the grid of step ``q`` (a fraction of the bounding-box
+diagonal), so every coordinate is within ``q / 2`` of the input and every vertex within
+``q sqrt(3) / 2``, a bound on the symmetric vertex-to-surface Hausdorff distance. The integer
+coordinates are predicted along a traversal of the connectivity (multi-parallelogram, the
+subset chosen by the encoder) and the residuals coded with an adaptive binary range coder
+(:mod:`._predictive_kernel`); decoding is integer arithmetic and one product by ``q``, so it is
+bit-identical on every machine. See docs/decisions.md#codec-predictive.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from ._container import Reader, varint
+from ._rate import STEP_MAX, STEP_MIN
+
+TAG_RESIDUALS = 6
+_P = struct.Struct("<dd")  # grid step, bound on each coordinate's error
+#: largest integer coordinate a file may hold (the kernel codes residuals below 2**42)
+MAX_GRID = 1 << 40
+
+
+class PredictivePlan:
+    """Encoder state of the predictive codec: quantise at any step ``q``.
+
+    ``radius`` (None: rounding to the nearest grid point) lets each coordinate take any grid
+    value within ``radius`` of the input, the one nearest its prediction (set by
+    :meth:`for_max_error`).
+    """
+
+    def __init__(self, X: np.ndarray, F: np.ndarray) -> None:
+        self.X = X
+        self.F = np.ascontiguousarray(F, dtype=np.int64)
+        self.n = X.shape[0]
+        self.radius: float | None = None
+        self._cache: tuple = (None, b"", None)
+
+    def _bounds(self, q: float) -> tuple[np.ndarray, np.ndarray]:
+        if self.radius is None:
+            lo = hi = np.rint(self.X / q)
+        else:
+            lo = np.ceil((self.X - self.radius) / q)
+            hi = np.floor((self.X + self.radius) / q)
+        if lo.size and max(np.abs(lo).max(), np.abs(hi).max()) >= MAX_GRID:
+            raise InvalidInputError("quantisation step too small for this mesh; use a larger one.")
+        return lo.astype(np.int64), hi.astype(np.int64)
+
+    def _encode(self, q: float) -> tuple[bytes, np.ndarray]:
+        key = (float(q), self.radius)
+        if self._cache[0] != key:
+            from . import _predictive_kernel as kernel
+
+            lo, hi = self._bounds(q)
+            G = np.zeros_like(lo)
+            buf = np.zeros(self.n * 3 * 16 + 64, dtype=np.uint8)
+            nb = kernel.run(True, self.F, self.n, G, buf, lo, hi)
+            self._cache = (key, varint(self.n) + buf[:nb].tobytes(), G)
+        return self._cache[1], self._cache[2]
+
+    def params(self, q: float) -> bytes:
+        return _P.pack(float(q), float(q) / 2 if self.radius is None else self.radius)
+
+    def chunks(self, q: float) -> list[tuple[int, bytes]]:
+        return [(TAG_RESIDUALS, self._encode(q)[0])]
+
+    def reconstruct(self, q: float | None) -> np.ndarray:
+        return self.X.copy() if q is None else self._encode(q)[1] * float(q)
+
+    def levels(self) -> list[PredictivePlan]:
+        return [self]
+
+    def for_max_error(self, bound: float) -> float:
+        """Grid step for a vertex error of at most ``bound``: every coordinate within
+        ``bound / sqrt(3)``, on the grid of that step doubled (rounding) or of that step (the
+        value nearest the prediction), whichever codes smaller."""
+        r = float(bound) / math.sqrt(3.0) * (1.0 - 1e-9)
+        best = None
+        for radius, q in ((None, 2.0 * r), (r, r)):
+            if not STEP_MIN <= q <= STEP_MAX:
+                continue
+            self.radius = radius
+            size = len(self._encode(q)[0])
+            if best is None or size < best[0]:
+                best = (size, radius, q)
+        if best is None:
+            raise InvalidInputError(
+                f"`max_error` = {bound:g} is below what 'predictive' reaches (its finest step "
+                f"{STEP_MIN:g} bounds the error by {STEP_MIN * math.sqrt(3) / 2:.3g})."
+            )
+        self.radius = best[1]
+        return best[2]
+
+
+def make_plan(X: np.ndarray, F: np.ndarray, method: str, options: dict) -> PredictivePlan:
+    if options:
+        raise InvalidInputError(
+            f"unknown option(s) {sorted(options)} for method 'predictive'; it takes none."
+        )
+    return PredictivePlan(X, F)
+
+
+def describe(params: bytes, method: str) -> dict:
+    q, r = _step(params)
+    return {"step": q, "max_vertex_error": r * math.sqrt(3.0)}
+
+
+def _step(params: bytes) -> tuple[float, float]:
+    if len(params) != _P.size:
+        raise InvalidInputError(".sgc predictive parameters are malformed.")
+    q, r = _P.unpack(params)
+    if not (math.isfinite(q) and 0 < q <= STEP_MAX and math.isfinite(r) and 0 <= r <= q):
+        raise InvalidInputError(".sgc predictive parameters are invalid (step).")
+    return q, r
+
+
+def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str, *, complete: bool = True):
+    """Normalised coordinates (n, 3) from the residual chunk."""
+    from . import _predictive_kernel as kernel
+
+    q = _step(params)[0]
+    if len(chunks) != 1 or chunks[0][0] != TAG_RESIDUALS:
+        raise InvalidInputError(".sgc predictive stream lacks its residual chunk.")
+    r = Reader(chunks[0][1], "predictive residuals")
+    if r.varint() != n:
+        raise InvalidInputError(".sgc predictive residuals do not match the vertex count.")
+    buf = np.frombuffer(r.rest(), dtype=np.uint8).copy()
+    G = np.zeros((n, 3), dtype=np.int64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    none = np.zeros((0, 3), dtype=np.int64)
+    if kernel.run(False, F, n, G, buf, none, none) < 0:
+        raise InvalidInputError(".sgc predictive residuals are truncated or malformed.")
+    if G.size and np.abs(G).max() >= MAX_GRID:
+        raise InvalidInputError(".sgc predictive residuals are malformed (out of range).")
+    return G * q
