@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ._split_types import Case, _c
+from ._split_types import Case, Default, _c, _d
 
 # ============================================================================= registration
 _R = "spectrageo.register."
@@ -13,6 +13,44 @@ _REGISTER_CONSULTED = (
     _R + "narrow_phase.tol",
     _R + "_narrow.COARSE_EPS",
 )
+_ER = "spectrageo evaluate register --split tuning"
+#: defaults chosen on the tuning crops of fragment.pcd, whose validation crops are of the same file
+_CROPS_CONSULTED = (_R + "_broad.RIVAL_SHARE", _R + "_broad.RIVAL_DEG")
+#: defaults of registration chosen in docs/decisions.md#register-speed and #register-reliable
+REGISTER_DEFAULTS: tuple[Default, ...] = (
+    _d(_R + "_broad.DENSITY_NEIGHBORS", 32, "tuning", "register", _ER,
+       "same 27/28 tuning pairs as 64, less time; docs/decisions.md#register-speed"),
+    _d(_R + "_broad.VERIFY_SHORT", 5, "tuning", "register", _ER,
+       "same tuning successes as 20 iterations on every peak; docs/decisions.md#register-speed"),
+    _d(_R + "_broad.VERIFY_KEEP", 3, "tuning", "register", _ER,
+       "same tuning successes as 20 iterations on every peak; docs/decisions.md#register-speed"),
+    _d(_R + "_api.MAX_POINTS", 10000, "tuning", "register", _ER,
+       "same tuning successes and errors within 0.1 deg of 20000; docs/decisions.md#register-speed"),
+    _d(_R + "_api.TARGET_POINTS", 2.0, "tuning", "register", _ER,
+       "with MAX_POINTS; docs/decisions.md#register-speed"),
+    _d(_R + "_broad.RIVAL_SHARE", 0.9, "tuning", "register", _ER,
+       "fragment crop #1 (seed 1): right poses at 0.95-1.0 of the turned room's voxel fitness; "
+       "docs/decisions.md#register-rivals"),
+    _d(_R + "_broad.RIVAL_DEG", 10.0, "tuning", "register", _ER,
+       "a pose of its own beyond the ICP basin; docs/decisions.md#register-rivals"),
+    _d(_R + "_api.MIN_CONSTRAINT", 1e-3, "tuning", "register", _ER,
+       "tuning pairs >= 2.9e-3, tuning no-overlap crops 3.6e-4-8e-3; "
+       "docs/decisions.md#register-reliable"),
+    _d(_R + "_api.MIN_TIGHT_SHARE", 0.6, "tuning", "register", _ER,
+       "tuning pairs >= 0.70, tuning no-overlap crops 0.26-0.68; "
+       "docs/decisions.md#register-reliable"),
+)  # fmt: skip
+#: the bunny scan pairs (ground-truth overlap > 0.3, in ``bun.conf`` order) of each split: the
+#: even positions tune, the odd ones validate
+BUNNY_PAIRS = {
+    "tuning": ("bun000->bun045", "bun000->bun270", "bun000->bun315", "bun045->bun090",
+               "bun045->bun315", "bun090->bun180", "bun090->top3", "bun180->bun270",
+               "bun180->ear_back", "bun270->bun315", "bun270->ear_back", "top2->ear_back",
+               "bun315->chin"),
+    "validation": ("bun000->bun090", "bun000->top3", "bun000->chin", "bun045->top3",
+                   "bun045->chin", "bun090->top2", "bun090->ear_back", "bun180->top2",
+                   "bun270->top2", "bun270->chin", "top2->top3", "top3->bun315"),
+}  # fmt: skip
 #: the library of the identification scenes: name -> path
 IDENTIFY_LIBRARY = {
     "bunny": "meshes/stanford-bunny.obj",
@@ -41,7 +79,12 @@ def _register_cases() -> list[Case]:
         ("validation", 0, ("elephant", "camel", "cow", "dino", "bull")),
     ):
         cons = _REGISTER_CONSULTED if split == "validation" else ()
-        note = "the tuning scans moved by other motions" if cons else ""
+        note = (
+            "bunny: the pairs of BUNNY_PAIRS['validation'] (other pairs of the same scans) with "
+            "other motions; fragment: the tuning pair with another motion"
+            if cons
+            else "bunny: the pairs of BUNNY_PAIRS['tuning']"
+        )
         out.append(
             _c(
                 "register",
@@ -67,6 +110,21 @@ def _register_cases() -> list[Case]:
                 frag_src,
                 consulted_by=cons,
                 note=note,
+            )
+        )
+        n_crops = 2 if split == "tuning" else 4
+        out.append(
+            _c(
+                "register",
+                "scans/registration/open3d/fragment.pcd",
+                split,
+                "scan",
+                f"{n_crops} pairs of crops, motion",
+                seed,
+                "fragment-crops",
+                consulted_by=_CROPS_CONSULTED if split == "validation" else (),
+                note="real RGB-D fragment; crops and motions drawn from the split's seed (the "
+                "validation crops are other crops of the tuning file)",
             )
         )
         out += [

@@ -9,7 +9,9 @@ import importlib
 
 _EXPORTS = {
     # registration (Sections 6.2.2, 6.2.4, 6.2.5)
+    "PreparedTarget": "._api",
     "RegistrationResult": "._api",
+    "prepare_target": "._api",
     "register": "._api",
     "broad_phase": "._api",
     "narrow_phase": "._api",

@@ -8,21 +8,37 @@ deterministic for a given ``rng``.
 from __future__ import annotations
 
 import time
+import warnings
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .._errors import InvalidInputError
-from .._validation import as_rng, check_positive
+from .._errors import ConvergenceWarning, InvalidInputError
+from .._validation import as_rng, check_choice, check_positive
 from ._common import (
     RegistrationResult,
     apply_transform,
     as_transform,
+    check_extent,
     downsample_to,
     points_of,
+    thin,
 )
-from ._narrow import TargetIndex, check_icp_options, run_narrow
+from ._narrow import TargetIndex, _score, check_icp_options, constraint, run_narrow
 from ._robust import boundary_mask, outlier_scores
+
+#: :func:`register` keeps at most TARGET_POINTS * max_points target points for the narrow phase
+#: (docs/decisions.md#register-speed)
+TARGET_POINTS = 2.0
+#: default source size of :func:`register`'s narrow phase (docs/decisions.md#register-speed)
+MAX_POINTS = 10000
+#: larger inputs are first thinned to a random subset of this size (every later step samples
+#: far fewer points)
+MAX_INPUT_POINTS = 1_000_000
+#: a registration is reported ``converged`` only with at least these (docs/decisions.md#register-reliable)
+MIN_CONSTRAINT = 1e-3
+MIN_TIGHT_SHARE = 0.6
 
 
 def narrow_phase(
@@ -124,6 +140,112 @@ def broad_phase(source: Any, target: Any, *, rng: Any = 0, **options: Any) -> np
     return broad_phase_points(S, Tg, rng=as_rng(rng), **options)[0]
 
 
+@dataclass(frozen=True, eq=False)
+class PreparedTarget:
+    """A target made ready for many :func:`register` calls (see :func:`prepare_target`).
+
+    Attributes
+    ----------
+    points : (n, 3) float64
+        The target as given.
+    voxel_size : float
+        Broad-phase voxel.
+    robust, method, max_points
+        The :func:`register` options it was prepared for.
+    """
+
+    points: np.ndarray = field(repr=False)
+    voxel_size: float
+    robust: bool
+    method: str
+    max_points: int
+    broad: Any = field(repr=False, default=None)
+    narrow_points: np.ndarray = field(repr=False, default=None)
+    index: TargetIndex = field(repr=False, default=None)
+    n_kept: int = 0
+
+
+def prepare_target(
+    target: Any,
+    *,
+    voxel_size: float | None = None,
+    robust: bool = True,
+    method: str = "point_to_plane",
+    max_points: int = MAX_POINTS,
+) -> PreparedTarget:
+    """Target descriptors, KD-trees and robustified narrow-phase cloud, for reuse by :func:`register`.
+
+    Parameters
+    ----------
+    target : (n, 3) array_like, PointCloud or Mesh
+    voxel_size : float, optional
+        Broad-phase voxel (default: the target's bounding-box diagonal / 45).
+    robust, method, max_points
+        As in :func:`register`; a call with other values raises.
+
+    Returns
+    -------
+    PreparedTarget
+
+    Example
+    -------
+    >>> pt = prepare_target(scan0)                      # doctest: +SKIP
+    >>> [register(s, pt).transformation for s in scans]  # doctest: +SKIP
+    """
+    from ._broad import broad_target, default_voxel
+
+    Tg = thin(points_of(target, "target"), MAX_INPUT_POINTS)
+    check_extent(Tg, "target")
+    check_choice(method, "method", ("point_to_plane", "point_to_point"))
+    check_positive(max_points, "max_points", integer=True)
+    s = float(voxel_size) if voxel_size is not None else default_voxel(Tg, Tg)
+    check_positive(s, "voxel_size")
+    Td = downsample_to(Tg, int(TARGET_POINTS * max_points))
+    n_kept = Td.shape[0]
+    if robust:
+        Td, kt = robustify(Td)
+        n_kept = int(kt.sum())
+    index = TargetIndex(Td, need_normals=method == "point_to_plane")
+    return PreparedTarget(Tg, s, bool(robust), method, int(max_points), broad_target(Tg, s), Td,
+                          index, n_kept)  # fmt: skip
+
+
+def _prepared(target: Any, S: np.ndarray, robust: bool, method: str, max_points: int, bo: dict):
+    if not isinstance(target, PreparedTarget):
+        from ._broad import default_voxel
+
+        Tg = thin(points_of(target, "target"), MAX_INPUT_POINTS)
+        vs = bo.get("voxel_size")
+        s = float(vs) if vs is not None else default_voxel(S, Tg)
+        check_positive(s, "voxel_size")
+        return prepare_target(Tg, voxel_size=s, robust=robust, method=method, max_points=max_points)
+    got = (target.robust, target.method, target.max_points)
+    if got != (bool(robust), method, int(max_points)):
+        raise InvalidInputError(
+            f"the prepared target was made for robust, method, max_points = {got}; this call "
+            f"asks for {(bool(robust), method, int(max_points))}."
+        )
+    if bo.get("voxel_size") is not None and float(bo["voxel_size"]) != target.voxel_size:
+        raise InvalidInputError(
+            "`broad_options['voxel_size']` differs from the prepared target's; prepare it with "
+            "that voxel."
+        )
+    return target
+
+
+def _reliable(Sd: np.ndarray, index: TargetIndex, res: RegistrationResult, info: dict) -> bool:
+    """Whether the final pose is pinned down: the inliers constrain every rigid motion
+    (:func:`constraint` at least ``MIN_CONSTRAINT``) and concentrate near zero residual (the
+    share of the inliers within a third of ``inlier_distance``, one spacing, at least
+    ``MIN_TIGHT_SHARE``); docs/decisions.md#register-reliable."""
+    d = res.inlier_distance
+    c = constraint(Sd, index, res.transformation, d)
+    tight = _score(Sd, index, res.transformation, d / 3.0)[0] / max(res.fitness, 1e-300)
+    info.update(icp_converged=bool(res.converged), constraint=c, tight_share=tight)
+    info["reliable"] = bool(c >= MIN_CONSTRAINT and tight >= MIN_TIGHT_SHARE)
+    return info["reliable"]
+
+
 def register(
     source: Any,
     target: Any,
@@ -134,19 +256,23 @@ def register(
     max_iter: int = 60,
     tol: float = 1e-5,
     method: str = "point_to_plane",
-    max_points: int = 20000,
+    max_points: int = MAX_POINTS,
     broad_options: dict | None = None,
 ) -> RegistrationResult:
     """Broad-to-narrow registration (Section 6.2.1): broad phase unless ``init``, robustify, ICP.
 
+    ``target`` may be a :class:`PreparedTarget` (:func:`prepare_target`), reused across calls.
     ``rng`` seeds the broad phase; ``robust`` applies :func:`robustify`; ``max_iter``, ``tol``,
     ``method``, ``max_points`` go to :func:`narrow_phase` and ``broad_options`` to
-    :func:`broad_phase`. Returns a :class:`RegistrationResult` whose ``info`` holds ``time_s``,
-    ``broad_time_s``, ``n_candidates``, ``n_kept_source`` and ``n_kept_target``.
+    :func:`broad_phase`. ``converged`` is the narrow phase's convergence and the pose being
+    pinned down (no sliding along a plane, line or sphere, inliers near zero residual; else the
+    pose is a guess, e.g. without overlap). Returns a :class:`RegistrationResult` whose ``info``
+    holds ``time_s``, ``broad_time_s``, ``n_candidates``, ``n_kept_source``, ``n_kept_target``,
+    ``icp_converged``, ``constraint``, ``tight_share`` and ``reliable``.
     """
     t0 = time.perf_counter()
-    S = points_of(source, "source")
-    Tg = points_of(target, "target")
+    S = thin(points_of(source, "source"), MAX_INPUT_POINTS)
+    check_extent(S, "source")
     check_icp_options(max_iter, tol, method)
     check_positive(max_points, "max_points", integer=True)
     g = as_rng(rng)
@@ -154,11 +280,14 @@ def register(
         raise InvalidInputError(
             f"`broad_options` must be a dict; got {type(broad_options).__name__}."
         )
+    bo = dict(broad_options or {})
+    pt = _prepared(target, S, robust, method, max_points, bo)
+    bo.pop("voxel_size", None)
     info: dict[str, Any] = {}
     if init is None:
         from ._broad import broad_phase_points
 
-        T0, binfo = broad_phase_points(S, Tg, rng=g, **(broad_options or {}))
+        T0, binfo = broad_phase_points(S, None, rng=g, target=pt.broad, **bo)
         info.update(binfo)
     else:
         T0 = as_transform(init, "init")
@@ -166,45 +295,52 @@ def register(
     # robustification on the clouds the narrow phase will use (down-sampled first: the RPCA
     # patch problem then costs ~0.05 s instead of ~0.5 s on a 40k-point scan)
     Sd = downsample_to(S, max_points)
-    Td = downsample_to(Tg, max(5 * max_points, 100000))
     if robust:
         Sd, ks = robustify(Sd)
-        Td, kt = robustify(Td)
-        info["n_kept_source"], info["n_kept_target"] = int(ks.sum()), int(kt.sum())
-    index = TargetIndex(Td, need_normals=method == "point_to_plane")
+        info["n_kept_source"], info["n_kept_target"] = int(ks.sum()), pt.n_kept
     # after the broad phase (already refined at the voxel scale) the Tukey scale starts at two
     # voxels instead of the median distance, which at low overlap is dominated by points without
     # a counterpart and would drag the alignment off
     gamma0 = 2.0 * info["voxel_size"] if init is None else None
-    res = run_narrow(
-        Sd,
-        Td,
-        T0,
-        max_iter=max_iter,
-        tol=tol,
-        method=method,
-        gamma=gamma0,
-        max_points=max_points,
-        index=index,
-    )
+    # the broad phase's best and its close rivals (other poses nearly as fit at the voxel scale,
+    # e.g. a room turned by 180 degrees) are refined; the share of source points within one
+    # spacing (a third of the inlier distance) decides, then the fitness
+    res, best = None, (-1.0, -1.0)
+    rivals = info.pop("rivals", [])
+    info["n_rivals"] = len(rivals)
+    for T_start in [T0, *rivals]:
+        r = run_narrow(Sd, pt.points, T_start, max_iter=max_iter, tol=tol, method=method,
+                       gamma=gamma0, max_points=max_points, index=pt.index, warn=False)  # fmt: skip
+        key = (_score(Sd, pt.index, r.transformation, r.inlier_distance / 3.0)[0], r.fitness)
+        if res is None or key > best:
+            res, best = r, key
+    if not res.converged:
+        warnings.warn(
+            f"narrow phase stopped at max_iter={max_iter} before meeting tol={tol:g}.",
+            ConvergenceWarning,
+            stacklevel=2,
+        )
     info.update(res.info)
+    reliable = _reliable(Sd, pt.index, res, info)
     info["time_s"] = time.perf_counter() - t0
     return RegistrationResult(
         transformation=res.transformation,
         fitness=res.fitness,
         inlier_rmse=res.inlier_rmse,
         n_iter=res.n_iter,
-        converged=res.converged,
+        converged=res.converged and reliable,
         inlier_distance=res.inlier_distance,
         info=info,
     )
 
 
 __all__ = [
+    "PreparedTarget",
     "RegistrationResult",
     "apply_transform",
     "broad_phase",
     "narrow_phase",
+    "prepare_target",
     "register",
     "robustify",
 ]

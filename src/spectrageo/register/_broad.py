@@ -10,6 +10,7 @@ Details: docs/decisions.md#register-broad-details.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,18 @@ from ._narrow import TargetIndex, icp
 #: kernel threshold phi of Section 6.2.2 (contributions below phi are neglected)
 PHI = 0.01
 SCALES = (16, 40)
+#: broad-phase voxel: the larger bounding-box diagonal over this (docs/decisions.md#register-defaults)
+VOXEL_DIVISOR = 45.0
+#: verification: every peak gets VERIFY_SHORT ICP iterations, the VERIFY_KEEP best the rest
+#: (docs/decisions.md#register-speed)
+VERIFY_SHORT = 5
+VERIFY_KEEP = 3
+#: neighbours summed in the density of a candidate (docs/decisions.md#register-speed)
+DENSITY_NEIGHBORS = 32
+#: a verified pose at least RIVAL_SHARE as fit as the best and RIVAL_DEG degrees away from it is
+#: refined too, the finer fit decides (docs/decisions.md#register-rivals)
+RIVAL_SHARE = 0.9
+RIVAL_DEG = 10.0
 
 
 def shape_properties(P: np.ndarray, tree: cKDTree, ks=SCALES, chunk: int = 20000):
@@ -106,61 +119,141 @@ def embed(R: np.ndarray, t: np.ndarray, cen: np.ndarray, L: np.ndarray) -> np.nd
     return np.c_[RL, R @ cen + t]
 
 
-def density(Phi: np.ndarray, radius: float, max_neighbors: int = 64) -> np.ndarray:
+def density(Phi: np.ndarray, radius: float, max_neighbors: int | None = None) -> np.ndarray:
     """``rho`` of Eq. 6.24 at every candidate over at most ``max_neighbors`` within ``radius``."""
     m = Phi.shape[0]
+    k = DENSITY_NEIGHBORS if max_neighbors is None else int(max_neighbors)
     b = np.sqrt(-np.log(PHI)) / radius
-    d, _ = cKDTree(Phi).query(
-        Phi, k=min(max_neighbors, m), distance_upper_bound=radius, workers=WORKERS
-    )
+    d, _ = cKDTree(Phi).query(Phi, k=min(k, m), distance_upper_bound=radius, workers=WORKERS)
     d = np.asarray(d).reshape(m, -1)
     w = np.exp(-((b * d) ** 2))
     w[~np.isfinite(d)] = 0.0
     return w.sum(axis=1)
 
 
+def _peaks(Phi: np.ndarray, rho: np.ndarray, radius: float, n_peaks: int) -> list[int]:
+    """Greedy peaks: the densest candidate, then the densest farther than ``radius`` from every
+    chosen one, up to ``n_peaks``."""
+    alive = np.ones(Phi.shape[0], dtype=bool)
+    score = np.where(np.isfinite(rho), rho, -np.inf)
+    peaks: list[int] = []
+    while len(peaks) < n_peaks and alive.any():
+        i = int(np.argmax(np.where(alive, score, -np.inf)))
+        peaks.append(i)
+        alive &= np.einsum("ij,ij->i", Phi - Phi[i], Phi - Phi[i]) >= radius * radius
+    return peaks
+
+
+@dataclass(frozen=True, eq=False)
+class BroadTarget:
+    """Target side of the broad phase at one voxel: points, descriptors, frames, trees."""
+
+    voxel: float
+    points: np.ndarray
+    desc: np.ndarray
+    frames: np.ndarray
+    desc_tree: cKDTree
+    index: TargetIndex
+
+
+def broad_target(Tg: np.ndarray, voxel: float) -> BroadTarget:
+    """The :class:`BroadTarget` of the cloud ``Tg`` voxel down-sampled at ``voxel``."""
+    Tv, _ = voxel_downsample(Tg, voxel)
+    if Tv.shape[0] < 6:
+        raise InvalidInputError(
+            f"`voxel_size` {voxel:.3g} leaves fewer than 6 points ({Tv.shape[0]} target); use a "
+            "smaller voxel."
+        )
+    index = TargetIndex(Tv)
+    dt, Ft = shape_properties(Tv, index.tree)
+    dt = dt * voxel
+    return BroadTarget(voxel, Tv, dt, Ft, cKDTree(dt), index)
+
+
+def default_voxel(S: np.ndarray, Tg: np.ndarray) -> float:
+    """Broad-phase voxel: 1/45 of the larger bounding-box diagonal."""
+    diag = max(bbox_diagonal(S), bbox_diagonal(Tg))
+    if diag <= 0:
+        raise InvalidInputError("`source` and `target` are single points; nothing to register.")
+    return diag / VOXEL_DIVISOR
+
+
+def _verify(Sv, index, R, t, peaks, r, s, verify_iter):
+    """Short ICP runs from every peak, the ``VERIFY_KEEP`` best (fitness, then rmse) continued;
+    ``(T, fitness, rank)`` of the best."""
+
+    def run(T0, iters, gamma0):
+        return icp(Sv, index, T0, max_iter=int(iters), tol=1e-4, method="point_to_plane",
+                   gamma0=gamma0, gamma_min=s, inlier_distance=1.5 * s)  # fmt: skip
+
+    first = min(VERIFY_SHORT, verify_iter)
+    res = [run(make_transform(R[i], t[i]), first, r) for i in peaks]
+    ranked = sorted(range(len(res)), key=lambda k: (-res[k].fitness, res[k].inlier_rmse, k))
+    if verify_iter > first:
+        for k in ranked[:VERIFY_KEEP]:
+            res[k] = run(res[k].transformation, verify_iter - first, res[k].info["gamma"])
+        ranked = sorted(
+            ranked[:VERIFY_KEEP], key=lambda k: (-res[k].fitness, res[k].inlier_rmse, k)
+        )
+    k = ranked[0]
+    rivals = [res[j].transformation for j in ranked[1:VERIFY_KEEP] if _rival(res[j], res[k], s)]
+    return res[k].transformation, res[k].fitness, k, rivals
+
+
+def _rival(a, best, s: float) -> bool:
+    """Whether verified pose ``a`` fits nearly as well as ``best`` (``RIVAL_SHARE``) but is
+    another pose (more than ``RIVAL_DEG`` degrees or 3 voxels away)."""
+    if a.fitness < RIVAL_SHARE * best.fitness:
+        return False
+    D = a.transformation @ np.linalg.inv(best.transformation)
+    ang = np.degrees(np.arccos(np.clip((np.trace(D[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+    return bool(ang > RIVAL_DEG or np.linalg.norm(D[:3, 3]) > 3.0 * s)
+
+
 def broad_phase_points(
     S: np.ndarray,
-    Tg: np.ndarray,
+    Tg: np.ndarray | None,
     *,
     rng: np.random.Generator,
     voxel_size: float | None = None,
-    n_samples: int = 600,
-    n_matches: int = 15,
+    n_samples: int = 400,
+    n_matches: int = 10,
     kernel_radius: float | None = None,
     n_peaks: int = 15,
     verify_iter: int = 20,
+    target: BroadTarget | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
-    """Broad phase on validated point arrays; returns ``(T, info)``."""
+    """Broad phase on validated point arrays (``target`` reuses a prepared target side and
+    fixes the voxel); returns ``(T, info)``."""
     t0 = time.perf_counter()
     check_positive(n_samples, "n_samples", integer=True)
     check_positive(n_matches, "n_matches", integer=True)
     check_positive(n_peaks, "n_peaks", integer=True)
     check_positive(verify_iter, "verify_iter", integer=True, allow_zero=True)
-    diag = max(bbox_diagonal(S), bbox_diagonal(Tg))
-    if diag <= 0:
-        raise InvalidInputError("`source` and `target` are single points; nothing to register.")
-    s = float(voxel_size) if voxel_size is not None else diag / 45.0
+    if target is not None:
+        s = target.voxel
+    else:
+        s = float(voxel_size) if voxel_size is not None else default_voxel(S, Tg)
     check_positive(s, "voxel_size")
     r = float(kernel_radius) if kernel_radius is not None else 3.0 * s
     check_positive(r, "kernel_radius")
     Sv, _ = voxel_downsample(S, s)
-    Tv, _ = voxel_downsample(Tg, s)
-    if Sv.shape[0] < 6 or Tv.shape[0] < 6:
+    if Sv.shape[0] < 6:
         raise InvalidInputError(
-            f"`voxel_size` {s:.3g} leaves fewer than 6 points ({Sv.shape[0]} source, "
-            f"{Tv.shape[0]} target); use a smaller voxel."
+            f"`voxel_size` {s:.3g} leaves fewer than 6 points ({Sv.shape[0]} source); use a "
+            "smaller voxel."
         )
-    s_tree, t_tree = cKDTree(Sv), cKDTree(Tv)
+    bt = target if target is not None else broad_target(Tg, s)
+    Tv, Ft = bt.points, bt.frames
+    s_tree = cKDTree(Sv)
     ds, Fs = shape_properties(Sv, s_tree)
-    dt, Ft = shape_properties(Tv, t_tree)
-    ds, dt = ds * s, dt * s
+    ds = ds * s
     # distinctive source points: the 60 % most curved (curvedness at the larger scale)
     curv = np.hypot(ds[:, -2], ds[:, -1])
     pool = np.flatnonzero(curv >= np.quantile(curv, 0.4))
     pick = np.sort(rng.choice(pool, size=min(int(n_samples), pool.size), replace=False))
     km = int(min(n_matches, Tv.shape[0]))
-    _, nb = cKDTree(dt).query(ds[pick], k=km, workers=WORKERS)
+    _, nb = bt.desc_tree.query(ds[pick], k=km, workers=WORKERS)
     nb = np.asarray(nb).reshape(pick.size, km)
     si = np.repeat(pick, km)
     ti = nb.ravel()
@@ -172,38 +265,15 @@ def broad_phase_points(
     pt = np.concatenate([Tv[ti], Tv[ti]])
     t = pt - np.einsum("mij,mj->mi", R, ps)
     cen, L = triangle_embedding_basis(Sv, s_tree)
-    Phi = embed(R, t, cen, L)
+    Phi = np.ascontiguousarray(embed(R, t, cen, L))
     rho = density(Phi, r)
-    order = np.argsort(-rho, kind="stable")
-    peaks: list[int] = []
-    for i in order:
-        if peaks and np.min(np.linalg.norm(Phi[peaks] - Phi[i], axis=1)) < r:
-            continue
-        peaks.append(int(i))
-        if len(peaks) >= n_peaks:
-            break
+    peaks = _peaks(Phi, rho, r, int(n_peaks))
     best_T = make_transform(R[peaks[0]], t[peaks[0]])
     info: dict[str, Any] = {"n_candidates": int(R.shape[0]), "voxel_size": s, "n_peaks": len(peaks)}
     if verify_iter > 0 and len(peaks) > 1:
-        index = TargetIndex(Tv)
-        best = (-1.0, np.inf)
-        for rank, i in enumerate(peaks):
-            res = icp(
-                Sv,
-                index,
-                make_transform(R[i], t[i]),
-                max_iter=int(verify_iter),
-                tol=1e-4,
-                method="point_to_plane",
-                gamma0=r,
-                gamma_min=s,
-                inlier_distance=1.5 * s,
-            )
-            key = (res.fitness, -res.inlier_rmse)
-            if key > (best[0], -best[1]):
-                best = (res.fitness, res.inlier_rmse)
-                best_T = res.transformation
-                info["peak_rank"] = rank
-        info["broad_fitness"] = best[0]
+        best_T, fit, rank, rivals = _verify(Sv, bt.index, R, t, peaks, r, s, int(verify_iter))
+        info["rivals"] = rivals
+        info["peak_rank"] = rank
+        info["broad_fitness"] = fit
     info["broad_time_s"] = time.perf_counter() - t0
     return best_T, info

@@ -14,6 +14,13 @@ from .._validation import as_points
 #: Threads used by the kNN queries (-1: all cores, as Open3D's searches do; the answers do not
 #: depend on the thread count).
 WORKERS = -1
+#: queries with fewer points run on one thread (starting the threads costs more than they save)
+SMALL_QUERY = 8192
+
+
+def workers_for(n: int) -> int:
+    """kNN query threads for ``n`` query points."""
+    return 1 if n < SMALL_QUERY else WORKERS
 
 
 def points_of(x: Any, name: str) -> np.ndarray:
@@ -32,6 +39,15 @@ def points_of(x: Any, name: str) -> np.ndarray:
             f"`{name}` must have at least 3 points for a rigid registration; got {P.shape[0]}."
         )
     return P
+
+
+def check_extent(P: np.ndarray, name: str) -> None:
+    """Raise when every point of ``P`` is the same (nothing fixes a rigid motion)."""
+    if not np.any(P.max(axis=0) > P.min(axis=0)):
+        raise InvalidInputError(
+            f"`{name}` has {P.shape[0]} points that are all equal (zero extent); a rigid "
+            "registration needs a cloud with extent."
+        )
 
 
 def as_transform(T: Any, name: str) -> np.ndarray:
@@ -124,6 +140,14 @@ def voxel_downsample(P: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarra
     return Q, label
 
 
+def thin(P: np.ndarray, limit: int) -> np.ndarray:
+    """At most ``limit`` points of ``P``: a fixed-seed random subset in the original order."""
+    if P.shape[0] <= limit:
+        return P
+    keep = np.random.default_rng(0).choice(P.shape[0], size=int(limit), replace=False)
+    return P[np.sort(keep)]
+
+
 def downsample_to(P: np.ndarray, max_points: int) -> np.ndarray:
     """Voxel down-sampling grown until at most ``max_points`` remain."""
     if P.shape[0] <= max_points:
@@ -145,7 +169,7 @@ def spacing(P: np.ndarray, tree: cKDTree | None = None, *, n_sample: int = 2000)
         return 0.0
     tree = tree if tree is not None else cKDTree(P)
     idx = np.arange(0, n, max(1, n // n_sample))
-    d, _ = tree.query(P[idx], k=2, workers=WORKERS)
+    d, _ = tree.query(P[idx], k=2, workers=workers_for(idx.size))
     s = float(np.median(d[:, 1]))
     if s <= 0:
         pos = d[:, 1][d[:, 1] > 0]
@@ -167,7 +191,7 @@ def knn_normals_at(
     """:func:`knn_normals` of the cloud ``P`` at its points ``X``."""
     n = X.shape[0]
     k = int(min(k, P.shape[0]))
-    _, idx = tree.query(X, k=k, workers=WORKERS)
+    _, idx = tree.query(X, k=k, workers=workers_for(n))
     idx = np.asarray(idx).reshape(n, k)
     Q = P[idx]
     Q = Q - Q.mean(axis=1, keepdims=True)
@@ -188,7 +212,8 @@ class RegistrationResult:
     fitness, inlier_rmse : float
         Share of down-sampled source points within ``inlier_distance`` of the target; their RMS.
     n_iter, converged : int, bool
-        Narrow-phase iterations and whether it met its tolerance.
+        Narrow-phase iterations and whether it met its tolerance (:func:`register`: and the
+        pose is pinned down, ``info["reliable"]``).
     inlier_distance : float
     info : dict
         Diagnostics (``gamma``, ``time_s``, ...).

@@ -12,7 +12,6 @@ from scipy.spatial import cKDTree
 from .._errors import ConvergenceWarning
 from .._validation import check_choice, check_positive
 from ._common import (
-    WORKERS,
     RegistrationResult,
     apply_transform,
     bbox_diagonal,
@@ -22,6 +21,7 @@ from ._common import (
     orthonormalize,
     rotvec_to_matrix,
     spacing,
+    workers_for,
 )
 
 #: Tukey constant: gamma = 4.685 sigma gives 95 % efficiency under Gaussian residuals.
@@ -102,17 +102,41 @@ def _query(
     index: TargetIndex, P: np.ndarray, bound: float, eps: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
     """Nearest target within ``bound`` (inf beyond); ``eps > 0`` approximate."""
-    d, j = index.tree.query(P, k=1, eps=eps, distance_upper_bound=bound, workers=WORKERS)
+    d, j = index.tree.query(
+        P, k=1, eps=eps, distance_upper_bound=bound, workers=workers_for(P.shape[0])
+    )
     j = np.where(np.isfinite(d), j, 0)
     return d, j
 
 
 def _score(P: np.ndarray, index: TargetIndex, T: np.ndarray, dist: float) -> tuple[float, float]:
-    d, _ = index.tree.query(apply_transform(T, P), k=1, distance_upper_bound=dist, workers=WORKERS)
+    d, _ = index.tree.query(
+        apply_transform(T, P), k=1, distance_upper_bound=dist, workers=workers_for(P.shape[0])
+    )
     ok = np.isfinite(d)
     fit = float(ok.mean())
     rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("inf")
     return fit, rmse
+
+
+def constraint(P: np.ndarray, index: TargetIndex, T: np.ndarray, dist: float) -> float:
+    """Smallest over largest eigenvalue of the point-to-plane information matrix ``J^T J`` of
+    the inliers within ``dist`` (rows ``[(p - c) x n / l, n]``, ``l`` the source diagonal): near
+    0 when a motion slides the source along the target (plane, line, sphere, no overlap)."""
+    X = apply_transform(T, P)
+    d, j = index.tree.query(X, k=1, distance_upper_bound=dist, workers=workers_for(P.shape[0]))
+    ok = np.isfinite(d)
+    if ok.sum() < 6:
+        return 0.0
+    X, j = X[ok], j[ok]
+    if index._normals is not None:
+        N = index.normals_at(j)
+    else:
+        N = knn_normals_at(index.points, index.points[j], index.normal_k, index.tree)[0]
+    scale = max(bbox_diagonal(P), 1e-300)
+    J = np.c_[np.cross((X - X.mean(axis=0)) / scale, N), N]
+    ev = np.linalg.eigvalsh(J.T @ J / X.shape[0])
+    return float(max(ev[0], 0.0) / max(ev[-1], 1e-300))
 
 
 def icp(
@@ -143,7 +167,7 @@ def icp(
         # robust scale of the initial distances, on a strided subset (a nearest-neighbour query
         # far from the target is slow; later queries are bounded by gamma)
         sub = P[:: max(1, P.shape[0] // 2000)]
-        gamma = TUKEY_C * 1.4826 * float(np.median(index.tree.query(sub, k=1, workers=WORKERS)[0]))
+        gamma = TUKEY_C * 1.4826 * float(np.median(index.tree.query(sub, k=1, workers=1)[0]))
     else:
         gamma = float(gamma0)
     gamma = max(gamma, gamma_min)
