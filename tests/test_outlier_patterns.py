@@ -211,14 +211,15 @@ def test_valley_threshold_recovers_contamination(c, seed):
 
 def test_valley_threshold_single_population_and_degenerate():
     from spectrageo.outliers import auto_threshold, valley_threshold
+    from spectrageo.outliers._thresholds import RPCA_MIN_TAU as floor
 
     rng = np.random.default_rng(0)
     s = 10 ** rng.normal(-1.5, 0.4, 20000)
     t, info = valley_threshold(s)
     assert info["valley"] is None  # no second population: the density rule, floored
-    assert t == pytest.approx(max(auto_threshold(s, minimum=0.4, rule="density"), 0.4))
+    assert t == pytest.approx(max(auto_threshold(s, minimum=floor, rule="density"), floor))
     assert info["contamination"] < 0.01
-    assert valley_threshold(np.array([np.inf, np.nan]))[0] == 0.4
+    assert valley_threshold(np.array([np.inf, np.nan]))[0] == floor
     assert valley_threshold(np.zeros(50))[1]["valley"] is None
 
 

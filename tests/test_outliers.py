@@ -134,7 +134,9 @@ def test_rpca_refinement_rebuilds_outlier_patches_and_subtracts_baseline():
     M = knn_patch_matrix((P - P.mean(axis=0)) / plain.spacing, k, neighbors=idx)
     ref = rpca(M, method="ialm", tol=1e-9, max_iter=500, options=LinalgOptions(rho=1.5))
     s2 = np.linalg.norm(ref.sparse[:, 0].reshape(-1, 3), axis=1)
-    expect = np.maximum(s2 - np.median(s1[idx], axis=1), 0.0)
+    from spectrageo.outliers._rpca_core import BASELINE_QUANTILE
+
+    expect = np.maximum(s2 - np.quantile(s1[idx], BASELINE_QUANTILE, axis=1), 0.0)
     np.testing.assert_allclose(r.scores, expect, atol=1e-4 * max(1.0, expect.max()))
     # the refinement separates the outlier cloud better than the plain first column
     from spectrageo.evaluate.outliers import _oracle_threshold
@@ -317,8 +319,15 @@ def test_remove_far_outliers_synthetic(method):
     np.testing.assert_array_equal(r.points.points, P[r.keep])
     # the threshold reproduces the mask (rpca: points of small volumetric clusters removed too)
     if method == "rpca":
-        cmp = (r.scores < r.threshold) & ~rpca_scores(P, 10).clusters
-        assert r.info["n_cluster_outliers"] >= np.count_nonzero(~r.keep & (r.scores < r.threshold))
+        from spectrageo.outliers._rpca_types import SPARSE_FACTOR
+        from spectrageo.outliers.static import SPARSE_GATE
+
+        rs = rpca_scores(P, 10)
+        d = rs.kth_distance
+        sparse = (d > SPARSE_FACTOR * np.median(d)) & (r.scores >= SPARSE_GATE * r.threshold)
+        cmp = (r.scores < r.threshold) & ~rs.clusters & ~sparse
+        n_extra = r.info["n_cluster_outliers"] + r.info["n_sparse_outliers"]
+        assert n_extra >= np.count_nonzero(~r.keep & (r.scores < r.threshold))
     else:
         cmp = r.scores <= r.threshold
     np.testing.assert_array_equal(r.keep, cmp)

@@ -194,15 +194,15 @@ def test_normal_of_matches_eigh():
             assert 1.0 - abs(n @ V[:, 0]) < 1e-9
 
 
-def test_patch_median_and_flag_counts_match_numpy():
+def test_patch_quantile_and_flag_counts_match_numpy():
     rng = np.random.default_rng(9)
     s1 = rng.random(500)
-    for k in (6, 7):
+    for k, q in ((6, 0.5), (7, 0.5), (10, 0.3), (11, 0.0), (10, 1.0)):
         idx = rng.integers(0, 500, (500, k)).astype(np.int32)
         out = rng.random(500)
-        expect = np.maximum(out - np.median(s1[idx], axis=1), 0.0)
-        kern.subtract_patch_median(out, s1, idx)
-        np.testing.assert_array_equal(out, expect)
+        expect = np.maximum(out - np.quantile(s1[idx], q, axis=1), 0.0)
+        kern.subtract_patch_quantile(out, s1, idx, q)
+        np.testing.assert_allclose(out, expect, rtol=0, atol=1e-15)
         flagged = s1 > 0.7
         np.testing.assert_array_equal(kern.count_flagged(idx, flagged), flagged[idx].sum(axis=1))
 

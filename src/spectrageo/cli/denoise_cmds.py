@@ -95,6 +95,8 @@ def cmd_outliers_tiled(args) -> int:
 
     if args.tile is None or args.tile <= 0:
         raise InvalidInputError(f"`tile` must be a positive number of points; got {args.tile}.")
+    if getattr(args, "viewpoint", None) is not None:
+        raise InvalidInputError("--viewpoint is not applied per tile; run without --tile.")
     want = bool(args.mask or args.scores)
     device = getattr(args, "device", "cpu")
     extra = {}

@@ -56,8 +56,59 @@ _OUTLIER_INJECTED = (
 )
 
 
-def _outlier_cases() -> list[Case]:
+#: the scan-type benchmark (``spectrageo evaluate outliers``, suite ``scan-types``): file ->
+#: (scan type, sensor viewpoint or None); organized Kinect frames are in camera coordinates
+OUTLIER_SCAN_TYPES = {
+    **{
+        f"scans/bunny/{b}.ply.gz": ("laser range scan", None)
+        for b in ("bun000", "bun045", "bun090", "chin", "ear_back")
+        + ("bun180", "bun270", "bun315", "top2", "top3")
+    },
+    "scans/pcl/table_scene_mug_stereo_textured.pcd": ("Kinect organized frame", (0.0, 0.0, 0.0)),
+    "scans/pcl/office1.pcd": ("Kinect organized frame", (0.0, 0.0, 0.0)),
+    "scans/pcl/milk.pcd": ("Kinect segment", (0.0, 0.0, 0.0)),
+    "scans/registration/open3d/cloud_bin_0.pcd": ("RGB-D fragment", None),
+    "scans/registration/open3d/cloud_bin_1.pcd": ("RGB-D fragment", None),
+    "scans/lidar/autzen_trim.laz": ("LiDAR", None),
+    "scans/rangemap/face000.ply": ("range map", None),
+}
+#: the split of each scan-type case: bunny scans with real labels, the Kinect frame whose range
+#: model exponent was chosen, the fragments (validation where the outlier task has them)
+_SCAN_TYPE_TUNING = (
+    "scans/bunny/bun000.ply.gz",
+    "scans/bunny/bun045.ply.gz",
+    "scans/bunny/bun090.ply.gz",
+    "scans/bunny/chin.ply.gz",
+    "scans/bunny/ear_back.ply.gz",
+    "scans/pcl/table_scene_mug_stereo_textured.pcd",
+    "scans/pcl/milk.pcd",
+    "scans/registration/open3d/cloud_bin_0.pcd",
+)
+
+
+def _scan_type_cases() -> list[Case]:
     out = []
+    for rel, (stype, vp) in OUTLIER_SCAN_TYPES.items():
+        split = "tuning" if rel in _SCAN_TYPE_TUNING else "validation"
+        real = rel.startswith("scans/bunny/")
+        out.append(
+            _c(
+                "outliers-scantypes",
+                rel,
+                split,
+                "scan",
+                "real (reference), injected far + near, bands" if real else "injected, bands",
+                name=f"{stype}: {rel.rsplit('/', 1)[-1].split('.')[0]}",
+                sources=("meshes/stanford-bunny.obj",) if real else (),
+                note=(f"viewpoint {vp}" if vp is not None else "")
+                + ("; RANGE_POWER chosen on it" if vp is not None and split == "tuning" else ""),
+            )
+        )
+    return out
+
+
+def _outlier_cases() -> list[Case]:
+    out = _scan_type_cases()
     for split in ("tuning", "validation"):
         pats = ",".join(OUTLIER_PATTERNS_BY_SPLIT[split])
         for label, rel in _OUTLIER_SCANS[split]:

@@ -156,6 +156,12 @@ OUTLIERS = CommandSchema(
             help="write per-point outlier scores to .npy, one per input row (inf for NaN rows)",
         ),
         Option(
+            "viewpoint", ("--viewpoint",), metavar="X,Y,Z",
+            help="--method rpca: sensor origin of a single-view scan (0,0,0 for an organized "
+            "Kinect/RGB-D frame in camera coordinates); scores are normalised by the spacing "
+            "expected at each point's range, so sparse far regions are kept",
+        ),
+        Option(
             "device", ("--device",), default="cpu", choices=("cpu", "cuda", "auto"),
             help="where the RPCA iterations run: cpu (numba, default), cuda (PyTorch on the GPU; "
             "scores within 1e-3 spacings of cpu), auto (cuda when a GPU is visible); also for "
@@ -202,6 +208,11 @@ COMPRESS = CommandSchema(
             "error", ("--error",), type=float, metavar="E", group="rate",
             help="target RMS vertex error as a fraction of the bounding-box diagonal; "
             "animations: KG error in percent",
+        ),
+        Option(
+            "max_error", ("--max-error",), type=float, metavar="E", group="rate",
+            help="meshes: bound on the largest vertex deviation (hence the symmetric Hausdorff "
+            "distance) as a fraction of the bounding-box diagonal",
         ),
         Option(
             "step", ("--step",), type=float, group="rate",

@@ -28,6 +28,15 @@ from .._errors import InvalidInputError
 from .._progress import progress
 from ..datasets.splits import OUTLIER_PATTERNS_BY_SPLIT, split_of
 from ..datasets.splits import cases as _cases
+from ._outliers_common import (  # noqa: F401 - re-exported for the evaluations and tests
+    PCL_MEAN_K,
+    _have_open3d,
+    _open3d_sor,
+    _oracle_threshold,
+    _prf,
+    _row,
+)
+from ._outliers_scans import evaluate_scan_types, format_scan_types
 from ._tables import rows_to_csv, write_md_csv
 
 __all__ = [
@@ -49,7 +58,7 @@ __all__ = [
 #: validation scans are not held out for the constants chosen on this benchmark
 SCANS = tuple((c.name, c.file) for c in _cases("outliers-injected"))
 SEQUENCES = tuple((c.name, c.file) for c in _cases("outliers-sequence"))
-DEFAULT_METHODS = ("rpca", "sor", "sor-grid", "radius", "open3d-sor", "sequence")
+DEFAULT_METHODS = ("rpca", "sor", "sor-grid", "radius", "open3d-sor", "sequence", "scan-types")
 #: Methods run only when named (long): the outlier patterns on sequences.
 EXTRA_METHODS = ("sequence-patterns",)
 #: frame step of the sequences of :data:`SEQUENCE_PATTERN_DATA` (1 when not listed)
@@ -80,34 +89,6 @@ VALIDATION_SPLIT = _split_spec("validation")
 SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
 SPLIT_FRACTIONS = (0.05, 0.1, 0.2, 0.3)
 _SOR_GRID = ((10, 20, 30), (0.5, 1.0, 1.5, 2.0, 2.5, 3.0))
-#: ``pcl-sor``: the statistical filter at the setting of PCL's outlier-removal tutorial
-#: (``setMeanK(50)``, ``setStddevMulThresh(1.0)``; the algorithm of our ``sor``, exactly).
-PCL_MEAN_K = 50
-
-
-def _prf(removed: np.ndarray, labels: np.ndarray) -> tuple[float, float, float]:
-    tp = int(np.count_nonzero(removed & labels))
-    p = tp / max(int(np.count_nonzero(removed)), 1)
-    r = tp / max(int(np.count_nonzero(labels)), 1)
-    return p, r, (2 * p * r / (p + r) if p + r > 0 else 0.0)
-
-
-def _open3d_sor(P: np.ndarray, k: int, std_ratio: float) -> np.ndarray:
-    import open3d as o3d
-
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
-    _, ind = pc.remove_statistical_outlier(nb_neighbors=k, std_ratio=std_ratio)
-    keep = np.zeros(P.shape[0], dtype=bool)
-    keep[np.asarray(ind, dtype=np.int64)] = True
-    return keep
-
-
-def _have_open3d() -> bool:
-    try:
-        import open3d  # noqa: F401
-    except Exception:  # noqa: BLE001 - missing shared libraries raise OSError, not ImportError
-        return False
-    return True
 
 
 def evaluate_outliers(
@@ -130,14 +111,16 @@ def evaluate_outliers(
     ``"sequence-patterns"``).
 
     ``splits`` (default: both ``("tuning", "validation")`` when ``scans`` is left at its
-    default, none otherwise) adds the pattern benchmark of :func:`evaluate_splits`: rows with a
-    ``split`` column, ``kind`` = the outlier pattern (or ``"clean"`` for the unmodified scan, with
-    the fraction of points flagged in ``flagged``).
+    default and a static filter is among ``methods``, none otherwise) adds the pattern benchmark
+    of :func:`evaluate_splits`: rows with a ``split`` column, ``kind`` = the outlier pattern (or
+    ``"clean"`` for the unmodified scan, with the fraction of points flagged in ``flagged``).
 
     Rows carry ``dataset, kind, fraction, method, params, precision, recall, f1, time_s,
     n_points, split`` (static; ``split`` of the scan in the registry, ``"-"`` for a scan it does
     not list) or ``theta_deg, p2s_mean, p2s_max_frame`` and per-frame lists
-    (sequences; ``"sequence"`` in ``methods``). ``out`` writes ``<out>.md`` and ``<out>.csv``.
+    (sequences; ``"sequence"`` in ``methods``). ``"scan-types"`` adds the rows of
+    :func:`._outliers_scans.evaluate_scan_types` (``suite`` = ``"scan-types"``). ``out`` writes
+    ``<out>.md`` and ``<out>.csv``.
     """
     from .. import io, noise
     from ..geometry import pca_normals
@@ -215,11 +198,14 @@ def evaluate_outliers(
                         dt = time.perf_counter() - t0
                         rows.append(_row(base, m, "nb_neighbors=10, std_ratio=1", ~keep, lab, dt))
     if splits is None:
-        splits = tuple(SPLITS) if scans is SCANS else ()
+        static = any(m in methods for m in ("rpca", "sor", "radius"))
+        splits = tuple(SPLITS) if scans is SCANS and static else ()
     if splits:
         rows.extend(
             evaluate_splits(data, splits=tuple(splits), fractions=split_fractions, seed=seed)
         )
+    if "scan-types" in methods:  # per scan type: real labels, bands, clean scans
+        rows.extend(evaluate_scan_types(data, seed=seed))
     if "sequence" in methods:
         rows.extend(_evaluate_sequences(data, sequence_fractions, seed))
     if "sequence-patterns" in methods:
@@ -488,34 +474,6 @@ def _open3d_radius(P: np.ndarray, k: int) -> np.ndarray:
     return keep
 
 
-def _oracle_threshold(scores: np.ndarray, labels: np.ndarray) -> float:
-    """The threshold ``tau`` (remove ``score >= tau``) of best F1, chosen with the labels."""
-    o = np.argsort(-scores, kind="stable")
-    s = scores[o]
-    tp = np.cumsum(labels[o])
-    f1 = 2.0 * tp / (np.arange(1, s.size + 1) + max(int(np.count_nonzero(labels)), 1))
-    # only cut between distinct scores: removing the top i+1 points must be a threshold
-    valid = np.append(s[1:] < s[:-1], True)
-    i = int(np.argmax(np.where(valid, f1, -1.0)))
-    return float(s[i])
-
-
-def _row(base: dict, method: str, params: str, removed, labels, dt: float) -> dict:
-    removed = np.asarray(removed, bool)
-    p, r, f = _prf(removed, labels)
-    extra = {"flagged": round(float(removed.mean()), 4)} if base.get("kind") == "clean" else {}
-    return {
-        **base,
-        **extra,
-        "method": method,
-        "params": params,
-        "precision": round(p, 4),
-        "recall": round(r, 4),
-        "f1": round(f, 4),
-        "time_s": round(dt, 3),
-    }
-
-
 def _evaluate_sequences(data: Path, fractions, seed: int) -> list[dict]:
     from ..metrics import point_to_surface, theta_deg
     from ..outliers import clean_sequence
@@ -591,6 +549,12 @@ _COLS = (
     "suite",
     "faces_kept",
     "converged",
+    "scan_type",
+    "n_outliers",
+    "largest_group",
+    "recall_1_3",
+    "recall_3_5",
+    "recall_5_15",
 )
 
 
@@ -610,6 +574,7 @@ def format_markdown(rows: list[dict]) -> str:
     """Markdown tables: static F1 per scan/kind/fraction/method, then the sequence results."""
     split_rows = [r for r in rows if _is_pattern_row(r)]
     suite_rows = [r for r in rows if r.get("suite") == "sequence-patterns"]
+    scan_rows = [r for r in rows if r.get("suite") == "scan-types"]
     rows = [r for r in rows if not _is_pattern_row(r) and not r.get("suite")]
     static = [r for r in rows if r.get("kind") != "sequence"]
     seq = [r for r in rows if r.get("kind") == "sequence"]
@@ -658,6 +623,9 @@ def format_markdown(rows: list[dict]) -> str:
     if suite_rows:
         out.append("")
         out.extend(_sequence_pattern_tables(suite_rows))
+    if scan_rows:
+        out.append("")
+        out.extend(format_scan_types(scan_rows))
     return "\n".join(out)
 
 

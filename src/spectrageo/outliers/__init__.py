@@ -9,6 +9,7 @@
   Laplacian refill (Eq. 5.104-5.109).
 """
 
+from ._rpca_types import viewpoint_options
 from .robot import RobotResult, bilateral_point_filter, knn_triangles, robot_pipeline
 from .rpca import PatchRPCAResult, RPCAOptions, knn_patch_matrix, rpca_scores
 from .sequence import SequenceResult, clean_sequence, weighted_laplacian
@@ -40,5 +41,6 @@ __all__ = [
     "rpca_scores",
     "sor_scores",
     "valley_threshold",
+    "viewpoint_options",
     "weighted_laplacian",
 ]

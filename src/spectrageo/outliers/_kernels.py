@@ -278,12 +278,15 @@ def count_flagged(idx, flagged):  # pragma: no cover - compiled
 
 
 @njit(cache=True, parallel=True)
-def subtract_patch_median(scores, s1, idx):  # pragma: no cover - compiled
-    """``scores[i] = max(scores[i] - median_j s1[idx[i, j]], 0)`` in place (the median of an even
-    count is the mean of the two middle values, as :func:`numpy.median`)."""
+def subtract_patch_quantile(scores, s1, idx, q):  # pragma: no cover - compiled
+    """``scores[i] = max(scores[i] - Q_q(s1[idx[i, :]]), 0)`` in place, ``Q_q`` the ``q``-quantile
+    with linear interpolation between order statistics (:func:`numpy.quantile`'s default)."""
     n, k = idx.shape
     n_chunks = min(n, 256)
-    h = k // 2
+    pos = q * (k - 1)
+    lo = min(int(np.floor(pos)), k - 1)
+    hi = min(lo + 1, k - 1)
+    g = pos - lo
     for ch in prange(n_chunks):
         v = np.empty(k)
         for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
@@ -294,6 +297,6 @@ def subtract_patch_median(scores, s1, idx):  # pragma: no cover - compiled
                     v[p] = v[p - 1]
                     p -= 1
                 v[p] = x
-            med = v[h] if k % 2 == 1 else 0.5 * (v[h - 1] + v[h])
-            d = scores[i] - med
+            base = v[lo] + g * (v[hi] - v[lo])
+            d = scores[i] - base
             scores[i] = d if d > 0.0 else 0.0

@@ -31,6 +31,9 @@ from ._rpca_types import PatchRPCAResult, report
 #: Flagging floor of the refinement pass, in spacings (step 5); chosen on the tuning split; see
 #: docs/decisions.md#outlier-rpca-constants.
 REFINE_MIN_TAU = 1.0
+#: Quantile of the first-pass patch scores subtracted in step 6 (the local baseline); chosen on
+#: the tuning split; see docs/decisions.md#outliers-baseline-quantile.
+BASELINE_QUANTILE = 0.3
 
 
 def score_in_threads(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
@@ -61,8 +64,8 @@ def score_cloud(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
         return scores_deduplicated(X, k, score_cloud, dict(opts, knn=None))
     h = spacing_from(nb.dmean)
     check_span(Xs, h, opts["dtype"])
-    idx = nb.idx
-    del nb  # the distances are not needed any more
+    idx, dlast_s = nb.idx, nb.dlast
+    del nb
     clusters_s = cluster_outliers(Xs, idx, h) if opts["clusters"] else None  # step 8
     solve_kw = {
         key: opts[key]
@@ -119,6 +122,8 @@ def score_cloud(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
     if smoothed:
         sm = np.empty((n, 3))
         sm[order] = E0_s
+    kth = np.empty(n)
+    kth[order] = dlast_s
     res = PatchRPCAResult(
         scores=scores,
         spacing=h,
@@ -129,6 +134,7 @@ def score_cloud(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
         n_blocks=n_blocks,
         n_refined=n_refined,
         clusters=clusters,
+        kth_distance=kth,
     )
     report(res, opts["on_nonconvergence"], opts["max_iter"])
     return res
@@ -193,8 +199,8 @@ def _rebuild_outlier_patches(
 
 
 def _subtract_local_baseline(scores: np.ndarray, s1: np.ndarray, idx: np.ndarray) -> None:
-    """Step 6: ``scores -= median of s1 over each patch``, floored at 0, in place."""
-    _k.subtract_patch_median(scores, s1, idx)
+    """Step 6: ``scores -= the BASELINE_QUANTILE of s1 over each patch``, floored at 0, in place."""
+    _k.subtract_patch_quantile(scores, s1, idx, BASELINE_QUANTILE)
 
 
 def has_duplicates(X: np.ndarray) -> bool:
@@ -231,4 +237,5 @@ def scores_deduplicated(
         n_blocks=r.n_blocks,
         n_refined=r.n_refined,
         clusters=None if r.clusters is None else r.clusters[inverse],
+        kth_distance=None if r.kth_distance is None else r.kth_distance[inverse],
     )

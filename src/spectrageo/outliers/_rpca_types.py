@@ -10,9 +10,12 @@ import numpy as np
 
 from .._errors import ConvergenceError, ConvergenceWarning, InvalidInputError
 from .._validation import check_choice, check_positive
+from ._range import RANGE_POWER, check_viewpoint
 
-__all__ = ["PatchRPCAResult", "RPCAOptions"]
+__all__ = ["PatchRPCAResult", "RPCAOptions", "viewpoint_options"]
 
+#: Default ``sparse_factor``: chosen on the tuning split; see docs/decisions.md#outliers-sparse-stage.
+SPARSE_FACTOR = 3.0
 #: Default ``rank_tol``: chosen on the tuning split; see docs/decisions.md#outliers-rank-tol.
 RANK_TOL = 3e-3
 
@@ -45,6 +48,13 @@ class RPCAOptions:
         A cloud above ``block_size``: k-d tiles with halos, or Morton blocks of one problem.
     on_nonconvergence : {"warn", "raise", "ignore"}
         Policy when a block reaches ``max_iter`` first.
+    viewpoint : (3,) tuple of float, optional
+        Sensor origin of a single-view scan (step 9: scores over ``max(rho_i, 1)^range_power``).
+    range_power : float
+        Exponent of step 9 (``>= 0``).
+    sparse_factor : float, optional
+        :func:`remove_outliers` also removes points whose ``k``-th neighbour is farther than
+        ``sparse_factor`` times the median (range-normalised with a viewpoint); None: off.
     """
 
     lam: float | None = None
@@ -60,8 +70,15 @@ class RPCAOptions:
     second_pass: str = "replay"
     partition: str = "tiles"
     on_nonconvergence: str = "warn"
+    viewpoint: tuple[float, float, float] | None = None
+    range_power: float = RANGE_POWER
+    sparse_factor: float | None = SPARSE_FACTOR
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "viewpoint", check_viewpoint(self.viewpoint))
+        check_positive(self.range_power, "range_power", allow_zero=True)
+        if self.sparse_factor is not None:
+            check_positive(self.sparse_factor, "sparse_factor")
         if self.lam is not None:
             check_positive(self.lam, "lam")
         check_positive(self.rho, "rho")
@@ -118,6 +135,25 @@ class RPCAOptions:
         )
 
 
+def viewpoint_options(text: str, method: str = "rpca") -> Any:
+    """:class:`RPCAOptions` with the viewpoint ``"X,Y,Z"`` (the ``--viewpoint`` option).
+
+    Raises
+    ------
+    InvalidInputError
+        Not three comma-separated numbers, or ``method`` is not ``"rpca"``.
+    """
+    if method != "rpca":
+        raise InvalidInputError(f"--viewpoint applies to --method rpca only; got {method!r}.")
+    try:
+        v = tuple(float(x) for x in str(text).split(","))
+    except ValueError as exc:
+        raise InvalidInputError(f"--viewpoint must be X,Y,Z (3 numbers); got {text!r}.") from exc
+    if len(v) != 3:
+        raise InvalidInputError(f"--viewpoint must be X,Y,Z (3 numbers); got {text!r}.")
+    return RPCAOptions(viewpoint=v)
+
+
 @dataclass(frozen=True)
 class PatchRPCAResult:
     """Result of :func:`spectrageo.outliers.rpca_scores` (arrays in input order).
@@ -135,6 +171,9 @@ class PatchRPCAResult:
         blocks (tiles), rebuilt patches.
     clusters : (n,) bool ndarray or None
         Points in small volumetric clusters (step 8).
+    kth_distance : (n,) ndarray or None
+        Distance to the ``k``-th neighbour (over ``max(rho_i, 1)`` with a viewpoint); None for
+        clouds scored on tiles.
     """
 
     scores: np.ndarray = field(repr=False)
@@ -146,6 +185,7 @@ class PatchRPCAResult:
     n_blocks: int = 1
     n_refined: int = 0
     clusters: np.ndarray | None = field(default=None, repr=False)
+    kth_distance: np.ndarray | None = field(default=None, repr=False)
 
 
 def report(res: PatchRPCAResult, policy: str, max_iter: int) -> None:

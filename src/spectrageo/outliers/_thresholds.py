@@ -12,7 +12,7 @@ __all__ = ["auto_threshold", "valley_threshold"]
 
 #: Smallest automatic RPCA threshold, in units of the point spacing (see :func:`auto_threshold`);
 #: chosen on the tuning split; see docs/decisions.md#outlier-rpca-constants.
-RPCA_MIN_TAU = 0.4
+RPCA_MIN_TAU = 0.5
 #: Automatic threshold rules of :func:`remove_outliers`; ``"valley"`` (:func:`valley_threshold`)
 #: is the RPCA default, ``"density"`` and ``"otsu"`` the rules of :func:`auto_threshold`.
 THRESHOLD_RULES = ("valley", "density", "otsu")

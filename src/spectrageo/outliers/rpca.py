@@ -5,6 +5,7 @@ ALM :mod:`._rpca_solver` and the k-d tiles of large clouds :mod:`._rpca_tiled`.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -13,6 +14,7 @@ from .._device import resolve_backend
 from .._errors import InvalidInputError
 from .._validation import options_with_legacy
 from ._common import as_cloud, check_k, knn_chunked
+from ._range import range_ratio
 from ._rpca_core import (  # noqa: F401 - REFINE_MIN_TAU is re-exported
     REFINE_MIN_TAU,
     has_duplicates,
@@ -94,10 +96,14 @@ def rpca_scores(
     5. ``refine``: patches with more than ``k / 2`` points scoring at least ``max(tau_1, 1)``
        spacings are rebuilt from the nearest unflagged points and rescored
        (docs/decisions.md#outliers-second-pass).
-    6. ``refine``: ``score_i = max(||s_i|| - median_j ||s_j^{(1)}||, 0)`` over the patch of ``v_i``.
+    6. ``refine``: ``score_i = max(||s_i|| - Q_q(||s_j^{(1)}||), 0)`` over the patch of ``v_i``,
+       ``Q_q`` the ``q = 0.3`` quantile (docs/decisions.md#outliers-baseline-quantile).
     7. ``tangent_weight = w < 1``: the tangential part of ``s_i`` (against the PCA normal of the
        neighbours) is weighted by ``w``.
     8. ``clusters``: small volumetric clusters of the kNN graph are flagged (scores unchanged).
+    9. ``viewpoint`` given: ``score_i / max(rho_i, 1)^p``, ``rho_i`` the spacing predicted at the
+       point's range over ``h`` (:func:`._range.range_ratio`), ``p`` = ``range_power``
+       (docs/decisions.md#outliers-range-model).
 
     ``RPCAOptions(refine=False, tangent_weight=1, clusters=False)`` gives the thesis' score; the
     defaults were chosen on the tuning split (docs/decisions.md#outlier-rpca-constants). Clouds of
@@ -144,7 +150,12 @@ def rpca_scores(
         block_size=block_size, smoothed=smoothed, workers=workers, device=device
     )
     kw["device"] = resolve_backend(device)  # "cpu" (numba) or a torch.device
-    return _dispatch(X, k, **kw)
+    res = _dispatch(X, k, **kw)
+    if opts.viewpoint is None:
+        return res
+    rho = np.maximum(range_ratio(X, k, opts.viewpoint), 1.0)
+    kth = None if res.kth_distance is None else res.kth_distance / rho
+    return replace(res, scores=res.scores / rho**opts.range_power, kth_distance=kth)
 
 
 def _dispatch(X: np.ndarray, k: int, **kw: Any) -> PatchRPCAResult:

@@ -43,6 +43,9 @@ __all__ = [
 ]
 
 METHODS = ("rpca", "sor", "radius")
+#: Score gate of the sparse-point stage, a fraction of the threshold; chosen on the tuning split
+#: (docs/decisions.md#outliers-sparse-stage).
+SPARSE_GATE = 0.25
 
 
 @dataclass(frozen=True)
@@ -132,6 +135,16 @@ def _knn_stat(X: np.ndarray, k: int, what: str, workers: int) -> np.ndarray:
     return out
 
 
+def _sparse_points(r, s: np.ndarray, tau: float, factor: float | None) -> np.ndarray:
+    """The sparse-point stage: ``d_k > factor * median(d_k)`` and ``score >= SPARSE_GATE * tau``,
+    ``d_k`` the (range-normalised) ``k``-th neighbour distance
+    (docs/decisions.md#outliers-sparse-stage); none without ``factor`` or ``kth_distance``."""
+    d = r.kth_distance
+    if factor is None or d is None or d.size == 0:
+        return np.zeros(s.size, dtype=bool)
+    return (d > factor * float(np.median(d))) & (s >= SPARSE_GATE * tau)
+
+
 def remove_outliers(
     cloud: Any,
     *,
@@ -151,9 +164,10 @@ def remove_outliers(
 
     ``method="rpca"`` (Section 5.4.1): the scores of :func:`rpca_scores` (Eq. 5.98-5.99, in units
     of the point spacing); points with ``score < tau`` are kept, except the small volumetric
-    clusters of its step 8, removed whatever their score. ``threshold=None`` uses
+    clusters of its step 8 (whatever their score) and the sparse points of
+    ``options.sparse_factor`` (:func:`_sparse_points`). ``threshold=None`` uses
     ``threshold_rule`` (``"valley"``: :func:`valley_threshold`; ``"density"``, ``"otsu"``:
-    :func:`auto_threshold`) with the floor :data:`RPCA_MIN_TAU` = 0.4 spacings (chosen on the tuning
+    :func:`auto_threshold`) with the floor :data:`RPCA_MIN_TAU` = 0.5 spacings (chosen on the tuning
     split; see docs/decisions.md#outlier-rpca-constants). ``method="sor"``: keep points whose mean
     kNN distance is within ``threshold`` (default 1) standard deviations above the mean
     (:func:`sor_scores`). ``method="radius"``: keep points with at least ``k`` neighbours within
@@ -259,8 +273,10 @@ def _outliers(
             info.update(vinfo)
         else:
             tau = auto_threshold(s, minimum=RPCA_MIN_TAU, rule=threshold_rule)
-        keep_f = (s < tau) & ~blob
+        sparse = _sparse_points(r, s, tau, options.sparse_factor)
+        keep_f = (s < tau) & ~blob & ~sparse
         info["n_cluster_outliers"] = int(np.count_nonzero(blob))
+        info["n_sparse_outliers"] = int(np.count_nonzero(sparse & ~blob & (s < tau)))
         info.setdefault("contamination", float(np.count_nonzero(~keep_f) / max(s.size, 1)))
         info["threshold_rule"] = "given" if threshold is not None else threshold_rule
         sm = r.smoothed
