@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import importlib
 import os
 import re
 import sys
@@ -15,36 +16,29 @@ import traceback
 import warnings
 
 from .._errors import SpectrageoError
-from . import (
-    batch_cmds,
-    complete_cmds,
-    compress_cmds,
-    denoise_cmds,
-    evaluate_cmds,
-    file_cmds,
-    identify_cmds,
-    learn_cmds,
-    register_cmds,
-    saliency_cmds,
-    view_cmd,
-)
 from ._common import set_quiet
 
-#: The command groups, in ``spectrageo --help`` order; each module's ``register(sub)`` adds its
-#: sub-commands with their descriptions and examples.
-COMMAND_MODULES = (
-    file_cmds,
-    denoise_cmds,
-    evaluate_cmds,
-    saliency_cmds,
-    view_cmd,
-    compress_cmds,
-    complete_cmds,
-    batch_cmds,
-    register_cmds,
-    identify_cmds,
-    learn_cmds,
-)
+#: The command groups in ``spectrageo --help`` order, with the sub-commands each module's
+#: ``register(sub)`` adds. A command line that names one of them builds that group's parser only,
+#: so a command does not import the packages of the others (``tests/test_cli.py`` checks the
+#: names against what the modules register).
+COMMAND_GROUPS = {
+    "file_cmds": ("info", "convert", "noise", "metrics"),
+    "denoise_cmds": ("denoise", "outliers", "robot"),
+    "evaluate_cmds": ("evaluate", "demo"),
+    "saliency_cmds": ("saliency", "features", "curves", "simplify", "inspect"),
+    "view_cmd": ("view",),
+    "compress_cmds": ("compress", "decompress"),
+    "complete_cmds": ("complete",),
+    "batch_cmds": ("batch",),
+    "register_cmds": ("register",),
+    "identify_cmds": ("identify",),
+    "learn_cmds": ("train",),
+}
+
+
+def _group(name: str):
+    return importlib.import_module(f"{__package__}.{name}")
 
 
 class _Formatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
@@ -67,7 +61,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``spectrageo`` parser: every command, or only the group of ``command`` when it names
+    one (the parser a command line needs)."""
+    groups = [g for g, names in COMMAND_GROUPS.items() if command in names] or list(COMMAND_GROUPS)
     p = _Parser(
         prog="spectrageo",
         description="Spectral processing of static and dynamic 3D geometry.",
@@ -75,8 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=_version())
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for module in COMMAND_MODULES:
-        module.register(sub)
+    for g in groups:
+        _group(g).register(sub)
     for sp in sub.choices.values():
         if not any("--quiet" in a.option_strings for a in sp._actions):
             sp.add_argument(
@@ -138,8 +135,9 @@ def _version() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args_in = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(args_in[0] if args_in else None)
+    args = parser.parse_args(args_in)
     if not getattr(args, "command", None):
         parser.print_help(sys.stderr)
         return 2
