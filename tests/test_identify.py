@@ -320,10 +320,12 @@ def test_cli_identify_writes_report(tmp_path, shared_data):
         io.write(p, Mesh(*lib[name]))
         paths.append(str(p))
     out = tmp_path / "report.json"
-    rc = main(["identify", str(scene_p), *paths, "--out", str(out), "--seed", "0"])
+    vp = ",".join(repr(float(x)) for x in sc.viewpoint)
+    rc = main(["identify", str(scene_p), *paths, "--out", str(out), "--viewpoint", vp])
     assert rc == 0
     rep = json.loads(out.read_text())
     assert "time_s" in rep and rep["time_s"] > 0
+    assert rep["viewpoint"] == [float(x) for x in sc.viewpoint]
     assert [m["model"] for m in rep["matches"]] == paths
     for m in rep["matches"]:
         assert set(m) >= {
@@ -349,6 +351,12 @@ def test_cli_identify_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "file not found" in err and "Traceback" not in err
     assert not (tmp_path / "r.json").exists()
+    with pytest.raises(SystemExit) as exc:
+        main(
+            ["identify", "s.ply", "m.off", "--out", str(tmp_path / "r.json"), "--viewpoint", "1,2"]
+        )
+    assert exc.value.code == 2
+    assert "X,Y,Z" in capsys.readouterr().err
 
 
 def test_ransac_inlier_count_kernel_matches_numpy():

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from .._errors import InvalidInputError
-from ._argtypes import seed_type
+from ._argtypes import point3_type, seed_type
 from ._common import status as _status
 
 
@@ -39,12 +39,14 @@ def cmd_identify(args) -> int:
     if not math.isfinite(args.zeta) or args.zeta <= 0:
         raise InvalidInputError(f"`--zeta` must be a positive number; got {args.zeta}.")
     t0 = time.perf_counter()
-    matches = identify(args.scene, list(args.models), rng=args.seed, zeta=args.zeta)
+    vp = args.viewpoint
+    matches = identify(args.scene, list(args.models), rng=args.seed, zeta=args.zeta, viewpoint=vp)
     dt = time.perf_counter() - t0
     report = {
         "scene": str(args.scene),
         "seed": args.seed,
         "zeta": args.zeta,
+        "viewpoint": None if vp is None else [float(x) for x in vp],
         "matches": [
             {
                 "model": str(m.model),
@@ -77,6 +79,13 @@ def register(sub) -> None:
     p.add_argument("--seed", type=seed_type, default=0, help="random seed (default 0)")
     p.add_argument(
         "--zeta", type=float, default=0.4, help="dissimilarity threshold (Table 6.7: 0.4)"
+    )
+    p.add_argument(
+        "--viewpoint",
+        type=point3_type,
+        metavar="X,Y,Z",
+        help="sensor position of the scan: poses that put model points in front of what the "
+        "sensor saw (free space) are rejected",
     )
     p.set_defaults(func=cmd_identify)
     p.description = (

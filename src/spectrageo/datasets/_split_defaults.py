@@ -239,6 +239,17 @@ _DEFAULTS = [
        "guided sampling, designed on seeds 1-6 only"),
     _d(_R + "_identify.PAIR_COS_TOL", 0.25, "tuning", "identify", _EI,
        "guided sampling, designed on seeds 1-6 only"),
+    _d(_R + "_identify.VIS_MAX", 0.03, "tuning", "identify", _EI,
+       "right poses with h < zeta violate <= 0.007, wrong ones >= 0.089; generated scenes, "
+       "seeds 1-10; docs/decisions.md#identify-visibility"),
+    _d(_R + "_identify.VIS_TOL", 3.0, "tuning", "identify", _EI,
+       "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
+    _d(_R + "_identify.FLIP_H", 0.8, "tuning", "identify", _EI,
+       "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
+    _d(_R + "_visibility.RAY_STEPS", 1.0, "tuning", "identify", _EI,
+       "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
+    _d(_R + "_visibility.RAY_NEIGHBORS", 4, "tuning", "identify", _EI,
+       "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
 ]
 # fmt: on
 #: every tuned default with the data it was chosen on

@@ -3,8 +3,10 @@
 Scene and models share one sampling step; planes are removed and adaptive DBSCAN gives segments
 (Eq. 6.28-6.29); boundary points are left out (Eq. 6.43-6.44); point saliency and multi-scale
 features (Eq. 6.30-6.36) give correspondences, RANSAC and Tukey ICP a pose, and the dissimilarity
-``h`` of the salient pairs (Eq. 6.37-6.38) decides ``found`` (``h < zeta``). Departures from the
-thesis: docs/decisions.md#identify-pipeline.
+``h`` of the salient pairs (Eq. 6.37-6.38) decides ``found`` (``h < zeta``). With a sensor
+``viewpoint``, a pose must also respect free space (``_visibility``) and half turns of a rejected
+pose are tried. Departures from the thesis: docs/decisions.md#identify-pipeline and
+#identify-visibility.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from .._errors import InvalidInputError
 from ._common import WORKERS, apply_transform, knn_normals, make_transform, voxel_downsample
 from ._kernels import compatible_lists, count_inliers
 from ._segment import adaptive_dbscan, remove_planes
+from ._visibility import SceneRays
 
 #: RANSAC inliers also need normals within ~37 degrees (unoriented), as in the re-ranking
 INLIER_COS = 0.8
@@ -29,6 +32,12 @@ N_ANCHORS = 500
 N_RERANK = 64
 #: guided sampling: largest change of ``|n_i . n_j|`` between the model and the segment pair
 PAIR_COS_TOL = 0.25
+#: free-space verification (with a viewpoint): range tolerance in sampling steps
+VIS_TOL = 3.0
+#: largest fraction of the moved model's points that may violate free space
+VIS_MAX = 0.03
+#: flipped poses (half turns about the model's principal axes) are tried below this ``h``
+FLIP_H = 0.8
 
 DEFAULTS: dict[str, Any] = {
     "zeta": 0.4,  # Table 6.7
@@ -50,6 +59,7 @@ DEFAULTS: dict[str, Any] = {
     "min_fraction": 0.05,
     "n_refine": 3,
     "min_segment": 30,
+    "viewpoint": None,
 }
 
 
@@ -148,6 +158,14 @@ def _check_options(options: dict) -> dict:
         v = o[k]
         if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
             raise InvalidInputError(f"`{k}` must be a positive integer; got {v!r}.")
+    if o["viewpoint"] is not None:
+        try:
+            vp = np.asarray(o["viewpoint"], dtype=np.float64)
+        except (TypeError, ValueError):
+            vp = np.full(0, np.nan)
+        if vp.shape != (3,) or not np.isfinite(vp).all():
+            raise InvalidInputError(f"`viewpoint` must be 3 finite numbers or None; got {vp!r}.")
+        o["viewpoint"] = vp
     if o["tau"] >= 1:
         raise InvalidInputError(f"`tau` must be in (0, 1); got {o['tau']!r}.")
     return o
@@ -337,6 +355,46 @@ def _refine(model: _Cloud, seg: _Cloud, T0: np.ndarray, o: dict) -> np.ndarray:
     return np.linalg.inv(res.transformation)
 
 
+def _flips(model: _Cloud, T: np.ndarray) -> list[np.ndarray]:
+    """``T`` composed with half turns about the model's principal axes through its centroid."""
+    c = model.P.mean(axis=0)
+    _, _, Vt = np.linalg.svd(model.P - c, full_matrices=False)
+    out = []
+    for a in Vt:
+        F = 2.0 * np.outer(a, a) - np.eye(3)  # rotation by pi about a
+        out.append(T @ make_transform(F, c - F @ c))
+    return out
+
+
+def _search_segment(model, seg, voxel, o, g, rays) -> list[tuple[float, float, np.ndarray]]:
+    """Refined poses of ``model`` on ``seg`` as ``(h, violation, T)``; flips of the best pose
+    are tried when no pose is clearly accepted (docs/decisions.md#identify-visibility)."""
+    out: list[tuple[float, float, np.ndarray]] = []
+    zeta = o["zeta"]
+
+    def run(T0):
+        T = _refine(model, seg, T0, o)
+        h = dissimilarity(model, seg, T, voxel, o)
+        v = 0.0 if rays is None else rays.violations(model.P, T, VIS_TOL)
+        out.append((h, v, T))
+        return h < 0.75 * zeta and v <= VIS_MAX  # a clear match: no need for the other poses
+
+    for _score, T0 in _ransac_poses(model, seg, voxel, o, g):
+        if run(T0):
+            return out
+    if rays is None or not out or any(h < zeta and v <= VIS_MAX for h, v, _ in out):
+        return out
+    h0, _, T0 = min(out, key=lambda x: x[0])
+    if h0 >= FLIP_H:
+        return out
+    # a plausible but rejected pose: the pose search often turns a mostly hidden object by a
+    # half turn about one of its principal axes
+    for Tf in _flips(model, T0):
+        if run(Tf):
+            break
+    return out
+
+
 # ---------------------------------------------------------------------------- dissimilarity
 
 
@@ -396,7 +454,8 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
     rng : int or Generator
     **options
         Overrides of :data:`DEFAULTS` (``zeta``, ``k_a``, ``k_d``, ``k_s``, ``k_p``, ``tau``, ...);
-        unknown names raise InvalidInputError.
+        unknown names raise InvalidInputError. ``viewpoint`` (3,): the sensor position; a found
+        pose then leaves at most :data:`VIS_MAX` of the model in observed free space.
 
     Returns
     -------
@@ -455,10 +514,12 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
         if cl is not None:
             segs.append((idx, cl))
     # --- every model against every segment
-    cands = []
+    rays = None if o["viewpoint"] is None else SceneRays(Sd, o["viewpoint"], voxel)
+    cands, admissible = [], []
     for mi_, P in enumerate(mpts):
         mc = _prepare(P, voxel, o)
         best = (np.inf, np.eye(4), np.zeros(0, dtype=np.int64))
+        best_key = (True, np.inf)
         if mc is not None:
             for c, (idx, sc) in enumerate(segs):
                 # one stream per (model, segment): a model's answer does not depend on the others
@@ -466,16 +527,15 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
                 # too small to decide (a few dozen points fit anywhere on any model)
                 if sc.diag < 0.15 * mc.diag or sc.P.shape[0] < o["min_fraction"] * mc.P.shape[0]:
                     continue
-                for _score, T0 in _ransac_poses(mc, sc, voxel, o, g):
-                    T = _refine(mc, sc, T0, o)
-                    h = dissimilarity(mc, sc, T, voxel, o)
-                    if h < best[0]:
-                        best = (h, T, idx)
-                    if h < 0.75 * o["zeta"]:  # a clear match: no need for the other poses
-                        break
+                tried = _search_segment(mc, sc, voxel, o, g, rays)
+                for h, v, T in tried:
+                    key = (v > VIS_MAX, h)
+                    if np.isfinite(h) and key < best_key:
+                        best_key, best = key, (h, T, idx)
         cands.append((mi_, *best, mc))
+        admissible.append(not best_key[0])
     # --- decisions, conflicts resolved by h
-    found = [np.isfinite(c[1]) and c[1] < o["zeta"] for c in cands]
+    found = [np.isfinite(c[1]) and c[1] < o["zeta"] and a for c, a in zip(cands, admissible)]
     explained = []
     for _mi, h, T, idx, mc in cands:
         if not np.isfinite(h) or mc is None:
