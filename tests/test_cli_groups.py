@@ -47,3 +47,12 @@ def _exit_code(argv):
         return cli_main.main(argv)
     except SystemExit as exc:
         return exc.code
+
+
+def test_evaluate_compress_takes_a_split(tmp_path, capsys):
+    # an empty data folder: the split is accepted, then no model of it is found
+    assert _exit_code(["evaluate", "compress", "--data", str(tmp_path), "--split", "tuning"]) == 2
+    assert "no compress benchmark data found" in capsys.readouterr().err
+    argv = ["evaluate", "compress", "--data", str(tmp_path), "--split", "both", "--levels", "0.1"]
+    assert _exit_code(argv) == 2
+    assert "`--levels` applies to `evaluate denoise --split` only" in capsys.readouterr().err

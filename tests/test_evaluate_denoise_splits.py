@@ -335,7 +335,7 @@ def test_cli_split_options(capsys, shared_data, tmp_path):
         assert code != 0 and msg in err
     code = main(["evaluate", "outliers", "--data", str(shared_data), "--split", "both"])
     _, err = capsys.readouterr()
-    assert code != 0 and "applies to `evaluate denoise` only" in err
+    assert code != 0 and "applies to `evaluate denoise` and `compress` only" in err
 
 
 def test_time_ratios_where_both_denoised_leave_out_gate_only_cases():

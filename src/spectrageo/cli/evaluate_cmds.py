@@ -70,7 +70,10 @@ def cmd_evaluate(args) -> int:
             ev = importlib.import_module(f"spectrageo.evaluate.{mod}")
         except ModuleNotFoundError as exc:
             raise err(f"no evaluation named {args.what!r}.") from exc
-        rows = ev.evaluate(data, methods=methods, out=args.out)
+        kw = {}
+        if args.what == "compress" and args.split is not None:
+            kw["splits"] = ("tuning", "validation") if args.split == "both" else (args.split,)
+        rows = ev.evaluate(data, methods=methods, out=args.out, **kw)
     if not rows:  # nothing of this area under --data: empty tables help no one
         for f in _outputs(args.out) - before:
             f.unlink(missing_ok=True)
@@ -106,8 +109,15 @@ def _generality_options(args) -> dict | None:
         if used:
             raise err(f"`{used[0]}` needs `--split tuning|validation|both` (evaluate denoise).")
         return None
+    if args.what == "compress":  # the registry splits of the compress task
+        used = [k for k, v in given.items() if v is not None]
+        if used:
+            raise err(f"`{used[0]}` applies to `evaluate denoise --split` only.")
+        return None
     if args.what != "denoise":
-        raise err(f"`--split` applies to `evaluate denoise` only; got {args.what!r}.")
+        raise err(
+            f"`--split` applies to `evaluate denoise` and `compress` only; got {args.what!r}."
+        )
     opts: dict = {"split": args.split, "cli_timing": bool(args.cli_timing)}
     if args.repeat is not None:
         opts["repeat"] = args.repeat  # checked by evaluate_generality
@@ -160,8 +170,8 @@ def register(sub) -> None:
         "--split",
         default=None,
         choices=("tuning", "validation", "both"),
-        help="run the protocol on this split instead of the shared pairs (also writes "
-        "FILE_grid.csv and FILE.png)",
+        help="denoise: run the protocol on this split instead of the shared pairs (also writes "
+        "FILE_grid.csv and FILE.png); compress: only this split's models",
     )
     g.add_argument("--levels", default=None, help="noise levels, e.g. 0.1,0.3,0.5 (the default)")
     g.add_argument("--max-vertices", type=int, default=None, help="skip models with more vertices")
