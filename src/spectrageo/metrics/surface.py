@@ -54,8 +54,9 @@ class _TriangleIndex:
 
     def __init__(self, V: np.ndarray, F: np.ndarray) -> None:
         self.V = V
-        self.F = F
-        tri = V[F]
+        self.keep = _distinct_triangles(V, F)  # None: every triangle is distinct
+        self.F = F if self.keep is None else F[self.keep]
+        tri = V[self.F]
         (
             self.order,
             nmin,
@@ -79,7 +80,44 @@ class _TriangleIndex:
             Q, self.V, self.F, self.order, self.nmin, self.nmax, self.left, self.right,
             self.start, self.count, self.depth, best_d2, best_t,
         )  # fmt: skip
+        if self.keep is not None:
+            best_t = self.keep[best_t]
         return np.sqrt(best_d2), best_t
+
+
+def _mix(x: np.ndarray) -> np.ndarray:
+    """splitmix64's finaliser, elementwise on uint64."""
+    x = x ^ (x >> np.uint64(30))
+    x = x * np.uint64(0xBF58476D1CE4E5B9)
+    x = x ^ (x >> np.uint64(27))
+    x = x * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+def _distinct_triangles(V: np.ndarray, F: np.ndarray) -> np.ndarray | None:
+    """Indices of the first of each group of triangles with the same three corner positions
+    (in any order), or None when all are distinct. Coincident copies (instanced scenes, stacked
+    soups) change no distance but make every query visit each copy. Groups are found by a hash
+    and confirmed coordinate by coordinate, so only exact copies are left out."""
+    if F.shape[0] < 2:
+        return None
+    bits = np.ascontiguousarray(V, dtype=np.float64).view(np.uint64)
+    hv = _mix(_mix(_mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
+    hf = hv[F]
+    corner = np.argsort(hf, axis=1, kind="stable")
+    hs = np.take_along_axis(hf, corner, axis=1)
+    key = _mix(_mix(_mix(hs[:, 0]) ^ hs[:, 1]) ^ hs[:, 2])
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    first = np.r_[True, ks[1:] != ks[:-1]]
+    if first.all():
+        return None
+    rep = order[np.maximum.accumulate(np.where(first, np.arange(ks.size), 0))]
+    canon = np.take_along_axis(F, corner, axis=1)
+    same = np.all(V[canon[order]] == V[canon[rep]], axis=(1, 2))  # exact, not only the hash
+    drop = np.zeros(F.shape[0], dtype=bool)
+    drop[order] = same & ~first
+    return None if not drop.any() else np.flatnonzero(~drop)
 
 
 def point_to_surface(
