@@ -187,8 +187,8 @@ def prepare_target(
     -------
     PreparedTarget
 
-    Example
-    -------
+    Examples
+    --------
     >>> pt = prepare_target(scan0)                      # doctest: +SKIP
     >>> [register(s, pt).transformation for s in scans]  # doctest: +SKIP
     """
