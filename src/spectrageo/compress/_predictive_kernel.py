@@ -19,6 +19,8 @@ import heapq
 import numba
 import numpy as np
 
+from ._conn_traverse import _bitlen
+
 #: bit lengths of residuals (|e| < 2**KMAX)
 KMAX = 42
 #: neighbour-magnitude buckets of the contexts
@@ -105,10 +107,16 @@ def _bit(enc, st, buf, probs, i, bit):
         st[1] -= bound
         probs[i] = p - (p >> 5)
         bit = 1
+    _dec_normalise(st, buf)
+    return bit
+
+
+@numba.njit(cache=True, inline="always")
+def _dec_normalise(st, buf):
+    """Decoder: shift in bytes until the range is back above ``_TOP``."""
     while st[1] < _TOP:
         st[1] <<= 8
         st[4] = ((st[4] << 8) | _next_byte(st, buf)) & 0xFFFFFFFF
-    return bit
 
 
 @numba.njit(cache=True)
@@ -125,19 +133,8 @@ def _direct(enc, st, buf, bit):
     if st[4] >= st[1]:
         st[4] -= st[1]
         bit = 1
-    while st[1] < _TOP:
-        st[1] <<= 8
-        st[4] = ((st[4] << 8) | _next_byte(st, buf)) & 0xFFFFFFFF
+    _dec_normalise(st, buf)
     return bit
-
-
-@numba.njit(cache=True)
-def _bitlen(a):
-    k = 0
-    while a > 0:
-        a >>= 1
-        k += 1
-    return k
 
 
 @numba.njit(cache=True)
