@@ -1,4 +1,4 @@
-"""Plugins declared as package entry points, loaded once on first need.
+"""Plugins declared as package entry points, and package names imported on first use.
 
 A lower layer keeps a registry (``io``'s format table, ``denoise``'s method table); a higher layer
 fills it by declaring an entry point in ``pyproject.toml``::
@@ -8,12 +8,14 @@ fills it by declaring an entry point in ``pyproject.toml``::
 
 The lower layer calls :func:`load_plugins` with its group name when a lookup misses, so it never
 imports the layer above, and a third-party package can register its own readers or methods the
-same way.
+same way. :func:`lazy_exports` lets a package ``__init__`` import its public names only when one
+is used, so that a command imports only the modules it runs.
 """
 
 from __future__ import annotations
 
-from importlib.metadata import entry_points
+import importlib
+from collections.abc import Callable
 
 from ._errors import SpectrageoError
 
@@ -35,6 +37,8 @@ def load_plugins(group: str) -> None:
     """
     if group in _LOADED:
         return
+    from importlib.metadata import entry_points
+
     _LOADED.add(group)
     for ep in sorted(entry_points(group=group), key=lambda e: e.name):
         try:
@@ -45,3 +49,40 @@ def load_plugins(group: str) -> None:
             raise SpectrageoError(
                 f"plugin {ep.name!r} ({ep.value}) of {group!r} failed: {exc}"
             ) from exc
+
+
+def lazy_exports(
+    package: str, exports: dict[str, str], eager: tuple[str, ...] = ()
+) -> tuple[Callable, Callable]:
+    """``(__getattr__, __dir__)`` of a package whose names are imported on first access (PEP 562).
+
+    Parameters
+    ----------
+    package : str
+        The package's ``__name__``.
+    exports : dict
+        Public name -> submodule that defines it, relative (``".neighbors"``).
+    eager : tuple of str
+        Public names the package binds at import; listed by ``__dir__`` too.
+
+    Returns
+    -------
+    tuple of callable
+        Module-level ``__getattr__`` (imports the submodule, caches the value in the package)
+        and ``__dir__`` (the public names).
+    """
+    names = sorted([*exports, *eager])
+
+    def __getattr__(name: str):
+        try:
+            module = exports[name]
+        except KeyError:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}") from None
+        value = getattr(importlib.import_module(module, package), name)
+        setattr(importlib.import_module(package), name, value)
+        return value
+
+    def __dir__() -> list[str]:
+        return names
+
+    return __getattr__, __dir__

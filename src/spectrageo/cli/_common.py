@@ -3,6 +3,7 @@ command schema, help texts and the out-of-core options."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -55,7 +56,13 @@ def fmt(v) -> str:
 
 def add_schema_options(p, schema, *, per_file: bool = True) -> None:
     """Add the options of a :class:`~spectrageo.distributed.CommandSchema` to parser ``p``
-    (``per_file=False``: leave out those that name one file per run)."""
+    (``per_file=False``: leave out those that name one file per run).
+
+    A parser with a true ``summary`` attribute (the one ``spectrageo --help`` builds, which shows
+    no option) gets the options without the help texts and choices that functions compute: those
+    import the packages whose methods they list.
+    """
+    summary = getattr(p, "summary", False)
     groups: dict[str, object] = {}
     for o in schema.options:
         if o.per_file and not per_file:
@@ -65,6 +72,8 @@ def add_schema_options(p, schema, *, per_file: bool = True) -> None:
             if o.group not in groups:
                 groups[o.group] = p.add_mutually_exclusive_group()
             target = groups[o.group]
+        if summary and (callable(o.help) or callable(o.choices)):
+            o = dataclasses.replace(o, help=None, choices=None)
         target.add_argument(*o.flags, **o.argparse_kwargs())
 
 

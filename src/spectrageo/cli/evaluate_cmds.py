@@ -155,9 +155,6 @@ def cmd_demo(args) -> int:
 
 def register(sub) -> None:
     """Add ``evaluate`` and ``demo``."""
-    from .. import denoise
-
-    static = denoise.available()
     p = sub.add_parser("evaluate", help="run methods on the shared benchmark data and print tables")
     p.add_argument("what", choices=EVALUATIONS, metavar="AREA", help=" | ".join(EVALUATIONS))
     p.add_argument(
@@ -197,6 +194,12 @@ def register(sub) -> None:
         "--level", type=float, default=0.3, help="noise level relative to the mean edge length"
     )
     p.add_argument("--seed", type=seed_type, default=0)
+    if getattr(p, "summary", False):  # `spectrageo --help` shows no option: no denoiser list
+        static = []
+    else:
+        from .. import denoise
+
+        static = denoise.available()
     p.add_argument("--methods", default=None, help=f"comma-separated subset of {', '.join(static)}")
     p.set_defaults(func=cmd_demo)
     apply_help(sub, HELP)

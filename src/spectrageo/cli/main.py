@@ -61,17 +61,31 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+class _SummaryParser(_Parser):
+    """A parser for ``spectrageo --help`` and ``--version``: its sub-commands' options skip the
+    help texts and choices that functions compute (``add_schema_options``;
+    docs/decisions.md#register-cli-startup)."""
+
+    summary = True
+
+
+#: first words after which argparse prints and exits before any sub-command parses
+_TOP_ONLY = ("-h", "--help", "--version")
+
+
+def build_parser(command: str | None = None, *, summary: bool = False) -> argparse.ArgumentParser:
     """The ``spectrageo`` parser: every command, or only the group of ``command`` when it names
-    one (the parser a command line needs)."""
+    one (the parser a command line needs). ``summary=True`` builds every command for the
+    top-level help only (see :class:`_SummaryParser`)."""
     groups = [g for g, names in COMMAND_GROUPS.items() if command in names] or list(COMMAND_GROUPS)
-    p = _Parser(
+    cls = _SummaryParser if summary else _Parser
+    p = cls(
         prog="spectrageo",
         description="Spectral processing of static and dynamic 3D geometry.",
         epilog="Run 'spectrageo COMMAND --help' for a command's options and an example.",
     )
     p.add_argument("--version", action="version", version=_version())
-    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=cls)
     for g in groups:
         _group(g).register(sub)
     for sp in sub.choices.values():
@@ -136,7 +150,8 @@ def _version() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args_in = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(args_in[0] if args_in else None)
+    first = args_in[0] if args_in else None
+    parser = build_parser(first, summary=first is None or first in _TOP_ONLY)
     args = parser.parse_args(args_in)
     if not getattr(args, "command", None):
         parser.print_help(sys.stderr)

@@ -1,72 +1,52 @@
-"""Geometry containers and per-element quantities (thesis Chapter 3)."""
+"""Geometry containers and per-element quantities (thesis Chapter 3).
 
-from .data import Mesh, MeshAnimation, PointCloud, PointCloudSequence
-from .neighbors import knn
-from .pointcloud import PCANormals, pca_normals, pca_normals_eigen
-from .primitives import (
-    boundary_edges,
-    boundary_loops,
-    cotangent_weights,
-    edge_lengths,
-    edges,
-    face_areas,
-    face_centroids,
-    face_normals,
-    mean_curvature,
-    mean_edge_length,
-    vertex_areas,
-    vertex_face_matrix,
-    vertex_normals,
-)
-from .repair import (
-    WELD_TOL,
-    RepairReport,
-    Weld,
-    clean_mesh,
-    degenerate_faces,
-    duplicate_faces,
-    is_soup,
-    merge_duplicate_vertices,
-    remove_unreferenced,
-    unreferenced_vertices,
-    weld,
-)
-from .topology import mesh_topology
-from .update import update_vertices
+Names are imported from their submodules on first use, so that reading a file does not load the
+solvers (scipy's sparse graphs, numba kernels) of the others.
+"""
 
-__all__ = [
-    "Mesh",
-    "MeshAnimation",
-    "PCANormals",
-    "PointCloud",
-    "PointCloudSequence",
-    "RepairReport",
-    "WELD_TOL",
-    "Weld",
-    "boundary_edges",
-    "boundary_loops",
-    "clean_mesh",
-    "cotangent_weights",
-    "degenerate_faces",
-    "duplicate_faces",
-    "edge_lengths",
-    "edges",
-    "face_areas",
-    "face_centroids",
-    "face_normals",
-    "mean_curvature",
-    "mean_edge_length",
-    "mesh_topology",
-    "is_soup",
-    "knn",
-    "merge_duplicate_vertices",
-    "pca_normals",
-    "pca_normals_eigen",
-    "remove_unreferenced",
-    "unreferenced_vertices",
-    "update_vertices",
-    "vertex_areas",
-    "vertex_face_matrix",
-    "vertex_normals",
-    "weld",
-]
+from .._plugins import lazy_exports
+
+_EXPORTS = {
+    **dict.fromkeys(("Mesh", "MeshAnimation", "PointCloud", "PointCloudSequence"), ".data"),
+    "knn": ".neighbors",
+    **dict.fromkeys(("PCANormals", "pca_normals", "pca_normals_eigen"), ".pointcloud"),
+    **dict.fromkeys(
+        (
+            "boundary_edges",
+            "boundary_loops",
+            "cotangent_weights",
+            "edge_lengths",
+            "edges",
+            "face_areas",
+            "face_centroids",
+            "face_normals",
+            "mean_curvature",
+            "mean_edge_length",
+            "vertex_areas",
+            "vertex_face_matrix",
+            "vertex_normals",
+        ),
+        ".primitives",
+    ),
+    **dict.fromkeys(
+        (
+            "WELD_TOL",
+            "RepairReport",
+            "Weld",
+            "clean_mesh",
+            "degenerate_faces",
+            "duplicate_faces",
+            "is_soup",
+            "merge_duplicate_vertices",
+            "remove_unreferenced",
+            "unreferenced_vertices",
+            "weld",
+        ),
+        ".repair",
+    ),
+    "mesh_topology": ".topology",
+    "update_vertices": ".update",
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

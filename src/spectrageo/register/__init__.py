@@ -3,9 +3,7 @@
 Public names are loaded on first use from their submodules.
 """
 
-from __future__ import annotations
-
-import importlib
+from .._plugins import lazy_exports
 
 _EXPORTS = {
     # registration (Sections 6.2.2, 6.2.4, 6.2.5)
@@ -26,17 +24,4 @@ _EXPORTS = {
 }
 
 __all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    try:
-        module = _EXPORTS[name]
-    except KeyError:
-        raise AttributeError(f"module 'spectrageo.register' has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(module, __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

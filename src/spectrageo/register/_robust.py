@@ -23,4 +23,7 @@ def outlier_scores(P: np.ndarray, k: int) -> np.ndarray:
     """``m_i`` of Eq. 6.42: RPCA sparse-row norm in point spacings."""
     from ..outliers import RPCAOptions, rpca_scores
 
-    return np.asarray(rpca_scores(P, k, RPCAOptions(on_nonconvergence="ignore")).scores)
+    # the cluster flags (step 8 of rpca_scores) leave the scores unchanged and are not used here
+    # (docs/decisions.md#register-cli-startup)
+    opts = RPCAOptions(on_nonconvergence="ignore", clusters=False)
+    return np.asarray(rpca_scores(P, k, opts).scores)
