@@ -68,6 +68,22 @@ _DEFAULTS = [
     _d(_O + "_range.RANGE_POWER", 2.0, "tuning", "outliers-scantypes", _EO,
        "Kinect table scene clean removal 7.0 % (none) / 3.5 % (p=1) / 1.1 % (p=2) / 0.5 % (p=3); "
        "far-outlier F1 0.99 for all p"),
+    _d(_O + "_organized.GRID_ALPHA", 4.0, "tuning", "outliers-scantypes", _EO,
+       "Kinect table scene / milk_cartoon clean removal 0.70 / 0.19 % (alpha 3), 0.50 / 0.17 % "
+       "(4), 0.40 / 0.15 % (6); flying 0.24 / 0.03, 0.08 / 0.01, 0.01 / 0.00 %"),
+    _d(_O + "_organized.GRID_SUPPORT", 7, "tuning", "outliers-scantypes", _EO,
+       "Kinect table scene clean removal 0.36 / 0.42 / 0.51 % at 6 / 7 / 8 (first tolerance)"),
+    _d(_O + "_organized.NOISE_QUANTILE", 0.9, "tuning", "outliers-scantypes", _EO,
+       "range noise of the grid tolerance; set after office1 (validation) was seen"),
+    _d(_O + "_organized.NOISE_BINS", 16, "tuning", "outliers-scantypes", _EO,
+       "range bins of the noise model; set after office1 (validation) was seen"),
+    _d(_O + "_support.SUPPORT_BETA", 0.2, "tuning", "outliers-scantypes", _EO,
+       "9 tuning scans: clean mean 0.550 % off, 0.492 % (beta 0.2, flat 0.05, group 20); "
+       "F1 10 / 30 % unchanged (0.968 / 0.884); beta 0.3 with flat 0.1 lost 0.02-0.04 F1"),
+    _d(_O + "_support.SUPPORT_FLAT", 0.05, "tuning", "outliers-scantypes", _EO,
+       "flat 0.1 with group 10 lost 0.01 F1 at 10 %"),
+    _d(_O + "_support.SUPPORT_GROUP", 20, "tuning", "outliers-scantypes", _EO,
+       "chin's 94-point removed group falls to 9; group 10 kept 0.04 % more, 50 less"),
     _d(_O + "static.DEFAULT_THRESHOLD_RULE", "valley", "tuning", "outliers", _EO,
        "mean F1 0.890 against 0.887 (density) on the tuning split"),
     _d(_O + "static.VALLEY_BIN", 0.05, "tuning", "outliers", _EO,

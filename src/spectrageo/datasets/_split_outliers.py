@@ -66,6 +66,7 @@ OUTLIER_SCAN_TYPES = {
     },
     "scans/pcl/table_scene_mug_stereo_textured.pcd": ("Kinect organized frame", (0.0, 0.0, 0.0)),
     "scans/pcl/office1.pcd": ("Kinect organized frame", (0.0, 0.0, 0.0)),
+    "scans/pcl/milk_cartoon_all_small_clorox.pcd": ("Kinect organized frame", (0.0, 0.0, 0.0)),
     "scans/pcl/milk.pcd": ("Kinect segment", (0.0, 0.0, 0.0)),
     "scans/registration/open3d/cloud_bin_0.pcd": ("RGB-D fragment", None),
     "scans/registration/open3d/cloud_bin_1.pcd": ("RGB-D fragment", None),
@@ -81,9 +82,28 @@ _SCAN_TYPE_TUNING = (
     "scans/bunny/chin.ply.gz",
     "scans/bunny/ear_back.ply.gz",
     "scans/pcl/table_scene_mug_stereo_textured.pcd",
+    "scans/pcl/milk_cartoon_all_small_clorox.pcd",
     "scans/pcl/milk.pcd",
     "scans/registration/open3d/cloud_bin_0.pcd",
 )
+#: tuning scans on which RANGE_POWER was chosen
+_RANGE_TUNING = ("scans/pcl/table_scene_mug_stereo_textured.pcd", "scans/pcl/milk.pcd")
+#: tuning scans on which the grid stage's constants were chosen (OrganizedGrid)
+_GRID_TUNING = (
+    "scans/pcl/table_scene_mug_stereo_textured.pcd",
+    "scans/pcl/milk_cartoon_all_small_clorox.pcd",
+)
+
+
+#: the grid stage's range-noise tolerance was added after office1 (validation) showed the depth
+#: quantisation of far walls flagged as flying pixels (docs/decisions.md#outliers-organized-grid)
+_SCAN_TYPE_CONSULTED = {
+    "scans/pcl/office1.pcd": (
+        _O + "_organized.NOISE_QUANTILE",
+        _O + "_organized.NOISE_BINS",
+        _O + "_organized.GRID_ALPHA",
+    ),
+}
 
 
 def _scan_type_cases() -> list[Case]:
@@ -100,8 +120,11 @@ def _scan_type_cases() -> list[Case]:
                 "real (reference), injected far + near, bands" if real else "injected, bands",
                 name=f"{stype}: {rel.rsplit('/', 1)[-1].split('.')[0]}",
                 sources=("meshes/stanford-bunny.obj",) if real else (),
+                consulted_by=_SCAN_TYPE_CONSULTED.get(rel, ()),
                 note=(f"viewpoint {vp}" if vp is not None else "")
-                + ("; RANGE_POWER chosen on it" if vp is not None and split == "tuning" else ""),
+                + ("; RANGE_POWER chosen on it" if rel in _RANGE_TUNING else "")
+                + ("; GRID_ALPHA, GRID_SUPPORT chosen on it" if rel in _GRID_TUNING else "")
+                + ("; the SUPPORT_* constants chosen on it" if split == "tuning" else ""),
             )
         )
     return out

@@ -159,7 +159,10 @@ OUTLIERS = CommandSchema(
             "viewpoint", ("--viewpoint",), metavar="X,Y,Z",
             help="--method rpca: sensor origin of a single-view scan (0,0,0 for an organized "
             "Kinect/RGB-D frame in camera coordinates); scores are normalised by the spacing "
-            "expected at each point's range, so sparse far regions are kept",
+            "expected at each point's range, so sparse far regions are kept. Default for a PCD: "
+            "its VIEWPOINT origin when organized (WIDTH x HEIGHT) or not 0 0 0 1 0 0 0; an "
+            "organized PCD also uses its image grid (flying pixels removed, image-supported "
+            "points kept)",
         ),
         Option(
             "device", ("--device",), default="cpu", choices=("cpu", "cuda", "auto"),

@@ -169,10 +169,13 @@ def run_outliers(args) -> int:
     opts = {"method": args.method, "k": args.k, "device": getattr(args, "device", "cpu")}
     if args.threshold is not None:
         opts["threshold"] = args.threshold
-    if getattr(args, "viewpoint", None) is not None:
-        if isinstance(obj, PointCloudSequence):
-            raise InvalidInputError("--viewpoint applies to single point clouds, not sequences.")
-        opts["options"] = outliers.viewpoint_options(args.viewpoint, args.method)
+    vp = getattr(args, "viewpoint", None)
+    if vp is not None and isinstance(obj, PointCloudSequence):
+        raise InvalidInputError("--viewpoint applies to single point clouds, not sequences.")
+    if not isinstance(obj, PointCloudSequence):  # --viewpoint, or a PCD's VIEWPOINT and grid
+        scan = outliers.scan_options(args.input, obj, vp, args.method)
+        if scan is not None:
+            opts["options"] = scan
     if isinstance(obj, PointCloudSequence):
         if args.method != "rpca":
             raise InvalidInputError("sequences are cleaned with --method rpca (Section 5.4.3).")

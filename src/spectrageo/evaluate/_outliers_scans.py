@@ -72,7 +72,8 @@ def _largest_group(P: np.ndarray, removed: np.ndarray, h: float) -> int:
 
 
 def _inject(P: np.ndarray, N: np.ndarray, frac: float, seed: int, bands=None):
-    """``(points, labels, band index or -1)``: far + near (5-15) at ``frac``, or the bands."""
+    """``(points, labels, band index or -1, row of P or -1)``: far + near (5-15) at ``frac``, or
+    the bands."""
     from .. import noise
 
     parts = [(P, np.zeros(P.shape[0], bool), np.full(P.shape[0], -1))]
@@ -89,16 +90,20 @@ def _inject(P: np.ndarray, N: np.ndarray, frac: float, seed: int, bands=None):
     order = np.random.default_rng(seed).permutation(Q.shape[0])
     lab = np.concatenate([p[1] for p in parts])[order]
     band = np.concatenate([p[2] for p in parts])[order]
-    return Q[order], lab, band
+    src = np.concatenate([np.arange(P.shape[0]), np.full(Q.shape[0] - P.shape[0], -1)])[order]
+    return Q[order], lab, band, src
 
 
-def _methods(Q: np.ndarray, lab: np.ndarray, viewpoint, o3d_ok: bool):
-    """``(method, params, removed, seconds)`` of ours and the peers (oracles only with labels)."""
+def _methods(Q: np.ndarray, lab: np.ndarray, viewpoint, o3d_ok: bool, grid=None):
+    """``(method, params, removed, seconds)`` of ours and the peers (oracles only with labels);
+    ``grid``: the organized frame's :class:`~spectrageo.outliers.OrganizedGrid` for ``Q``."""
     from ..outliers import RPCAOptions, detect_outliers
     from ._outliers_common import PCL_MEAN_K, _open3d_sor, _oracle_threshold
 
     out = []
-    runs = [("rpca", RPCAOptions(viewpoint=viewpoint), "defaults")]
+    runs = [("rpca", RPCAOptions(viewpoint=viewpoint, grid=grid), "defaults")]
+    if grid is not None:
+        runs.append(("rpca (no grid)", RPCAOptions(viewpoint=viewpoint), "defaults, no grid"))
     if viewpoint is not None:
         runs.append(("rpca (no viewpoint)", RPCAOptions(), "defaults, no viewpoint"))
     for name, opts, params in runs:
@@ -129,6 +134,7 @@ def evaluate_scan_types(data_dir, *, splits=("tuning", "validation"), seed: int 
 
     from .. import io
     from ..geometry import pca_normals
+    from ..outliers import OrganizedGrid
     from ._outliers_common import _have_open3d, _row
 
     data = Path(data_dir)
@@ -139,26 +145,33 @@ def evaluate_scan_types(data_dir, *, splits=("tuning", "validation"), seed: int 
             continue
         stype, viewpoint = OUTLIER_SCAN_TYPES[rel]
         real = real_labels(data, rel)
+        pixel = shape = None
         if real is not None:
             raw, rl, h = real
             P = raw[~rl]
         else:
-            P = io.read(data / rel, kind="points").points
+            pc = io.read(data / rel, kind="points")
+            P = pc.points
             h = float(np.median(cKDTree(P).query(P, 2)[0][:, 1]))
+            shape, pixel = _organized(data / rel, pc)
         N = pca_normals(P, 10, orient="none")
-        tests = [("clean", 0.0, P, np.zeros(P.shape[0], bool), None)]
+        every = np.arange(P.shape[0])
+        tests = [("clean", 0.0, P, np.zeros(P.shape[0], bool), None, every)]
         if real is not None:
-            tests.append(("real", float(rl.mean()), raw, rl, None))
+            tests.append(("real", float(rl.mean()), raw, rl, None, every))
         for frac in INJECTED_FRACTIONS:
-            Q, lab, _ = _inject(P, N, frac, seed)
-            tests.append(("injected", frac, Q, lab, None))
-        Q, lab, band = _inject(P, N, 0.03, seed, bands=BANDS)
-        tests.append(("bands", 0.09, Q, lab, band))
-        for kind, frac, Q, lab, band in tests:
+            Q, lab, _, src = _inject(P, N, frac, seed)
+            tests.append(("injected", frac, Q, lab, None, src))
+        Q, lab, band, src = _inject(P, N, 0.03, seed, bands=BANDS)
+        tests.append(("bands", 0.09, Q, lab, band, src))
+        for kind, frac, Q, lab, band, src in tests:
             base = {"suite": "scan-types", "split": split, "scan_type": stype, "dataset": name,
                     "kind": kind, "fraction": round(frac, 5), "n_points": Q.shape[0],
                     "n_outliers": int(lab.sum())}  # fmt: skip
-            for m, params, removed, dt in _methods(Q, lab, viewpoint, o3d_ok):
+            grid = None
+            if pixel is not None:
+                grid = OrganizedGrid(shape, np.where(src >= 0, pixel[np.maximum(src, 0)], -1))
+            for m, params, removed, dt in _methods(Q, lab, viewpoint, o3d_ok, grid):
                 row = _row(base, m, params, removed, lab, dt)
                 row["removed"] = round(float(removed.mean()), 5)
                 if kind == "clean":
@@ -170,6 +183,19 @@ def evaluate_scan_types(data_dir, *, splits=("tuning", "validation"), seed: int 
                         row[f"recall_{lo:g}_{hi:g}"] = round(float(removed[sel].mean()), 4)
                 rows.append(row)
     return rows
+
+
+def _organized(path: Path, pc) -> tuple:
+    """``(shape, pixel of each point)`` of an organized PCD frame, else ``(None, None)``."""
+    from ..io._pcd import read_pcd_header
+
+    if not path.name.lower().endswith((".pcd", ".pcd.gz")):
+        return None, None
+    hdr = read_pcd_header(path)
+    if not hdr.organized:
+        return None, None
+    pixel = pc.attributes.get("source_index", np.arange(pc.points.shape[0]))
+    return (hdr.height, hdr.width), np.asarray(pixel, dtype=np.int64)
 
 
 _DEFAULT_PEERS = ("sor", "radius", "pcl-sor", "open3d-sor")

@@ -7,9 +7,10 @@ one ``frombuffer`` per field.
 
 Fields (names case-insensitive): ``x y z`` -> points; ``normal_x normal_y normal_z`` -> normals;
 ``rgb`` (0x00RRGGBB) -> uint8 colours (n, 3); ``rgba`` -> (n, 4), or (n, 3) when every alpha is
-0; padding ``_`` dropped; others -> attributes. ``VIEWPOINT`` is not applied. NaN points of
-organized clouds are dropped by default (``nan_points``), their indices kept in
-``source_index``.
+0; padding ``_`` dropped; others -> attributes. ``VIEWPOINT`` is not applied to the points. NaN
+points of organized clouds are dropped by default (``nan_points``), their indices kept in
+``source_index``; :func:`read_pcd_header` gives the grid (``WIDTH``, ``HEIGHT``) and the
+``VIEWPOINT`` without decoding the body.
 
 Header and body must agree: POINTS = WIDTH*HEIGHT; exactly POINTS rows (ascii) or records
 (binary, less than one record of trailing bytes tolerated); ``binary_compressed`` must declare
@@ -19,8 +20,11 @@ produce (at most 88x). Declared sizes are checked against the memory cap.
 
 from __future__ import annotations
 
+import gzip
 import io
 import struct
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -333,6 +337,78 @@ def read_pcd(raw: bytes, name: str) -> RawGeometry:
     raw_geom = RawGeometry(V, None, normals, colors, cols, {})
     raw_geom.nan_policy_default = "drop"
     return raw_geom
+
+
+#: ``VIEWPOINT`` of a PCD header without one (PCL's default: origin, identity rotation)
+DEFAULT_VIEWPOINT = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+_HEADER_BYTES = 1 << 16
+
+
+@dataclass(frozen=True)
+class PCDHeader:
+    """Grid and sensor pose of a PCD file (:func:`read_pcd_header`).
+
+    Attributes
+    ----------
+    width, height : int
+        ``WIDTH`` and ``HEIGHT``; ``height > 1`` is an organized (image) cloud of ``height`` rows.
+    viewpoint : (7,) tuple of float
+        ``VIEWPOINT``: sensor origin ``tx ty tz`` and orientation quaternion ``qw qx qy qz``.
+    """
+
+    width: int
+    height: int
+    viewpoint: tuple[float, ...] = DEFAULT_VIEWPOINT
+
+    @property
+    def organized(self) -> bool:
+        """Whether the points are an image of ``height > 1`` rows of ``width`` pixels."""
+        return self.height > 1 and self.width > 1
+
+    @property
+    def origin(self) -> tuple[float, float, float]:
+        """The sensor origin ``(tx, ty, tz)``."""
+        return (self.viewpoint[0], self.viewpoint[1], self.viewpoint[2])
+
+    @property
+    def default_viewpoint(self) -> bool:
+        """Whether ``VIEWPOINT`` is absent or PCL's default ``0 0 0 1 0 0 0``."""
+        return self.viewpoint == DEFAULT_VIEWPOINT
+
+
+def read_pcd_header(path: Any) -> PCDHeader:
+    """The header of a ``.pcd`` (or ``.pcd.gz``) file, without decoding its body.
+
+    Raises
+    ------
+    InvalidInputError
+        Missing file, or a header that is not PCD or has malformed ``WIDTH``, ``HEIGHT`` or
+        ``VIEWPOINT`` values.
+    """
+    p = Path(path)
+    try:
+        opener = gzip.open if p.name.lower().endswith(".gz") else open
+        with opener(p, "rb") as fh:
+            raw = fh.read(_HEADER_BYTES)
+    except FileNotFoundError as exc:
+        raise InvalidInputError(f"file not found: {p}") from exc
+    except (OSError, EOFError) as exc:
+        raise InvalidInputError(f"{p.name}: cannot read the PCD header ({exc_text(exc)}).") from exc
+    hdr, _ = _parse_header(raw, p.name)
+    try:
+        width, height = int(hdr["WIDTH"][0]), int(hdr["HEIGHT"][0])
+        vp = tuple(float(v) for v in hdr.get("VIEWPOINT", DEFAULT_VIEWPOINT))
+    except (KeyError, IndexError, ValueError) as exc:
+        raise InvalidInputError(
+            f"{p.name}: malformed WIDTH, HEIGHT or VIEWPOINT in the PCD header."
+        ) from exc
+    if width < 0 or height < 0:
+        raise InvalidInputError(f"{p.name}: PCD header WIDTH and HEIGHT must be >= 0.")
+    if len(vp) != 7 or not np.isfinite(vp).all():
+        raise InvalidInputError(
+            f"{p.name}: PCD header VIEWPOINT must be 7 finite numbers; got {vp}."
+        )
+    return PCDHeader(width, height, vp)
 
 
 # --------------------------------------------------------------------------------------- writing

@@ -9,7 +9,8 @@
   Laplacian refill (Eq. 5.104-5.109).
 """
 
-from ._rpca_types import viewpoint_options
+from ._organized import OrganizedGrid
+from ._rpca_types import scan_options, viewpoint_options
 from .robot import RobotResult, bilateral_point_filter, knn_triangles, robot_pipeline
 from .rpca import PatchRPCAResult, RPCAOptions, knn_patch_matrix, rpca_scores
 from .sequence import SequenceResult, clean_sequence, weighted_laplacian
@@ -24,6 +25,7 @@ from .static import (
 )
 
 __all__ = [
+    "OrganizedGrid",
     "OutlierResult",
     "PatchRPCAResult",
     "RPCAOptions",
@@ -39,6 +41,7 @@ __all__ = [
     "remove_outliers",
     "robot_pipeline",
     "rpca_scores",
+    "scan_options",
     "sor_scores",
     "valley_threshold",
     "viewpoint_options",

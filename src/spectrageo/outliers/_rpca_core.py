@@ -111,6 +111,8 @@ def score_cloud(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
         del S1, S2
     if refine:
         _subtract_local_baseline(scores_s, s1, idx)
+        if n_refined:
+            idx[rebuilt] = old_idx  # the exact kNN again (PatchRPCAResult.knn)
 
     scores = np.empty(n)
     scores[order] = scores_s
@@ -135,6 +137,7 @@ def score_cloud(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
         n_refined=n_refined,
         clusters=clusters,
         kth_distance=kth,
+        knn=(order, idx),
     )
     report(res, opts["on_nonconvergence"], opts["max_iter"])
     return res

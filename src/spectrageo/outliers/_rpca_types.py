@@ -10,9 +10,10 @@ import numpy as np
 
 from .._errors import ConvergenceError, ConvergenceWarning, InvalidInputError
 from .._validation import check_choice, check_positive
+from ._organized import OrganizedGrid
 from ._range import RANGE_POWER, check_viewpoint
 
-__all__ = ["PatchRPCAResult", "RPCAOptions", "viewpoint_options"]
+__all__ = ["PatchRPCAResult", "RPCAOptions", "scan_options", "viewpoint_options"]
 
 #: Default ``sparse_factor``: chosen on the tuning split; see docs/decisions.md#outliers-sparse-stage.
 SPARSE_FACTOR = 3.0
@@ -55,6 +56,13 @@ class RPCAOptions:
     sparse_factor : float, optional
         :func:`remove_outliers` also removes points whose ``k``-th neighbour is farther than
         ``sparse_factor`` times the median (range-normalised with a viewpoint); None: off.
+    sparse_regions : bool
+        :func:`remove_outliers` keeps the removed points that form large sparse surface regions
+        (:mod:`._support`).
+    grid : OrganizedGrid, optional
+        Image grid of an organized depth frame: :func:`remove_outliers` removes its flying pixels
+        and keeps its image-supported points (:mod:`._organized`); the viewpoint defaults to the
+        origin (camera coordinates).
     """
 
     lam: float | None = None
@@ -73,8 +81,12 @@ class RPCAOptions:
     viewpoint: tuple[float, float, float] | None = None
     range_power: float = RANGE_POWER
     sparse_factor: float | None = SPARSE_FACTOR
+    sparse_regions: bool = True
+    grid: OrganizedGrid | None = None
 
     def __post_init__(self) -> None:
+        if self.grid is not None and not isinstance(self.grid, OrganizedGrid):
+            raise InvalidInputError(f"`grid` must be an OrganizedGrid; got {type(self.grid)}.")
         object.__setattr__(self, "viewpoint", check_viewpoint(self.viewpoint))
         check_positive(self.range_power, "range_power", allow_zero=True)
         if self.sparse_factor is not None:
@@ -108,6 +120,13 @@ class RPCAOptions:
         if dt not in (np.float32, np.float64):
             raise InvalidInputError(f"`dtype` must be float32 or float64; got {self.dtype!r}.")
         object.__setattr__(self, "dtype", dt.name)
+
+    @property
+    def sensor_origin(self) -> tuple[float, float, float] | None:
+        """``viewpoint``, or the origin for an organized grid without one."""
+        if self.viewpoint is None and self.grid is not None:
+            return (0.0, 0.0, 0.0)
+        return self.viewpoint
 
     def solver_kwargs(
         self, *, block_size: int, smoothed: bool, workers: int, device: Any
@@ -154,6 +173,43 @@ def viewpoint_options(text: str, method: str = "rpca") -> Any:
     return RPCAOptions(viewpoint=v)
 
 
+def scan_options(
+    path: Any, cloud: Any = None, viewpoint: str | None = None, method: str = "rpca"
+) -> Any:
+    """:class:`RPCAOptions` of a scan file as ``spectrageo outliers`` builds them, or None.
+
+    ``viewpoint`` (``"X,Y,Z"``, the ``--viewpoint`` option) wins; otherwise a PCD file's header
+    gives it (``VIEWPOINT``'s origin) when the cloud is organized or the ``VIEWPOINT`` differs
+    from PCL's default ``0 0 0 1 0 0 0``. An organized PCD (``HEIGHT > 1``) read as ``cloud``
+    (a PointCloud; NaN pixels dropped, their rows in the attribute ``source_index``) also gives
+    :class:`OrganizedGrid`. See docs/decisions.md#outliers-organized-grid.
+
+    Raises
+    ------
+    InvalidInputError
+        A malformed ``viewpoint`` or header, or ``viewpoint`` with a ``method`` other than rpca.
+    """
+    opts = None if viewpoint is None else viewpoint_options(viewpoint, method)
+    name = str(path).lower()
+    if method != "rpca" or not name.endswith((".pcd", ".pcd.gz")):
+        return opts
+    from ..io._pcd import read_pcd_header
+
+    hdr = read_pcd_header(path)
+    vp = opts.viewpoint if opts is not None else None
+    if vp is None and (hdr.organized or not hdr.default_viewpoint):
+        vp = hdr.origin
+    grid = None
+    points = getattr(cloud, "points", None)
+    if hdr.organized and points is not None:
+        index = getattr(cloud, "attributes", {}).get("source_index")
+        if index is not None or points.shape[0] == hdr.width * hdr.height:
+            grid = OrganizedGrid((hdr.height, hdr.width), index)
+    if vp is None and grid is None:
+        return opts
+    return RPCAOptions(viewpoint=vp, grid=grid)
+
+
 @dataclass(frozen=True)
 class PatchRPCAResult:
     """Result of :func:`spectrageo.outliers.rpca_scores` (arrays in input order).
@@ -174,6 +230,9 @@ class PatchRPCAResult:
     kth_distance : (n,) ndarray or None
         Distance to the ``k``-th neighbour (over ``max(rho_i, 1)`` with a viewpoint); None for
         clouds scored on tiles.
+    knn : tuple or None
+        ``(order, idx)``: the sorting permutation of the scored cloud and its neighbour lists in
+        sorted positions (after step 5); None for tiles and deduplicated clouds.
     """
 
     scores: np.ndarray = field(repr=False)
@@ -186,6 +245,7 @@ class PatchRPCAResult:
     n_refined: int = 0
     clusters: np.ndarray | None = field(default=None, repr=False)
     kth_distance: np.ndarray | None = field(default=None, repr=False)
+    knn: tuple | None = field(default=None, repr=False)
 
 
 def report(res: PatchRPCAResult, policy: str, max_iter: int) -> None:

@@ -101,9 +101,9 @@ def rpca_scores(
     7. ``tangent_weight = w < 1``: the tangential part of ``s_i`` (against the PCA normal of the
        neighbours) is weighted by ``w``.
     8. ``clusters``: small volumetric clusters of the kNN graph are flagged (scores unchanged).
-    9. ``viewpoint`` given: ``score_i / max(rho_i, 1)^p``, ``rho_i`` the spacing predicted at the
-       point's range over ``h`` (:func:`._range.range_ratio`), ``p`` = ``range_power``
-       (docs/decisions.md#outliers-range-model).
+    9. ``viewpoint`` (or ``grid``: the origin) given: ``score_i / max(rho_i, 1)^p``, ``rho_i``
+       the spacing predicted at the point's range over ``h`` (:func:`._range.range_ratio`),
+       ``p`` = ``range_power`` (docs/decisions.md#outliers-range-model).
 
     ``RPCAOptions(refine=False, tangent_weight=1, clusters=False)`` gives the thesis' score; the
     defaults were chosen on the tuning split (docs/decisions.md#outlier-rpca-constants). Clouds of
@@ -151,9 +151,9 @@ def rpca_scores(
     )
     kw["device"] = resolve_backend(device)  # "cpu" (numba) or a torch.device
     res = _dispatch(X, k, **kw)
-    if opts.viewpoint is None:
+    if opts.sensor_origin is None:
         return res
-    rho = np.maximum(range_ratio(X, k, opts.viewpoint), 1.0)
+    rho = np.maximum(range_ratio(X, k, opts.sensor_origin), 1.0)
     kth = None if res.kth_distance is None else res.kth_distance / rho
     return replace(res, scores=res.scores / rho**opts.range_power, kth_distance=kth)
 

@@ -19,6 +19,8 @@ from .._validation import (
 )
 from ..geometry import PointCloud
 from ._common import SortedCloud, check_k, knn_grid, numba_threads
+from ._organized import grid_labels
+from ._support import sparse_surface
 from ._thresholds import (  # noqa: F401 - the VALLEY_* constants are re-exported
     DEFAULT_THRESHOLD_RULE,
     RPCA_MIN_TAU,
@@ -165,7 +167,10 @@ def remove_outliers(
     ``method="rpca"`` (Section 5.4.1): the scores of :func:`rpca_scores` (Eq. 5.98-5.99, in units
     of the point spacing); points with ``score < tau`` are kept, except the small volumetric
     clusters of its step 8 (whatever their score) and the sparse points of
-    ``options.sparse_factor`` (:func:`_sparse_points`). ``threshold=None`` uses
+    ``options.sparse_factor`` (:func:`_sparse_points`), unless they lie in a large sparse
+    surface region (``options.sparse_regions``: :func:`._support.sparse_surface`); with
+    ``options.grid`` (an organized depth frame) the flying pixels are removed and the
+    image-supported points kept (:func:`._organized.grid_labels`). ``threshold=None`` uses
     ``threshold_rule`` (``"valley"``: :func:`valley_threshold`; ``"density"``, ``"otsu"``:
     :func:`auto_threshold`) with the floor :data:`RPCA_MIN_TAU` = 0.5 spacings (chosen on the tuning
     split; see docs/decisions.md#outlier-rpca-constants). ``method="sor"``: keep points whose mean
@@ -275,6 +280,19 @@ def _outliers(
             tau = auto_threshold(s, minimum=RPCA_MIN_TAU, rule=threshold_rule)
         sparse = _sparse_points(r, s, tau, options.sparse_factor)
         keep_f = (s < tau) & ~blob & ~sparse
+        # large sparse surface regions are kept (docs/decisions.md#outliers-sparse-regions);
+        # clouds scored on k-d tiles skip it, as the sparse stage
+        if options.sparse_regions and r.kth_distance is not None and not keep_f.all():
+            surface = sparse_surface(X, ~keep_f, k, r.knn)
+            info["n_sparse_region_kept"] = int(np.count_nonzero(surface))
+            keep_f |= surface
+        if options.grid is not None:  # the grid stage (docs/decisions.md#outliers-organized-grid)
+            pix = options.grid.pixels(X.shape[0] if finite is None else finite.size)
+            pix = pix if finite is None else pix[finite]
+            supported, flying = grid_labels(X, pix, options.grid.shape, options.sensor_origin)
+            info["n_flying"] = int(np.count_nonzero(flying))
+            info["n_supported_kept"] = int(np.count_nonzero(supported & ~keep_f))
+            keep_f = (keep_f | supported) & ~flying
         info["n_cluster_outliers"] = int(np.count_nonzero(blob))
         info["n_sparse_outliers"] = int(np.count_nonzero(sparse & ~blob & (s < tau)))
         info.setdefault("contamination", float(np.count_nonzero(~keep_f) / max(s.size, 1)))
