@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from spectrageo import InvalidInputError, compress
-from spectrageo.compress import _container
+from spectrageo.compress import _container, _predictive
 from spectrageo.datasets import fandisk
 from spectrageo.metrics import hausdorff
 
@@ -23,7 +23,7 @@ from conftest import icosphere
 #: coordinate, so these are the same on every machine
 PINNED = {
     "step": "feb2c900e9253ef5e16c20cc01d4b356be4e75b62c196c62941260409e6eebee",
-    "reorder": "d530a9941558603782bf12fe5076485a2c8bce2868019526ceb16c3efb2de5bc",
+    "reorder": "2b679a2af72a67be92de77c87c5ac6f88b8e1d0ea7db13f58b7c234922e434d4",
 }
 
 
@@ -35,6 +35,13 @@ def _sha(X: np.ndarray) -> str:
 def mesh():
     m = fandisk()
     return m.V, m.F
+
+
+def _order(V, V2):
+    """Index of the input vertex each decoded vertex came from (the nearest one)."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(V).query(V2)[1]
 
 
 def _diag(V):
@@ -104,20 +111,44 @@ def test_decoded_values_are_pinned(mesh):
 
 def test_decoding_is_the_same_for_a_generic_cpu(mesh, tmp_path):
     V, F = mesh
-    data = compress.encode(V, F, method="predictive", step=1e-3)
     f = tmp_path / "a.sgc"
-    f.write_bytes(data)
+    f.write_bytes(compress.encode(V, F, method="predictive", step=1e-3))
+    g = tmp_path / "b.sgc"
+    g.write_bytes(compress.encode(V, F, method="predictive", max_error=2e-4, reorder=True))
     code = (
-        "import hashlib, sys, numpy as np; from spectrageo import compress; "
-        "X = compress.decode(open(sys.argv[1], 'rb').read())[0]; "
-        "print(hashlib.sha256(np.ascontiguousarray(X).tobytes()).hexdigest())"
+        "import hashlib, sys, numpy as np; from spectrageo import compress\n"
+        "for p in sys.argv[1:]:\n"
+        "    X = compress.decode(open(p, 'rb').read())[0]\n"
+        "    print(hashlib.sha256(np.ascontiguousarray(X).tobytes()).hexdigest())"
     )
     env = {**os.environ, "NUMBA_CPU_NAME": "generic", "OPENBLAS_NUM_THREADS": "1"}
     r = subprocess.run(
-        [sys.executable, "-c", code, str(f)], env=env, capture_output=True, text=True, timeout=600
+        [sys.executable, "-c", code, str(f), str(g)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert r.returncode == 0, r.stderr[-2000:]
-    assert r.stdout.strip().splitlines()[-1] == PINNED["step"]
+    assert r.stdout.strip().splitlines()[-2:] == [PINNED["step"], PINNED["reorder"]]
+
+
+def test_max_error_may_use_a_sphere_around_each_vertex(mesh):
+    # at a coarse bound a vertex takes a grid point within the bound near its prediction: the
+    # file is smaller than rounding to the grid that keeps every coordinate within bound/sqrt(3)
+    # would give, and the largest vertex displacement still respects the bound
+    V, F = mesh
+    bound = 2e-3
+    data = compress.encode(V, F, method="predictive", max_error=bound, reorder=True)
+    step = compress.info(data)["parameters"]["step"]
+    assert any(step == pytest.approx(bound / rho, rel=1e-6) for rho in _predictive.SPHERE_RHO)
+    rounded = compress.encode(
+        V, F, method="predictive", step=2 * bound / math.sqrt(3.0) * (1 - 1e-9), reorder=True
+    )
+    assert len(data) < 0.95 * len(rounded)
+    V2, F2 = compress.decode(data)
+    perm = _order(V, V2)
+    assert np.linalg.norm(V2 - V[perm], axis=1).max() / _diag(V) <= bound
 
 
 def test_small_meshes_isolated_vertices_and_components():

@@ -14,7 +14,7 @@ def test_evaluate_compress_tuning(shared_data, tmp_path):
         out=tmp_path / "rd",
         splits=("tuning",),
     )
-    assert {r["model"] for r in rows} == {"fandisk", "partLp"}
+    assert {r["model"] for r in rows} == {"fandisk", "partLp", "elephant", "elephant-with-holes"}
     for model in ("fandisk", "partLp"):
         sp = sorted(
             (r["bpv"], r["rms"]) for r in rows if r["model"] == model and r["method"] == "spectral"

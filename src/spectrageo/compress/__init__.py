@@ -321,7 +321,9 @@ def encode_animation(
     frames : (T, n, 3) float or MeshAnimation
     F : (m, 3) int
         Shared faces; vertex order and faces are kept exactly.
-    method : {"pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "layered"}
+    method : {"pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "pca-pred", "layered"}
+        ``"pca-pred"``: trajectory PCA with the coefficients predicted along the mesh
+        (:mod:`._pca_pred`; not of the thesis), the smallest files; its step defaults to 2.5e-4.
     bpvf : float, optional
         Target size of the whole file in bits per vertex per frame (met within 5 %).
     error : float, optional
@@ -335,6 +337,8 @@ def encode_animation(
         of pca-qs / pca-qp / blocks, 0.01), ``anchor_ratio`` (anchor step / step, 0.5),
         ``weight`` (anchor weight in Eq. 5.51, 1), ``basis`` ("oi" or "exact"), ``n_iter`` (2),
         ``rd`` (row-dropping strength, 1); ``pca-spectral`` accepts and ignores them.
+        ``pca-pred``: ``block`` (frames per block, 512) and ``reorder`` (False; True codes the
+        vertices and faces in the connectivity coder's order, as the static ``reorder``).
         ``layered``: ``layer`` (fraction of the vertices sent per frame, 0.1), ``refresh`` (a
         refresh frame every that many frames, 16; 0 = never) and ``fine`` (the RPCA/ISVD fine
         reconstruction, off); its ``step`` (default 1e-3) is a fraction of twice the first

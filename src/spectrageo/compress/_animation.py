@@ -451,8 +451,8 @@ class StreamState:
     params: Params
     F: np.ndarray
     anchors: np.ndarray
-    L: sp.csr_matrix
-    solver: _Solver
+    L: sp.csr_matrix | None
+    solver: object  # _Solver, or the traversal plan of pca-pred
 
 
 def read_header(c: _container.Container) -> StreamState:
@@ -465,6 +465,13 @@ def read_header(c: _container.Container) -> StreamState:
     if [t for t, _ in c.chunks] != [TAG_CONNECTIVITY, TAG_ANCHOR_INDEX]:
         raise InvalidInputError(".sga stream header lacks its connectivity or anchors.")
     F = _connectivity.decode_faces(c.chunks[0][1], c.n_vertices, c.n_faces)
+    if c.method == "pca-pred":  # no anchors, no solve: the traversal plan instead
+        from ._pca_pred import make_plan
+
+        pl = make_plan(F, c.n_vertices)
+        e = np.zeros(0, np.int64)
+        o = np.asarray(c.origin)
+        return StreamState(c.method, c.n_vertices, c.n_faces, o, c.scale, p, F, e, None, pl)
     r = Reader(c.chunks[1][1], "anchor index")
     na = r.varint()
     if na > c.n_vertices:
@@ -494,8 +501,13 @@ def reconstruct_block(st: StreamState, chunks, nf: int, step: float, serial: boo
         if not np.isfinite(X).all():
             raise InvalidInputError(".sga data decodes to non-finite coordinates (corrupted).")
         return X * st.scale + st.origin
-    deltas, apos = decode_block(chunks, st.params, nf, st.n, st.anchors, step)
-    X = solve_frames(st.solver, deltas, apos, serial)
+    if st.method == "pca-pred":
+        from . import _pca_pred
+
+        X = _pca_pred.reconstruct(st.solver, st.n, chunks, nf, step)
+    else:
+        deltas, apos = decode_block(chunks, st.params, nf, st.n, st.anchors, step)
+        X = solve_frames(st.solver, deltas, apos, serial)
     if not np.isfinite(X).all():
         raise InvalidInputError(".sga data decodes to non-finite coordinates (corrupted).")
     return X * st.scale + st.origin
@@ -712,6 +724,11 @@ def make_encoder(frames, F, method: str, options: dict) -> AnimationEncoder:
     o = _check_options(method, options)
     if method == "pca-spectral":
         return PcaSpectralFileEncoder(frames, F)
+    if method == "pca-pred":
+        from ._pca_pred import PRED_BLOCK, PcaPredFileEncoder
+
+        blk = int(o["block"]) if "block" in options else PRED_BLOCK
+        return PcaPredFileEncoder(frames, F, blk, *frame_box(frames))
     return AnimationEncoder(
         frames,
         F,

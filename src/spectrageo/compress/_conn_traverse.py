@@ -13,10 +13,13 @@ order-preserving code needs about ``log2(m!) + log2(n!)`` bits plus a few bits p
 3. **Face order**: each file face as the canonical successor, an unplaced edge neighbour of
    the previous face, or its rank; then its rotation.
 
-:func:`canonical` is the order in which all three are nearly free (``--reorder``). Symbols use
-static categorical models with ``constriction``'s ANS coder, the third vertex in 16 contexts;
-both sides run one compiled state machine (:func:`_topology`). See
-docs/decisions.md#compress-connectivity and docs/decisions.md#compress-conn-contexts.
+:func:`canonical` is the order in which all three are nearly free (``--reorder``). Stage 1's
+symbols use adaptive models (:mod:`._rangecoder`, first byte :data:`MARKER_ADAPTIVE`), the
+third vertex in :data:`NV_CTX` contexts (faces already decoded around the gate's end); the other
+stages static categorical models with ``constriction``'s ANS coder. Files of the static format
+(:data:`MARKER`: every stream static, the third vertex in 16 contexts) still decode. Both sides
+run one compiled state machine (:func:`_topology`). See docs/decisions.md#compress-connectivity,
+docs/decisions.md#compress-conn-contexts and docs/decisions.md#codec-conn-adaptive.
 """
 
 from __future__ import annotations
@@ -25,7 +28,10 @@ import numba
 import numpy as np
 
 from .._errors import InvalidInputError
+from . import _rangecoder
+from ._conn_streams import read_streams, static_tables, static_words
 from ._container import Reader, varint
+from ._rangecoder import bitlen as _bitlen
 
 #: length of the candidate list for the third vertex of a traversed face
 KMAX = 30
@@ -57,7 +63,10 @@ ALPHABETS = (
     3,  # rotation relative to smallest label first
 )
 N_STREAMS = len(ALPHABETS)
-N_TOPO = 4 + N_CTX  # streams of stage 1
+N_TOPO = 4 + N_CTX  # streams of stage 1 (static format)
+#: contexts of the third-vertex symbol in the adaptive format: 0-5 faces already decoded around
+#: the gate's end ``v`` (docs/decisions.md#codec-conn-adaptive)
+NV_CTX = 6
 
 
 # ----------------------------------------------------------------------------- bit buffers
@@ -79,15 +88,6 @@ def _get(buf, pos, width, nbits):
         value = (value << 1) | ((buf[pos >> 3] >> (7 - (pos & 7))) & 1)
         pos += 1
     return value, pos
-
-
-@numba.njit(cache=True, inline="always")
-def _bitlen(x):
-    k = 0
-    while x > 0:
-        x >>= 1
-        k += 1
-    return k
 
 
 # ----------------------------------------------------------------------------- edge table
@@ -189,6 +189,16 @@ def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to):
     return nc
 
 
+@numba.njit(cache=True, inline="always")
+def _context(hist, fv, n_ctx):
+    """Context of the third-vertex symbol: in the static format the classes of the two symbols
+    before it (``hist``); in the adaptive one the faces already decoded around the gate's end
+    ``v``, whose decoded neighbours are the first candidates."""
+    if n_ctx == N_CTX:
+        return hist
+    return min(fv, n_ctx - 1)
+
+
 @numba.njit(cache=True)
 def _topology(
     encode,
@@ -241,7 +251,9 @@ def _topology(
     t = 0
     fpos = 0
     pos = 0
-    cur = np.zeros(N_TOPO, dtype=np.int64)  # read/write cursor per stream
+    n_ctx = lens.size - 4
+    cur = np.zeros(lens.size, dtype=np.int64)  # read/write cursor per stream
+    fcnt = np.zeros(N, dtype=np.int64)  # faces decoded around each vertex
     ctx = 0
     while t < m:
         if sp == 0:  # seed face, corner by corner
@@ -283,6 +295,8 @@ def _topology(
             Fc[t, 1] = c[1]
             Fc[t, 2] = c[2]
             t += 1
+            for k in range(3):
+                fcnt[c[k]] += 1
             if c[0] != c[1] and c[1] != c[2] and c[0] != c[2]:
                 for k in range(3):
                     ne = _add_edge(
@@ -338,6 +352,7 @@ def _topology(
             cur[1] += 1
         p, q2 = (v, u) if orient == 0 else (u, v)
         nc = _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to)
+        cx = _context(ctx, fcnt[v], n_ctx)
         if encode:
             cw = cid[w]
             if cw == -1:
@@ -360,15 +375,15 @@ def _topology(
                     s = W_ANY
                     pos = _put(bits, pos, cw, _bitlen(nv - 1))
             wsym[cur[4]] = s  # all contexts in one array, split by ``wctx`` afterwards
-            wctx[cur[4]] = ctx
+            wctx[cur[4]] = ctx * 64 + min(fcnt[v], 63)  # both formats' contexts
             cur[4] += 1
             done[f] = True
             order[t] = f
         else:
-            if cur[4 + ctx] >= lens[4 + ctx]:
+            if cur[4 + cx] >= lens[4 + cx]:
                 return 1, nv, pos
-            s = wsym[woff[ctx] + cur[4 + ctx]]
-            cur[4 + ctx] += 1
+            s = wsym[woff[cx] + cur[4 + cx]]
+            cur[4 + cx] += 1
             if s == 0:
                 if nv >= N:
                     return 1, nv, pos
@@ -400,6 +415,9 @@ def _topology(
         Fc[t, 1] = q2
         Fc[t, 2] = cw
         t += 1
+        fcnt[p] += 1
+        fcnt[q2] += 1
+        fcnt[cw] += 1
         ne = _add_edge(p, q2, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree)
         ne = _add_edge(q2, cw, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree)
         ne = _add_edge(cw, p, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree)
@@ -409,7 +427,7 @@ def _topology(
         su[sp] = cw
         sv[sp] = p
         sp += 1
-    for k in range(N_TOPO):
+    for k in range(lens.size):
         if not encode and cur[k] != lens[k]:
             return 1, nv, pos
         lens[k] = cur[k]
@@ -680,25 +698,31 @@ def _bitbuf(nbits_max: int) -> np.ndarray:
     return np.zeros(nbits_max // 8 + 8, dtype=np.uint8)
 
 
-def _categorical(counts: np.ndarray):
-    import constriction
-
-    p = counts.astype(np.float64) / float(counts.sum())
-    return constriction.stream.model.Categorical(p, perfect=False)
-
-
 # ----------------------------------------------------------------------------- public
+#: first byte of the traversal code with static models (read only)
 MARKER = 0x40
+#: first byte of the traversal code whose stage-1 streams use adaptive models (written)
+MARKER_ADAPTIVE = 0x41
+MARKERS = (MARKER, MARKER_ADAPTIVE)
+
+
+def _layout(marker: int) -> tuple[int, tuple[int, ...]]:
+    """Number of third-vertex contexts and the alphabets of all streams of a format."""
+    n_ctx = N_CTX if marker == MARKER else NV_CTX
+    alphas = ALPHABETS[:4] + (W_ALPHA,) * n_ctx + ALPHABETS[N_TOPO:]
+    return n_ctx, alphas
 
 
 def _traverse(F: np.ndarray):
+    """Stage 1 of the encoder: the stage-1 streams of both formats (by first byte), the raw
+    bits, canonical faces, file index of each canonical face and file label of each vertex."""
     m = F.shape[0]
     n_univ = int(F.max()) + 1
     ekeys, eptr, efaces = _edge_table(F, n_univ)
     syms = np.zeros((4, 3 * m + 3), dtype=np.int32)  # gate, orient, seed, far border
     wsym = np.zeros(m + 1, dtype=np.int32)  # third vertices of all contexts, in order
-    wctx = np.zeros(m + 1, dtype=np.int8)
-    lens = np.zeros(N_TOPO, dtype=np.int64)
+    wctx = np.zeros(m + 1, dtype=np.int16)
+    lens = np.zeros(4 + NV_CTX, dtype=np.int64)
     bits = _bitbuf(64 * (3 * m + 3))
     Fc = np.zeros((m, 3), dtype=np.int64)
     order = np.zeros(m, dtype=np.int64)
@@ -710,11 +734,15 @@ def _traverse(F: np.ndarray):
     if st != 0:  # pragma: no cover - the encoder's own state machine cannot fail
         raise RuntimeError("connectivity traversal failed")
     nw = int(lens[4])
-    streams = [syms[k, : lens[k]] for k in range(4)]
-    by_ctx = np.argsort(wctx[:nw], kind="stable")
-    splits = np.cumsum(np.bincount(wctx[:nw], minlength=N_CTX))[:-1]
-    streams += np.split(wsym[:nw][by_ctx], splits)
-    return n_univ, streams, bits, pos, Fc, order, L[:nv]
+    head = [syms[k, : lens[k]] for k in range(4)]
+    topo = {}
+    for marker in MARKERS:
+        n_ctx = _layout(marker)[0]
+        c = wctx[:nw] >> 6 if marker == MARKER else np.minimum(wctx[:nw] & 63, n_ctx - 1)
+        by_ctx = np.argsort(c, kind="stable")
+        splits = np.cumsum(np.bincount(c, minlength=n_ctx))[:-1]
+        topo[marker] = head + np.split(wsym[:nw][by_ctx], splits)
+    return n_univ, topo, bits, pos, Fc, order, L[:nv]
 
 
 def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
@@ -734,9 +762,8 @@ def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def encode(F: np.ndarray) -> bytes:
-    """Traversal code of ``F`` (int64, (m, 3), m >= 1); see the module docstring."""
-    from constriction import stream
-
+    """Traversal code of ``F`` (int64, (m, 3), m >= 1); see the module docstring. The smaller of
+    the adaptive and the static format."""
     F = np.ascontiguousarray(F, dtype=np.int64)
     m = F.shape[0]
     n_univ, topo, bitsA, posA, Fc, order, L = _traverse(F)
@@ -751,25 +778,32 @@ def encode(F: np.ndarray) -> bytes:
     fb = np.zeros(m, dtype=np.int64)
     bitsC = _bitbuf(64 * m + 64)
     st, n_fb, posC = _face_order(True, m, Fc, nptr, nbrs, vptr, vf, inv, fc, fb, bitsC, 0, 0)
-    rot = _rotation_symbols(F[order], L[Fc])
-    streams = [*topo, vb, fc, fb[:n_fb], rot]
-    head = bytearray([MARKER]) + varint(n_univ) + varint(nv)
-    coder = stream.stack.AnsCoder()
-    for s, alpha in zip(streams, ALPHABETS, strict=True):
-        head += varint(s.size)
-        if s.size:
-            counts = np.bincount(s, minlength=alpha)
-            top = int(np.flatnonzero(counts).max()) + 1
-            head += varint(top) + b"".join(varint(int(x)) for x in counts[:top])
-    for s, alpha in reversed(list(zip(streams, ALPHABETS, strict=True))):
-        if s.size:
-            counts = np.bincount(s, minlength=alpha)
-            coder.encode_reverse(s.astype(np.int32), _categorical(counts))
-    for buf, pos in ((bitsA, posA), (bitsB, posB), (bitsC, posC)):
-        raw = buf[: (pos + 7) // 8].tobytes()
-        head += varint(pos) + raw
-    words = coder.get_compressed().astype("<u4").tobytes()
-    return bytes(head) + words
+    rest = [vb, fc, fb[:n_fb], _rotation_symbols(F[order], L[Fc])]
+    raw = b"".join(
+        varint(pos) + bb[: (pos + 7) // 8].tobytes()
+        for bb, pos in ((bitsA, posA), (bitsB, posB), (bitsC, posC))
+    )
+    out = []
+    for marker in MARKERS:
+        n_ctx, alphas = _layout(marker)
+        streams = topo[marker] + rest
+        head = bytearray([marker]) + varint(n_univ) + varint(nv)
+        if marker == MARKER:
+            for s, alpha in zip(streams, alphas, strict=True):
+                head += varint(s.size) + static_tables([s], [alpha])
+            out.append(bytes(head) + raw + static_words(streams, alphas))
+            continue
+        n_topo = 4 + n_ctx
+        for s in streams:
+            head += varint(s.size)
+        head += static_tables(rest, alphas[n_topo:])
+        data = np.concatenate([s.astype(np.int64) for s in topo[marker]])
+        offsets = np.r_[0, np.cumsum([s.size for s in topo[marker]])].astype(np.int64)
+        buf = np.zeros(8 * data.size + 64, dtype=np.uint8)
+        nb = _rangecoder.code_streams(True, data, offsets, np.array(alphas[:n_topo]), buf)
+        head += varint(nb) + buf[:nb].tobytes()
+        out.append(bytes(head) + raw + static_words(rest, alphas[n_topo:]))
+    return min(out, key=len)
 
 
 def _rotation_symbols(Ff: np.ndarray, G: np.ndarray) -> np.ndarray:
@@ -784,86 +818,46 @@ def _rotation_symbols(Ff: np.ndarray, G: np.ndarray) -> np.ndarray:
 
 
 def decode(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
-    """Inverse of :func:`encode`; ``buf`` starts with :data:`MARKER`."""
-    from constriction import stream
-
-    what = "connectivity"
-    r = Reader(buf, what)
-    if r.take(1)[0] != MARKER:
+    """Inverse of :func:`encode`; ``buf`` starts with one of :data:`MARKERS`."""
+    r = Reader(buf, "connectivity")
+    marker = r.take(1)[0]
+    if marker not in MARKERS:
         raise InvalidInputError(".sgc connectivity is malformed (unknown scheme).")
     m = int(n_faces)
     n_univ = r.varint()
     nv = r.varint()
     if not (1 <= n_univ <= n_vertices and 1 <= nv <= n_univ and nv <= 3 * m):
         raise InvalidInputError(".sgc connectivity is malformed (bad vertex counts).")
-    limits = (3 * m + 3,) * N_TOPO + (nv, m, m, m)
-    sizes, tables = [], []
-    for alpha, lim in zip(ALPHABETS, limits, strict=True):
-        size = r.varint()
-        if size > lim:
-            raise InvalidInputError(".sgc connectivity is malformed (stream too long).")
-        sizes.append(size)
-        if size:
-            top = r.varint()
-            if not 1 <= top <= alpha:
-                raise InvalidInputError(".sgc connectivity is malformed (bad symbol table).")
-            counts = np.zeros(alpha, dtype=np.int64)
-            counts[:top] = [r.varint() for _ in range(top)]
-            if counts.sum() != size:
-                raise InvalidInputError(".sgc connectivity is malformed (bad symbol table).")
-            tables.append(counts)
-        else:
-            tables.append(None)
-    if sizes[N_TOPO] != nv or sizes[N_TOPO + 1] != m or sizes[N_TOPO + 3] != m:
-        raise InvalidInputError(".sgc connectivity is malformed (stream lengths).")
-    bits = []
-    for _ in range(3):
-        nb = r.varint()
-        if nb > 64 * (3 * m + 3):
-            raise InvalidInputError(".sgc connectivity is malformed (bit stream too long).")
-        raw = np.frombuffer(r.take((nb + 7) // 8), dtype=np.uint8)
-        bits.append((np.r_[raw, np.zeros(8, np.uint8)], nb))
-    words = r.rest()
-    if len(words) % 4:
-        raise InvalidInputError(".sgc connectivity is malformed (coder words misaligned).")
-    w = np.frombuffer(words, dtype="<u4").astype(np.uint32)
-    streams = []
-    try:
-        coder = stream.stack.AnsCoder(w)
-        for size, counts in zip(sizes, tables, strict=True):
-            if size:
-                streams.append(coder.decode(_categorical(counts), size).astype(np.int64))
-            else:
-                streams.append(np.zeros(0, dtype=np.int64))
-    except (ValueError, RuntimeError, OverflowError) as exc:
-        raise InvalidInputError(f".sgc connectivity is malformed ({exc}).") from None
+    n_ctx, alphas = _layout(marker)
+    n_topo = 4 + n_ctx
+    sizes, streams, bits = read_streams(r, marker == MARKER_ADAPTIVE, n_topo, alphas, m, nv)
     syms = np.zeros((4, max(1, max(sizes[:4]))), dtype=np.int32)
     for k in range(4):
         syms[k, : sizes[k]] = streams[k]
-    wsym = np.concatenate([np.zeros(0, dtype=np.int32), *streams[4:N_TOPO]]).astype(np.int32)
-    woff = np.r_[0, np.cumsum(sizes[4:N_TOPO])].astype(np.int64)
-    lens = np.array(sizes[:N_TOPO], dtype=np.int64)
+    wsym = np.concatenate([np.zeros(0, dtype=np.int32), *streams[4:n_topo]]).astype(np.int32)
+    woff = np.r_[0, np.cumsum(sizes[4:n_topo])].astype(np.int64)
+    lens = np.array(sizes[:n_topo], dtype=np.int64)
     Fc = np.zeros((m, 3), dtype=np.int64)
     dummyF = np.zeros((1, 3), dtype=np.int64)
     z = np.zeros(1, dtype=np.int64)
     (bA, nA), (bB, nB), (bC, nC) = bits
-    w8 = np.zeros(1, dtype=np.int8)
+    w16 = np.zeros(1, dtype=np.int16)
     st, nv2, _ = _topology(
-        False, m, dummyF, z, z, z, n_univ, syms, wsym, w8, woff, lens, bA, nA, Fc, z, z
+        False, m, dummyF, z, z, z, n_univ, syms, wsym, w16, woff, lens, bA, nA, Fc, z, z
     )
     if st != 0 or nv2 != nv:
         raise InvalidInputError(".sgc connectivity is malformed (topology stream).")
     L = np.zeros(nv, dtype=np.int64)
-    st, _ = _ranks(False, nv, L, n_univ, streams[N_TOPO], bB, 0, nB)
+    st, _ = _ranks(False, nv, L, n_univ, streams[n_topo], bB, 0, nB)
     if st != 0:
         raise InvalidInputError(".sgc connectivity is malformed (vertex labels).")
     nptr, nbrs, vptr, vf = _face_neighbours(Fc)
     inv = np.zeros(m, dtype=np.int64)
-    cls, fb = streams[N_TOPO + 1], streams[N_TOPO + 2]
+    cls, fb = streams[n_topo + 1], streams[n_topo + 2]
     st, used, _ = _face_order(False, m, Fc, nptr, nbrs, vptr, vf, inv, cls, fb, bC, 0, nC)
-    if st != 0 or used != sizes[N_TOPO + 2]:
+    if st != 0 or used != sizes[n_topo + 2]:
         raise InvalidInputError(".sgc connectivity is malformed (face order).")
     G = L[Fc]
-    rot = (streams[N_TOPO + 3] + np.argmin(G, axis=1)) % 3
+    rot = (streams[n_topo + 3] + np.argmin(G, axis=1)) % 3
     idx = (rot[:, None] + np.arange(3)[None, :]) % 3
     return np.take_along_axis(G, idx, axis=1)[inv]

@@ -2,7 +2,7 @@
 
 The encoder writes two schemes and keeps the smaller; the first byte tells them apart:
 
-- the traversal code of :mod:`._conn_traverse` (first byte ``0x40``);
+- the traversal code of :mod:`._conn_traverse` (first byte ``0x40`` or ``0x41``);
 - the delta code (first byte 1-8, the index width): each face ``(a, b, c)`` becomes ``a`` minus
   the previous face's first corner, ``b - a`` and ``c - a`` (zigzag), split into byte planes and
   compressed with zstd; it wins on tiny meshes and some files ordered by one sweep.
@@ -60,7 +60,7 @@ def _encode_delta(F: np.ndarray) -> bytes:
 
 
 def decode_faces(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
-    if len(buf) and buf[0] == _conn_traverse.MARKER and n_faces > 0:
+    if len(buf) and buf[0] in _conn_traverse.MARKERS and n_faces > 0:
         F = _conn_traverse.decode(buf, n_vertices, n_faces)
         if F.min() < 0 or F.max() >= n_vertices:  # pragma: no cover - decode checks the range
             raise InvalidInputError(".sgc connectivity is malformed (vertex index out of range).")

@@ -55,6 +55,7 @@ METHOD_IDS = {
     "blocks": 20,
     "layered": 21,
     "pca-spectral": 22,
+    "pca-pred": 23,
 }
 METHOD_NAMES = {v: k for k, v in METHOD_IDS.items()}
 FLAG_REORDERED = 1

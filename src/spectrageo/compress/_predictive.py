@@ -2,7 +2,9 @@
 
 Normalised coordinates are rounded to the grid of step ``q`` (a fraction of the bounding-box
 diagonal), so every coordinate is within ``q / 2`` of the input and every vertex within
-``q sqrt(3) / 2``, a bound on the symmetric vertex-to-surface Hausdorff distance. The integer
+``q sqrt(3) / 2``, a bound on the symmetric vertex-to-surface Hausdorff distance (under
+``max_error`` a vertex may instead take any grid point within the bound, one near its
+prediction). The integer
 coordinates are predicted along a traversal of the connectivity (multi-parallelogram, the
 subset chosen by the encoder) and the residuals coded with an adaptive binary range coder
 (:mod:`._predictive_kernel`); decoding is integer arithmetic and one product by ``q``, so it is
@@ -24,13 +26,16 @@ TAG_RESIDUALS = 6
 _P = struct.Struct("<dd")  # grid step, bound on each coordinate's error
 #: largest integer coordinate a file may hold (the kernel codes residuals below 2**42)
 MAX_GRID = 1 << 40
+#: radii, in grid steps, of the spheres of :meth:`PredictivePlan.for_max_error` (at least
+#: sqrt(3) / 2, so that the rounded vertex is always inside)
+SPHERE_RHO = (0.9, 1.0, 1.2)
 
 
 class PredictivePlan:
     """Encoder state of the predictive codec: quantise at any step ``q``.
 
-    ``radius`` (None: rounding to the nearest grid point) lets each coordinate take any grid
-    value within ``radius`` of the input, the one nearest its prediction (set by
+    ``sphere`` (None: rounding to the nearest grid point) lets each vertex take any grid point
+    within distance ``sphere`` of the input, one near its prediction (set by
     :meth:`for_max_error`).
     """
 
@@ -38,33 +43,34 @@ class PredictivePlan:
         self.X = X
         self.F = np.ascontiguousarray(F, dtype=np.int64)
         self.n = X.shape[0]
-        self.radius: float | None = None
+        self.sphere: float | None = None
         self._cache: tuple = (None, b"", None)
 
-    def _bounds(self, q: float) -> tuple[np.ndarray, np.ndarray]:
-        if self.radius is None:
-            lo = hi = np.rint(self.X / q)
-        else:
-            lo = np.ceil((self.X - self.radius) / q)
-            hi = np.floor((self.X + self.radius) / q)
-        if lo.size and max(np.abs(lo).max(), np.abs(hi).max()) >= MAX_GRID:
+    def _bounds(self, q: float) -> np.ndarray:
+        G = np.rint(self.X / q)
+        reach = (self.sphere or 0.0) / q + 1.0
+        if G.size and np.abs(G).max() + reach >= MAX_GRID:
             raise InvalidInputError("quantisation step too small for this mesh; use a larger one.")
-        return lo.astype(np.int64), hi.astype(np.int64)
+        return G.astype(np.int64)
 
     def _encode(self, q: float) -> tuple[bytes, np.ndarray]:
-        key = (float(q), self.radius)
+        key = (float(q), self.sphere)
         if self._cache[0] != key:
             from . import _predictive_kernel as kernel
 
-            lo, hi = self._bounds(q)
-            G = np.zeros_like(lo)
+            R = self._bounds(q)
+            X = self.X / q if self.sphere else np.zeros((1, 3))
+            rho = self.sphere / q if self.sphere else 0.0
+            G = np.zeros_like(R)
             buf = np.zeros(self.n * 3 * 16 + 64, dtype=np.uint8)
-            nb = kernel.run(True, self.F, self.n, G, buf, lo, hi)
+            nb = kernel.run(True, self.F, self.n, G, buf, R, R, X, rho)
             self._cache = (key, varint(self.n) + buf[:nb].tobytes(), G)
         return self._cache[1], self._cache[2]
 
     def params(self, q: float) -> bytes:
-        return _P.pack(float(q), float(q) / 2 if self.radius is None else self.radius)
+        if self.sphere:
+            return _P.pack(float(q), min(self.sphere / math.sqrt(3.0), float(q)))
+        return _P.pack(float(q), float(q) / 2)
 
     def chunks(self, q: float) -> list[tuple[int, bytes]]:
         return [(TAG_RESIDUALS, self._encode(q)[0])]
@@ -76,24 +82,32 @@ class PredictivePlan:
         return [self]
 
     def for_max_error(self, bound: float) -> float:
-        """Grid step for a vertex error of at most ``bound``: every coordinate within
-        ``bound / sqrt(3)``, on the grid of that step doubled (rounding) or of that step (the
-        value nearest the prediction), whichever codes smaller."""
-        r = float(bound) / math.sqrt(3.0) * (1.0 - 1e-9)
+        """Grid step for a vertex error of at most ``bound``.
+
+        Candidates: rounding to the grid of step ``2 bound / sqrt(3)`` (every coordinate within
+        ``bound / sqrt(3)``), and on grids of step ``bound / rho`` (:data:`SPHERE_RHO`) the grid
+        point within ``bound`` of the vertex near its prediction. Kept: the smallest
+        ``bits + 3 n log2(D)``, ``D`` the candidate's largest vertex displacement (equal slope
+        on the rate-error curve; docs/decisions.md#codec-sphere).
+        """
+        R = float(bound) * (1.0 - 1e-9)
+        cands = [(None, 2.0 * R / math.sqrt(3.0))] + [(R, R / rho) for rho in SPHERE_RHO]
         best = None
-        for radius, q in ((None, 2.0 * r), (r, r)):
+        for sphere, q in cands:
             if not STEP_MIN <= q <= STEP_MAX:
                 continue
-            self.radius = radius
-            size = len(self._encode(q)[0])
-            if best is None or size < best[0]:
-                best = (size, radius, q)
+            self.sphere = sphere
+            data, G = self._encode(q)
+            D = float(np.sqrt(((G * q - self.X) ** 2).sum(axis=1).max())) if self.n else 0.0
+            score = 8 * len(data) + 3 * self.n * math.log2(max(D, 1e-300))
+            if best is None or score < best[0]:
+                best = (score, sphere, q)
         if best is None:
             raise InvalidInputError(
                 f"`max_error` = {bound:g} is below what 'predictive' reaches (its finest step "
                 f"{STEP_MIN:g} bounds the error by {STEP_MIN * math.sqrt(3) / 2:.3g})."
             )
-        self.radius = best[1]
+        self.sphere = best[1]
         return best[2]
 
 
@@ -133,7 +147,7 @@ def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str, *, complet
     G = np.zeros((n, 3), dtype=np.int64)
     F = np.ascontiguousarray(F, dtype=np.int64)
     none = np.zeros((0, 3), dtype=np.int64)
-    if kernel.run(False, F, n, G, buf, none, none) < 0:
+    if kernel.run(False, F, n, G, buf, none, none, np.zeros((1, 3)), 0.0) < 0:
         raise InvalidInputError(".sgc predictive residuals are truncated or malformed.")
     if G.size and np.abs(G).max() >= MAX_GRID:
         raise InvalidInputError(".sgc predictive residuals are malformed (out of range).")

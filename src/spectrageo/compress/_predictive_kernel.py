@@ -9,7 +9,8 @@ decoded neighbours, one neighbour, or the previous vertex. Residuals go through 
 binary range coder (LZMA's: 11-bit probabilities, shift-5 update): a zero flag, a direct sign,
 the bit length in unary and the top mantissa bit adaptive, the other bits direct. Contexts: the
 coordinate, the decoded neighbours' residual bit lengths and whether the previous coordinate's
-residual was zero. All integer arithmetic: decoding is bit-identical on every machine.
+residual was zero. The encoder may choose each vertex's grid point within a sphere around the
+input (:func:`_choose`). Decoding is integer arithmetic: bit-identical on every machine.
 """
 
 from __future__ import annotations
@@ -19,7 +20,10 @@ import heapq
 import numba
 import numpy as np
 
-from ._conn_traverse import _bitlen
+from ._rangecoder import bit as _rbit
+from ._rangecoder import bitlen as _bitlen
+from ._rangecoder import direct as _direct
+from ._rangecoder import finish, start
 
 #: bit lengths of residuals (|e| < 2**KMAX)
 KMAX = 42
@@ -31,8 +35,9 @@ _NCTX = 3 * NB * 3
 MAXP = 4
 _FLAGS = _NCTX * _STRIDE
 _NPROB = _FLAGS + (MAXP + 1) * MAXP * 2
-_TOP = 1 << 24
-_ONE = 1 << 11
+#: probability bits of the residual models
+PB = 11
+_ONE = 1 << PB
 
 
 @numba.njit(cache=True)
@@ -55,104 +60,21 @@ def _vertex_faces(F, n):
 
 
 @numba.njit(cache=True)
-def _shift_low(st, buf):
-    # st: low, range, cache, cache_size, code, pos
-    low = st[0]
-    if low < 0xFF000000 or low >= (1 << 32):
-        carry = low >> 32
-        temp = st[2]
-        while True:
-            p = st[5]
-            if p < buf.size:
-                buf[p] = (temp + carry) & 0xFF
-            st[5] = p + 1
-            temp = 0xFF
-            st[3] -= 1
-            if st[3] == 0:
-                break
-        st[2] = (low >> 24) & 0xFF
-    st[3] += 1
-    st[0] = (low & 0x00FFFFFF) << 8
-
-
-@numba.njit(cache=True)
-def _next_byte(st, buf):
-    p = st[5]
-    st[5] = p + 1
-    return np.int64(buf[p]) if p < buf.size else np.int64(0)
-
-
-@numba.njit(cache=True)
-def _bit(enc, st, buf, probs, i, bit):
-    p = probs[i]
-    bound = (st[1] >> 11) * p
-    if enc:
-        if bit == 0:
-            st[1] = bound
-            probs[i] = p + ((_ONE - p) >> 5)
-        else:
-            st[0] += bound
-            st[1] -= bound
-            probs[i] = p - (p >> 5)
-        while st[1] < _TOP:
-            st[1] <<= 8
-            _shift_low(st, buf)
-        return bit
-    if st[4] < bound:
-        st[1] = bound
-        probs[i] = p + ((_ONE - p) >> 5)
-        bit = 0
-    else:
-        st[4] -= bound
-        st[1] -= bound
-        probs[i] = p - (p >> 5)
-        bit = 1
-    _dec_normalise(st, buf)
-    return bit
-
-
-@numba.njit(cache=True, inline="always")
-def _dec_normalise(st, buf):
-    """Decoder: shift in bytes until the range is back above ``_TOP``."""
-    while st[1] < _TOP:
-        st[1] <<= 8
-        st[4] = ((st[4] << 8) | _next_byte(st, buf)) & 0xFFFFFFFF
-
-
-@numba.njit(cache=True)
-def _direct(enc, st, buf, bit):
-    st[1] >>= 1
-    if enc:
-        if bit:
-            st[0] += st[1]
-        while st[1] < _TOP:
-            st[1] <<= 8
-            _shift_low(st, buf)
-        return bit
-    bit = 0
-    if st[4] >= st[1]:
-        st[4] -= st[1]
-        bit = 1
-    _dec_normalise(st, buf)
-    return bit
-
-
-@numba.njit(cache=True)
 def _code_int(enc, st, buf, probs, base, value):
     """Code one residual (encoder: ``value``; decoder: returns it)."""
-    if _bit(enc, st, buf, probs, base, 1 if value == 0 else 0) == 1:
+    if _rbit(enc, st, buf, probs, base, 1 if value == 0 else 0, PB) == 1:
         return np.int64(0)
     neg = _direct(enc, st, buf, 1 if value < 0 else 0)
     a = -value if value < 0 else value
     n_bits = _bitlen(a) if enc else 0
     k = 1
-    while k < KMAX and _bit(enc, st, buf, probs, base + k, 1 if k < n_bits else 0) == 1:
+    while k < KMAX and _rbit(enc, st, buf, probs, base + k, 1 if k < n_bits else 0, PB) == 1:
         k += 1
     m = np.int64(1)
     for j in range(k - 2, -1, -1):
         b = (a >> j) & 1 if enc else 0
         if j == k - 2:
-            b = _bit(enc, st, buf, probs, base + KMAX + k, b)
+            b = _rbit(enc, st, buf, probs, base + KMAX + k, b, PB)
         else:
             b = _direct(enc, st, buf, b)
         m = (m << 1) | b
@@ -222,16 +144,49 @@ def _clamp(x, lo, hi):
 
 
 @numba.njit(cache=True)
-def _cost(L, H, v, p):
+def _choose(L, H, X, rho, v, p, e):
+    """Encoder: residuals ``e`` (3,) of vertex ``v`` from prediction ``p``; returns their cost
+    estimate. ``rho > 0``: the grid point within distance ``rho`` of ``X[v]`` (grid units) near
+    the prediction; else each coordinate the integer of ``[L, H]`` nearest it."""
+    if rho > 0:
+        n2 = 0.0
+        for d in range(3):
+            n2 += (p[d] - X[v, d]) ** 2
+        if n2 <= rho * rho:
+            e[:] = 0
+            return 0
+        t = rho / np.sqrt(n2)
+        best = -1
+        for mask in range(8):
+            r2 = 0.0
+            c = 0
+            for d in range(3):
+                y = X[v, d] + (p[d] - X[v, d]) * t
+                g = np.int64(np.floor(y)) + ((mask >> d) & 1)
+                r2 += (g - X[v, d]) ** 2
+                a = g - p[d]
+                c += _bitlen(-a if a < 0 else a) * 2 + (1 if a != 0 else 0)
+            if r2 <= rho * rho and (best < 0 or c < best):
+                best = c
+                for d in range(3):
+                    y = X[v, d] + (p[d] - X[v, d]) * t
+                    e[d] = np.int64(np.floor(y)) + ((mask >> d) & 1) - p[d]
+        if best >= 0:
+            return best
+        c = 0
+        for d in range(3):
+            e[d] = np.int64(np.floor(X[v, d] + 0.5)) - p[d]
+            c += _bitlen(-e[d] if e[d] < 0 else e[d]) * 2 + (1 if e[d] != 0 else 0)
+        return c
     c = 0
     for d in range(3):
-        e = _clamp(p[d], L[v, d], H[v, d]) - p[d]
-        c += _bitlen(-e if e < 0 else e) * 2 + (1 if e != 0 else 0)
+        e[d] = _clamp(p[d], L[v, d], H[v, d]) - p[d]
+        c += _bitlen(-e[d] if e[d] < 0 else e[d]) * 2 + (1 if e[d] != 0 else 0)
     return c
 
 
 @numba.njit(cache=True)
-def _predict(enc, st, buf, probs, F, ptr, vf, G, L, H, vis, v, f, prev, p, P):
+def _predict(enc, st, buf, probs, F, ptr, vf, G, T, vis, v, f, prev, p, P, e):
     """Prediction of vertex ``v`` (met in face ``f``) into ``p``; returns its class 0-2. With
     parallelograms, the subset averaged is chosen by the encoder and sent as one flag each."""
     k = _parallelograms(F, ptr, vf, G, vis, v, P)
@@ -239,10 +194,10 @@ def _predict(enc, st, buf, probs, F, ptr, vf, G, L, H, vis, v, f, prev, p, P):
         best = (1 << k) - 1
         if enc and k > 1:
             _mean_of(P, best, k, p)
-            bc = _cost(L, H, v, p)
+            bc = _choose(T[0], T[1], T[2], T[3], v, p, e)
             for mask in range(1, (1 << k) - 1):
                 _mean_of(P, mask, k, p)
-                c = _cost(L, H, v, p) + 1
+                c = _choose(T[0], T[1], T[2], T[3], v, p, e) + 1
                 if c < bc:
                     bc = c
                     best = mask
@@ -254,7 +209,7 @@ def _predict(enc, st, buf, probs, F, ptr, vf, G, L, H, vis, v, f, prev, p, P):
                 if j == k - 1 and used == 0:
                     mask |= 1 << j
                     break
-                b = _bit(enc, st, buf, probs, base + j * 2 + min(used, 1), (best >> j) & 1)
+                b = _rbit(enc, st, buf, probs, base + j * 2 + min(used, 1), (best >> j) & 1, PB)
                 mask |= b << j
                 used += b
             best = mask
@@ -293,8 +248,10 @@ def _predict(enc, st, buf, probs, F, ptr, vf, G, L, H, vis, v, f, prev, p, P):
 
 
 @numba.njit(cache=True)
-def _visit(enc, st, buf, probs, F, ptr, vf, G, L, H, vis, ek, v, f, prev, p, P):
-    cls = _predict(enc, st, buf, probs, F, ptr, vf, G, L, H, vis, v, f, prev, p, P)
+def _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, f, prev, p, P, e3):
+    cls = _predict(enc, st, buf, probs, F, ptr, vf, G, T, vis, v, f, prev, p, P, e3)
+    if enc:
+        _choose(T[0], T[1], T[2], T[3], v, p, e3)
     t = 0
     cnt = 0
     for u in range(ptr[v], ptr[v + 1]):
@@ -309,7 +266,7 @@ def _visit(enc, st, buf, probs, F, ptr, vf, G, L, H, vis, ek, v, f, prev, p, P):
     prev_zero = 1
     for d in range(3):
         ctx = (d * NB + bucket) * 3 + (0 if d == 0 else 1 + prev_zero)
-        e = _clamp(p[d], L[v, d], H[v, d]) - p[d] if enc else np.int64(0)
+        e = e3[d] if enc else np.int64(0)
         e = _code_int(enc, st, buf, probs, ctx * _STRIDE, e)
         G[v, d] = p[d] + e
         a = _bitlen(-e if e < 0 else e)
@@ -320,19 +277,18 @@ def _visit(enc, st, buf, probs, F, ptr, vf, G, L, H, vis, ek, v, f, prev, p, P):
 
 
 @numba.njit(cache=True)
-def run(enc, F, n, G, buf, L, H):
+def run(enc, F, n, G, buf, L, H, X, rho):
     """Encode into ``buf`` (returns the byte count) or decode ``buf`` into ``G`` (n, 3) int64
     (returns the bytes read, or -1 when the data ran out). The encoder sends for each coordinate
-    the integer in ``[L, H]`` closest to its prediction and writes it to ``G``."""
+    the integer in ``[L, H]`` closest to its prediction (``rho > 0``: the grid point within ``rho``
+    of ``X``, grid units, near it) and writes it to ``G``."""
+    T = (L, H, X, rho)
+    e3 = np.zeros(3, np.int64)
     m = F.shape[0]
     ptr, vf = _vertex_faces(F, n)
     probs = np.full(_NPROB, _ONE >> 1, np.int64)
     st = np.zeros(6, np.int64)
-    st[1] = 0xFFFFFFFF
-    st[3] = 1
-    if not enc:
-        for _ in range(5):
-            st[4] = ((st[4] << 8) | _next_byte(st, buf)) & 0xFFFFFFFF
+    start(enc, st, buf)
     vis = np.zeros(n, np.bool_)
     gates = np.zeros(n, np.int64)
     seen = np.zeros(n, np.bool_)
@@ -353,7 +309,7 @@ def run(enc, F, n, G, buf, L, H):
             neg, _sq, v = heapq.heappop(heap)
             if vis[v] or -neg != gates[v]:
                 continue
-            _visit(enc, st, buf, probs, F, ptr, vf, G, L, H, vis, ek, v, -1, prev, p, P)
+            _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, -1, prev, p, P, e3)
             prev = v
             # most decoded neighbourhood first: a vertex gains a gate with each face whose two
             # other corners are decoded
@@ -374,7 +330,5 @@ def run(enc, F, n, G, buf, L, H):
             if not enc and st[5] > buf.size + 8:
                 return -1
     if enc:
-        for _ in range(5):
-            _shift_low(st, buf)
-        return st[5]
+        return finish(st, buf)
     return st[5] if st[5] <= buf.size + 4 else -1

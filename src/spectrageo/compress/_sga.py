@@ -29,7 +29,7 @@ from ._animation import (
 )
 from ._layered import LayeredEncoder, LayeredState
 from ._rate import bisect_step
-from ._rate_animation import QUANTISED, rate_search
+from ._rate_animation import QUANTISED, pred_rate_search, rate_search
 from ._sga_format import (
     KIND_INDEX,
     Params,
@@ -54,7 +54,21 @@ def encode_animation(
             raise InvalidInputError("give at most one of `bpvf` and `error`.")
         return _layered.encode(frames, F, step=step, bpvf=bpvf, error=error, **options)
     A, F = check_encode_args(frames, F, method, step, bpvf, error)
+    reorder = options.pop("reorder", False)
+    if not isinstance(reorder, bool | np.bool_) or (reorder and method != "pca-pred"):
+        raise InvalidInputError(
+            f"`reorder` must be True or False and needs method 'pca-pred'; got {reorder!r}."
+        )
+    if reorder:
+        from ._connectivity import reorder_coded
+
+        _V, F, perm, _code = reorder_coded(A[0], F)
+        A = A[:, perm]
     enc = make_encoder(A, F, method, options)
+    if reorder:
+        enc.reordered = True
+    if method == "pca-pred":
+        return pred_rate_search(enc, A, step, bpvf, error)[1]
     if method in QUANTISED and (bpvf is not None or error is not None):
         return rate_search(enc, A, bpvf, error)[1]
     return encode_at_rate(enc.build, A, method, step, bpvf, error)
@@ -161,7 +175,8 @@ def _info_animation(data: bytes) -> dict:
         return _layered.info(data, st, segs)
     n_blocks = 0
     frames = 0
-    conn = len(_container.parse(data[: segment_end(data, 0)], fmt=".sga").chunks[0][1])
+    head = _container.parse(data[: segment_end(data, 0)], fmt=".sga")
+    conn = len(head.chunks[0][1])
     has_index = False
     for _p, _e, c in segs:
         if c.params[:1] == bytes([KIND_INDEX]):
@@ -178,7 +193,7 @@ def _info_animation(data: bytes) -> dict:
         "anchor_ratio": p.anchor_ratio,
         "basis": "oi" if p.basis else "exact",
     }
-    return info_dict(data, st, frames, conn, n_blocks, has_index, parameters)
+    return info_dict(data, st, frames, conn, n_blocks, has_index, parameters, head.reordered)
 
 
 class StreamEncoder:

@@ -23,7 +23,7 @@ from . import _connectivity, _container
 from ._container import varint
 from ._entropy import zstd_compress
 
-METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral")
+METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "pca-pred")
 #: with the scalable layered codec of Section 5.2.4 (:mod:`._layered`)
 ALL_METHODS = (*METHODS, "layered")
 #: method ids in the container's method byte; the animation ids start at 16, clear of the static
@@ -123,11 +123,12 @@ def segment_end(data: bytes, pos: int) -> int | None:
     return p
 
 
-def _segment(method, n, m, origin, scale, params: bytes, chunks) -> bytes:
-    return _container.Container(method, n, m, origin, scale, params, False, chunks).to_bytes()
+def _segment(method, n, m, origin, scale, params: bytes, chunks, reordered=False) -> bytes:
+    c = _container.Container(method, n, m, origin, scale, params, reordered, chunks)
+    return c.to_bytes()
 
 
-def header_segment(method, n, m, origin, scale, p: Params, F, anchors) -> bytes:
+def header_segment(method, n, m, origin, scale, p: Params, F, anchors, reordered=False) -> bytes:
     conn = _connectivity.encode_faces(F)
     a = np.diff(np.r_[-1, anchors]) - 1
     idx = varint(anchors.size) + zstd_compress(a.astype("<u4").tobytes())
@@ -139,6 +140,7 @@ def header_segment(method, n, m, origin, scale, p: Params, F, anchors) -> bytes:
         scale,
         p.to_bytes(),
         [(TAG_CONNECTIVITY, conn), (TAG_ANCHOR_INDEX, idx)],
+        reordered,
     )
 
 
@@ -193,7 +195,7 @@ def is_animation(data) -> bool:
     return len(b) == 6 and b[:4] == _container.MAGIC and b[5] in METHOD_IDS.values()
 
 
-def info_dict(data, st, frames, conn, n_blocks, has_index, parameters) -> dict:
+def info_dict(data, st, frames, conn, n_blocks, has_index, parameters, reordered=False) -> dict:
     nvf = max(1, st.n * max(frames, 1))
     return {
         "format": "sga",
@@ -207,6 +209,6 @@ def info_dict(data, st, frames, conn, n_blocks, has_index, parameters) -> dict:
         "connectivity_bpvf": 8.0 * conn / nvf,
         "n_blocks": n_blocks,
         "frame_index": has_index,
-        "order_preserved": True,
+        "order_preserved": not reordered,
         "parameters": parameters,
     }

@@ -24,6 +24,7 @@ import numpy as np
 from .._errors import InvalidInputError
 from .._progress import progress
 from ..datasets.splits import COMPRESS_LARGE
+from ..datasets.splits import cases as _cases
 from ..datasets.splits import files as _files
 from ._tables import (
     check_names,
@@ -172,7 +173,7 @@ def _quant_zstd(V, F, bits: int):
 
 
 def _is_cad(path: str) -> bool:
-    return path.startswith("cad/") or path in TUNING_SPLIT
+    return path.startswith("cad/") or any(c.file == path for c in _cases("compress", group="cad"))
 
 
 def evaluate(

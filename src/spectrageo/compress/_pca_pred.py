@@ -1,0 +1,586 @@
+"""``pca-pred``: trajectory PCA with the coefficients predicted along the mesh.
+
+Not a method of the thesis (Coddyac-like, after Vasa and Skala): the normalised trajectories of
+a block of ``T`` frames, one row ``y_v`` (3T,) per vertex (x, then y, then z over time), are
+
+    y_v ~ m~ + sum_j c~_vj b~_j,    c~_vj = s q_vj,
+
+``m~`` the quantised mean trajectory, ``b~_j`` the quantised eigen-trajectories of the vertex
+covariance (principal components, by decreasing variance), ``q_vj`` integers. The coefficients
+are least-squares projections on the dequantised basis, rounded on one grid of step ``s``; a
+component is kept while its error removed pays for its bits (``lambda = ln2/6 s^2``, as in
+``pca-q``). The integers are coded losslessly vertex by vertex in a breadth-first order:
+
+1. base prediction ``p_vj``: the floor-mean of the parallelograms ``q_a + q_b - q_c`` of the
+   vertex's decoded faces, or of its decoded 1-ring (one flag per component, the encoder's
+   choice), else 0;
+2. the base residual ``r_vj = q_vj - p_vj`` is predicted from the vertex's own decoded
+   ``r_v0 .. r_v(j-1)`` (the first :data:`PREG`) by a ridge regression fitted on the decoded
+   two rings (locally the residual trajectories of a rigidly moving patch span three
+   dimensions, so few components predict the rest), used for a component while its running
+   cost is the lower one (both ends keep it);
+3. the remainder goes through the adaptive binary range coder of :mod:`._rangecoder`, in
+   contexts of the component, the decoded 1-ring's residual bit lengths and the vertex's two
+   previous ones.
+
+The encoder may round a coefficient to its other nearest integer when that saves more than
+:data:`RDO_LAMBDA` squared steps per bit. The decoder's floating-point steps (the regression,
+one product :func:`._dense_fixed.matmul`) are numba loops in a written order without BLAS or
+``fastmath``: the same bits on every machine. See docs/decisions.md#anim-pca-pred.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .._errors import InvalidInputError
+from ._container import Reader, varint
+from ._entropy import decode_groups, encode_groups
+from ._predictive_kernel import (
+    _ONE,
+    _STRIDE,
+    _code_int,
+    _mean_of,
+    _parallelograms,
+    _vertex_faces,
+)
+from ._rangecoder import bitlen as _bitlen
+from ._rangecoder import finish, start
+
+TAG_BASIS = 3
+TAG_COEFF = 4
+#: step of the mean trajectory relative to the coefficient step
+MEAN_RATIO = 0.25
+#: step of basis column ``j``: ``BASIS_RATIO * s sqrt(n / 3T) / ||c_j||``
+BASIS_RATIO = 0.5
+#: most parallelograms averaged per vertex
+MAXP = 4
+#: most decoded neighbours averaged per vertex
+MAXN = 8
+#: most decoded vertices of the two rings in a vertex's local regression
+MAXR = 24
+#: previous components regressed on (their base residuals) in the local regression
+PREG = 12
+#: ridge of the local regression (squared integer residuals)
+RIDGE = 20.0
+#: fewest ring vertices for a local regression
+MINR = 8
+#: rate-distortion weight of the encoder's choice between the two nearest integers
+#: (squared steps per estimated bit)
+RDO_LAMBDA = 0.15
+#: component contexts: one each below ``_JDIRECT``, then by bit length
+_JDIRECT = 24
+_JB = _JDIRECT + 8
+#: neighbour-magnitude buckets
+_NB = 6
+#: buckets of the bit lengths of the vertex's two previous components
+_NP = 5
+_NCTX = _JB * _NB * _NP
+
+
+# ----------------------------------------------------------------------------- traversal
+def make_plan(F: np.ndarray, n: int) -> tuple:
+    """``(F, order, ptr, vf, rings, n1)``: the breadth-first vertex order (scipy's, over the edge
+    graph with a virtual root joined to the smallest vertex of every connected component: all
+    integer, the same everywhere), the vertex-face incidence, up to ``MAXR`` vertices of the two
+    rings decoded before each vertex (n, MAXR; -1 where there are fewer), the decoded 1-ring
+    first, and the 1-ring's count (n,)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    E = np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]
+    G = sp.csr_matrix((np.ones(len(E), np.int8), (E[:, 0], E[:, 1])), shape=(n + 1, n + 1))
+    _k, lab = connected_components(G[:n, :n], directed=False)
+    _u, first = np.unique(lab, return_index=True)
+    R = sp.csr_matrix((np.ones(first.size, np.int8), (np.full(first.size, n), first)), G.shape)
+    G = ((G + G.T + R + R.T) > 0).astype(np.int8).tocsr()
+    G.sort_indices()
+    order = breadth_first_order(G, n, directed=False, return_predecessors=False)[1:]
+    order = np.ascontiguousarray(order, dtype=np.int64)
+    ptr, vf = _vertex_faces(F, n)
+    rings, n1 = _rings(ptr, vf, F, order)
+    return F, order, ptr, vf, rings, n1
+
+
+@numba.njit(cache=True)
+def _rings(ptr, vf, F, order):
+    """Up to ``MAXR`` vertices of the two rings of every vertex decoded before it, the 1-ring
+    first (n, MAXR), and how many of them are in the 1-ring (n,)."""
+    n = order.size
+    pos = np.empty(n, np.int64)
+    for i in range(n):
+        pos[order[i]] = i
+    Rg = np.full((n, MAXR), -1, np.int64)
+    n1 = np.zeros(n, np.int64)
+    stamp = np.full(n, -1, np.int64)
+    for v in range(n):
+        m = 0
+        stamp[v] = v
+        for ring in range(
+            2
+        ):  # the decoded 1-ring first, then the 2-ring through every 1-ring vertex
+            for t in range(ptr[v], ptr[v + 1]):
+                for j in range(3):
+                    u = F[vf[t], j]
+                    if ring == 0:
+                        if stamp[u] != v and pos[u] < pos[v] and m < MAXR:
+                            stamp[u] = v
+                            Rg[v, m] = u
+                            m += 1
+                        continue
+                    for t2 in range(ptr[u], ptr[u + 1]):
+                        for j2 in range(3):
+                            w = F[vf[t2], j2]
+                            if stamp[w] != v and pos[w] < pos[v] and m < MAXR:
+                                stamp[w] = v
+                                Rg[v, m] = w
+                                m += 1
+            if ring == 0:
+                n1[v] = m
+    return Rg, n1
+
+
+@numba.njit(cache=True)
+def _jctx(j):
+    return j if j < _JDIRECT else _JDIRECT + min(_bitlen(j - _JDIRECT), _JB - _JDIRECT - 1)
+
+
+@numba.njit(cache=True)
+def _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, out):
+    """Predictions ``out`` (k,) of the vertex ``v`` from the decoded ``Q`` (n, 3 ceil(k / 3)):
+    the floor-mean of the parallelograms (:func:`._predictive_kernel._parallelograms`, three
+    components at a time) where its flag is 0, else (or without one) the floor-mean of the
+    decoded 1-ring's ``nn`` vertices, else 0; returns the parallelogram count."""
+    k = out.size
+    cnt = _parallelograms(F, ptr, vf, Q[:, 0:3], vis, v, P)
+    for b in range(0, k, 3):
+        if cnt > 0:
+            if b > 0:
+                _parallelograms(F, ptr, vf, Q[:, b : b + 3], vis, v, P)
+            _mean_of(P, (1 << cnt) - 1, cnt, p3)
+        for j in range(b, min(b + 3, k)):
+            if cnt > 0 and flags[j] == 0:
+                out[j] = p3[j - b]
+            elif nn > 0:
+                s = np.int64(0)
+                for i in range(nn):
+                    s += Q[Rg[v, i], j]
+                out[j] = s // nn
+            else:
+                out[j] = 0
+    return cnt
+
+
+def _padded(Q: np.ndarray) -> np.ndarray:
+    """``Q`` (n, k) in an (n, 3 ceil(k / 3)) int64 array, zero columns after."""
+    n, k = Q.shape
+    out = np.zeros((n, 3 * (-(-k // 3))), np.int64)
+    out[:, :k] = Q
+    return out
+
+
+@numba.njit(cache=True)
+def choose_flags(order, ptr, vf, F, Rg, n1, Q, k):
+    """Per component, 1 where the decoded 1-ring's mean predicts ``Q`` (n, 3 ceil(k / 3)) with
+    fewer residual bits (``2 bitlen + 1``) than the parallelograms."""
+    n = Q.shape[0]
+    cost = np.zeros((2, k), np.int64)
+    vis = np.zeros(n, np.bool_)
+    P = np.zeros((MAXP, 3), np.int64)
+    p3 = np.zeros(3, np.int64)
+    out = np.zeros(k, np.int64)
+    par = np.zeros(k, np.int64)
+    for v in order:
+        nn = min(n1[v], MAXN)
+        if _base(F, ptr, vf, vis, Rg, nn, v, Q, par, P, p3, out) > 0:
+            for j in range(k):
+                s = np.int64(0)
+                for i in range(nn):
+                    s += Q[Rg[v, i], j]
+                e = Q[v, j] - out[j]
+                cost[0, j] += 2 * _bitlen(-e if e < 0 else e) + 1
+                e = Q[v, j] - s // nn
+                cost[1, j] += 2 * _bitlen(-e if e < 0 else e) + 1
+        vis[v] = True
+    return (cost[1] < cost[0]).astype(np.int64)
+
+
+@numba.njit(cache=True)
+def _local_factor(Rg, Rb, v, qm, X, L):
+    """Rows ``X`` (m, qm) of the ring's base residuals in the first ``qm`` components and the
+    Cholesky factor ``L`` of ``X^T X + RIDGE I`` (sums in index order); returns ``m``."""
+    m = 0
+    while m < MAXR and Rg[v, m] >= 0:
+        u = Rg[v, m]
+        for i in range(qm):
+            X[m, i] = float(Rb[u, i])
+        m += 1
+    if m < MINR:
+        return m
+    for i in range(qm):
+        for j in range(i + 1):
+            a = RIDGE if i == j else 0.0
+            for r in range(m):
+                a += X[r, i] * X[r, j]
+            for t in range(j):
+                a -= L[i, t] * L[j, t]
+            L[i, j] = math.sqrt(a) if i == j else a / L[j, j]
+    return m
+
+
+@numba.njit(cache=True)
+def _local_predict(Rg, Rb, v, j, q, m, X, L, w, y):
+    """Ridge regression of the ring's base residual of component ``j`` on its first ``q``
+    components, applied to the vertex's own (decoded) first ``q``: the nearest integer."""
+    for r in range(m):
+        y[r] = float(Rb[Rg[v, r], j])
+    for i in range(q):
+        a = 0.0
+        for r in range(m):
+            a += X[r, i] * y[r]
+        for t in range(i):
+            a -= L[i, t] * w[t]
+        w[i] = a / L[i, i]
+    for i in range(q - 1, -1, -1):
+        a = w[i]
+        for t in range(i + 1, q):
+            a -= L[t, i] * w[t]
+        w[i] = a / L[i, i]
+    x = 0.0
+    for i in range(q):
+        x += w[i] * float(Rb[v, i])
+    return np.int64(math.floor(x + 0.5))
+
+
+@numba.njit(cache=True)
+def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
+    """Encode ``Q`` (n, k) int64 (in an (n, 3 ceil(k / 3)) array) into ``buf`` (returns the byte count, which may exceed the
+    buffer) or decode ``buf`` into ``Q`` (returns the bytes read, -1 when the data ran out).
+
+    The base residual ``Q - p`` (``p``: :func:`_base`) of a component is further predicted
+    by :func:`_local_regression` where it has been cheaper so far for that component (a running
+    cost both ends keep). With ``lam > 0`` the encoder first re-quantises every ``X`` (n, k, in
+    steps) to the one of its two nearest integers minimising ``(X - q)^2 + lam (2 bitlen|e| + 1)``,
+    ``e`` the coded residual, and writes it to ``Q``."""
+    n = Q.shape[0]
+    k = flags.size
+    probs = np.full(_NCTX * _STRIDE, _ONE >> 1, np.int64)
+    st = np.zeros(6, np.int64)
+    start(enc, st, buf)
+    ek = np.zeros((n, k), np.int64)
+    Rb = np.zeros((n, k), np.int64)
+    acc = np.zeros((2, k), np.int64)
+    rdo = enc and lam > 0
+    qm = min(PREG, k)
+    Xr = np.zeros((MAXR, max(qm, 1)))
+    L = np.zeros((max(qm, 1), max(qm, 1)))
+    w = np.zeros(max(qm, 1))
+    yr = np.zeros(MAXR)
+    vis = np.zeros(n, np.bool_)
+    P = np.zeros((MAXP, 3), np.int64)
+    p3 = np.zeros(3, np.int64)
+    base = np.zeros(k, np.int64)
+    for v in order:
+        nn = min(n1[v], MAXN)
+        _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, base)
+        m = _local_factor(Rg, Rb, v, qm, Xr, L)
+        pz = 0
+        for j in range(k):
+            p = base[j]
+            pr = np.int64(0)
+            reg = j > 0 and m >= MINR
+            if reg:
+                pr = _local_predict(Rg, Rb, v, j, min(j, qm), m, Xr, L, w, yr)
+            use = reg and acc[1, j] < acc[0, j]
+            pt = p + pr if use else p
+            mag = 0
+            for i in range(nn):
+                mag += ek[Rg[v, i], j]
+            bucket = 0 if nn == 0 else min(1 + (mag + nn // 2) // nn, _NB - 1)
+            ctx = (_jctx(j) * _NB + bucket) * _NP + pz
+            if rdo:
+                x = X[v, j]
+                q0 = np.int64(np.floor(x))
+                e0 = q0 - pt
+                e1 = e0 + 1
+                c0 = (x - q0) ** 2 + lam * (2 * _bitlen(-e0 if e0 < 0 else e0) + 1)
+                c1 = (q0 + 1 - x) ** 2 + lam * (2 * _bitlen(-e1 if e1 < 0 else e1) + 1)
+                Q[v, j] = q0 if c0 <= c1 else q0 + 1
+            e = Q[v, j] - pt if enc else np.int64(0)
+            e = _code_int(enc, st, buf, probs, ctx * _STRIDE, e)
+            Q[v, j] = pt + e
+            rb = Q[v, j] - p
+            Rb[v, j] = rb
+            if reg:
+                e2 = rb - pr
+                acc[0, j] += 2 * _bitlen(-rb if rb < 0 else rb) + 1 - (acc[0, j] >> 6)
+                acc[1, j] += 2 * _bitlen(-e2 if e2 < 0 else e2) + 1 - (acc[1, j] >> 6)
+            b = _bitlen(-e if e < 0 else e)
+            ek[v, j] = b
+            b2 = b + (ek[v, j - 1] if j > 0 else b)
+            pz = min((b2 + 1) // 2, _NP - 1)
+        vis[v] = True
+        if not enc and st[5] > buf.size + 8:
+            return -1
+    if enc:
+        return finish(st, buf)
+    return st[5] if st[5] <= buf.size + 4 else -1
+
+
+def encode_coefficients(X: np.ndarray, pl, lam: float) -> tuple[bytes, np.ndarray]:
+    """``(chunk, Q)``: the coefficients ``X`` (n, k, in steps) quantised to integers ``Q`` (the
+    nearest, or the cheaper neighbour with ``lam > 0``: :func:`code`) and range coded in the
+    order of ``pl`` (:func:`make_plan`), after one predictor flag per component (packed bits)."""
+    F, order, ptr, vf, Rg, n1 = pl
+    k = X.shape[1]
+    Xp = _padded(np.zeros(X.shape, np.int64)).astype(np.float64)
+    Xp[:, :k] = X
+    Q0 = np.rint(Xp).astype(np.int64)
+    flags = choose_flags(order, ptr, vf, F, Rg, n1, Q0, k)
+    head = np.packbits(flags.astype(np.uint8)).tobytes()
+    size = 64 + Q0.size // 2
+    while True:
+        buf = np.zeros(size, np.uint8)
+        Q = Q0.copy()
+        used = code(True, F, order, ptr, vf, Rg, n1, flags, Q, Xp, float(lam), buf)
+        if used <= size:
+            return head + buf[:used].tobytes(), Q[:, :k]
+        size = int(used) + 16
+
+
+def decode_coefficients(data: bytes, pl, n: int, k: int) -> np.ndarray:
+    """Inverse of :func:`encode_coefficients`: ``Q`` (n, k) int64."""
+    F, order, ptr, vf, Rg, n1 = pl
+    Q = _padded(np.zeros((n, k), np.int64))
+    if k == 0:
+        return Q[:, :0]
+    nb = (k + 7) // 8
+    if len(data) < nb:
+        raise InvalidInputError(".sga coefficients are malformed (truncated).")
+    flags = np.unpackbits(np.frombuffer(data[:nb], np.uint8))[:k].astype(np.int64)
+    buf = np.frombuffer(data[nb:], np.uint8).copy()
+    if code(False, F, order, ptr, vf, Rg, n1, flags, Q, np.zeros((1, 1)), 0.0, buf) < 0:
+        raise InvalidInputError(".sga coefficients are malformed (truncated).")
+    return np.ascontiguousarray(Q[:, :k])
+
+
+# ----------------------------------------------------------------------------- basis
+def _diff_groups(qs: list[np.ndarray], T: int) -> tuple[np.ndarray, np.ndarray]:
+    """Temporal differences of (3T,) integer trajectories, restarted per coordinate; one group
+    per trajectory (first values apart)."""
+    if not qs:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    Z = np.stack(qs).reshape(len(qs), 3, T)
+    D = np.diff(Z, axis=2, prepend=0).reshape(len(qs), 3 * T)
+    G = np.repeat(np.arange(len(qs))[:, None], 3 * T, axis=1)
+    G[:, ::T] = len(qs)  # first value of each coordinate: its own group
+    return D.ravel(), G.ravel()
+
+
+def _undiff(D: np.ndarray, k: int, T: int) -> np.ndarray:
+    return np.cumsum(D.reshape(k, 3, T), axis=2).reshape(k, 3 * T)
+
+
+def basis_chunk(qm, sm, qB, sb, T: int) -> bytes:
+    """Mean trajectory (step ``sm``) and basis columns (``qB`` (3T, k), steps ``sb``)."""
+    k = qB.shape[1]
+    D, G = _diff_groups([qm] + [qB[:, j] for j in range(k)], T)
+    head = varint(k) + np.float32(sm).tobytes() + sb.astype("<f4").tobytes()
+    return head + encode_groups(D, G, k + 2)
+
+
+def read_basis(buf: bytes, T: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(mean (3T,), basis (3T, k))`` dequantised from a basis chunk."""
+    r = Reader(buf, "trajectory basis")
+    k = r.varint()
+    if k > 3 * T:
+        raise InvalidInputError(".sga trajectory basis is malformed (too many components).")
+    sm = float(np.frombuffer(r.take(4), "<f4")[0])
+    sb = np.frombuffer(r.take(4 * k), "<f4").astype(np.float64)
+    if not (math.isfinite(sm) and sm > 0 and np.isfinite(sb).all() and (sb > 0).all()):
+        raise InvalidInputError(".sga trajectory basis is malformed (bad steps).")
+    G = np.repeat(np.arange(k + 1)[:, None], 3 * T, axis=1)
+    G[:, ::T] = k + 1
+    Z = _undiff(decode_groups(r.rest(), G.ravel(), k + 2, "trajectory basis"), k + 1, T)
+    return Z[0] * sm, (Z[1:] * sb[:, None]).T
+
+
+# ----------------------------------------------------------------------------- encoder
+class PcaPredEncoder:
+    """Analysis of one block ``X`` (T, n, 3) (normalised frames) shared by every step."""
+
+    def __init__(self, X: np.ndarray, F: np.ndarray) -> None:
+        T, n = X.shape[:2]
+        self.T, self.n = T, n
+        Y = np.ascontiguousarray(X.transpose(1, 2, 0).reshape(n, 3 * T))
+        self.mu = Y.mean(axis=0)
+        self.Yc = Y - self.mu
+        if 3 * T <= n:
+            w, V = np.linalg.eigh(self.Yc.T @ self.Yc)
+            V = V[:, ::-1]
+        else:  # the vertex Gram matrix is the smaller one
+            w, U = np.linalg.eigh(self.Yc @ self.Yc.T)
+            U = U[:, ::-1][:, : 3 * T]
+            V = self.Yc.T @ U
+            V /= np.maximum(np.linalg.norm(V, axis=0), 1e-300)
+        idx = np.argmax(np.abs(V), axis=0)
+        sg = np.sign(V[idx, np.arange(V.shape[1])])
+        sg[sg == 0] = 1.0
+        self.V = V * sg
+        self.energy = np.maximum(w[::-1][: V.shape[1]], 0.0)  # ||Yc v_j||^2
+        self._C = np.zeros((n, 0))
+        self.plan = make_plan(F, n)
+        self._q: dict = {}
+
+    def cols(self, k: int) -> np.ndarray:
+        """Coefficients (n, k) of the first ``k`` components on the exact basis (computed as
+        far as asked)."""
+        if self._C.shape[1] < k:
+            self._C = np.hstack([self._C, self.Yc @ self.V[:, self._C.shape[1] : k]])
+        return self._C[:, :k]
+
+    def significant(self) -> int:
+        """Components holding more than 1e-9 of the energy each."""
+        return int(np.count_nonzero(self.energy > 1e-9 * max(float(self.energy.sum()), 1e-300)))
+
+    def keep(self, s: float) -> int:
+        """Components kept at step ``s``: the last one whose removed error beats ``lambda`` times
+        its bits (zero-order entropy of its rounded coefficients plus its basis column)."""
+        lam = math.log(2) / 6.0 * s * s
+        col = 8.0 * self.T  # about 8 bits per basis entry
+        k = 0
+        C = self.cols(int(np.count_nonzero(self.energy >= lam * col)))
+        for j in range(C.shape[1]):
+            c = C[:, j]
+            q = np.rint(c / s)
+            gain = self.energy[j] - float(np.sum((c - s * q) ** 2))
+            _u, cnt = np.unique(q, return_counts=True)
+            bits = -float(np.sum(cnt * np.log2(cnt / q.size)))
+            if gain > lam * (bits + col):
+                k = j + 1
+        return k
+
+    def quantise(self, s: float):
+        """``(qm, sm, qB, sb, Q, mean~, basis~, coefficient chunk)`` at step ``s`` (cached for
+        the last step)."""
+        if s in self._q:
+            return self._q[s]
+        T, n = self.T, self.n
+        k = self.keep(s)
+        sm = float(np.float32(MEAN_RATIO * s))
+        qm = np.rint(self.mu / sm).astype(np.int64)
+        norms = np.sqrt(self.energy[:k])
+        sb = BASIS_RATIO * s * math.sqrt(n / (3.0 * T)) / np.maximum(norms, 1e-30)
+        sb = np.clip(sb, 2.0**-24, 0.25).astype(np.float32).astype(np.float64)
+        qB = np.rint(self.V[:, :k] / sb).astype(np.int64)
+        Bq = qB * sb
+        Yr = self.Yc + (self.mu - qm * sm)
+        if k:
+            C = np.linalg.solve(Bq.T @ Bq, Bq.T @ Yr.T).T
+        else:
+            C = np.zeros((n, 0))
+        coef, Q = encode_coefficients(C / s, self.plan, RDO_LAMBDA)
+        self._q = {s: (qm, sm, qB, sb, Q, qm * sm, Bq, coef)}
+        return self._q[s]
+
+    def chunks(self, s: float) -> list:
+        qm, sm, qB, sb, _Q, _m, _B, coef = self.quantise(s)
+        return [(TAG_BASIS, basis_chunk(qm, sm, qB, sb, self.T)), (TAG_COEFF, coef)]
+
+
+def synthesise(mean: np.ndarray, B: np.ndarray, Q: np.ndarray, s: float, T: int) -> np.ndarray:
+    """Normalised frames (T, n, 3) of ``m~ + (s Q) B~^T``, the product in a fixed order."""
+    from ._dense_fixed import matmul
+
+    n, k = Q.shape
+    Y = np.broadcast_to(mean, (n, 3 * T)).copy()
+    if k:
+        Y += matmul(np.ascontiguousarray(Q * s, dtype=np.float64), np.ascontiguousarray(B.T))
+    return Y.reshape(n, 3, T).transpose(2, 0, 1)
+
+
+def reconstruct(pl, n: int, chunks, nf: int, step: float) -> np.ndarray:
+    """Normalised frames (nf, n, 3) of a ``pca-pred`` block segment; ``pl``: :func:`make_plan`."""
+    tags = [t for t, _ in chunks]
+    if tags != [TAG_BASIS, TAG_COEFF]:
+        raise InvalidInputError(f".sga block has chunks {tags}; expected [3, 4].")
+    mean, B = read_basis(chunks[0][1], nf)
+    Q = decode_coefficients(chunks[1][1], pl, n, B.shape[1])
+    return synthesise(mean, B, Q, step, nf)
+
+
+# ----------------------------------------------------------------------------- file
+#: default frames per block (one trajectory PCA each; its covariance is (3 block)^2)
+PRED_BLOCK = 512
+#: default coefficient step (fraction of the frames' bounding-box diagonal)
+PRED_STEP = 2.5e-4
+
+
+class PcaPredFileEncoder:
+    """A whole ``pca-pred`` file: blocks of ``block`` frames of ``frames`` (T, n, 3) normalised
+    by ``(origin, scale)``, each analysed once and coded at any step."""
+
+    def __init__(self, frames, F, block: int, origin, scale: float) -> None:
+        self.method = "pca-pred"
+        self.T, self.n = frames.shape[:2]
+        self.F = F
+        self.origin, self.scale = origin, scale
+        self.blk = min(block, self.T)
+        self.anchors = np.zeros(0, np.int64)
+        self.reordered = False
+        X = (frames - origin) / scale
+        self.parts = [
+            (t0, PcaPredEncoder(X[t0 : t0 + self.blk], F)) for t0 in range(0, self.T, self.blk)
+        ]
+
+    def params(self, step: float):
+        from ._sga_format import Params
+
+        return Params(self.method, self.T, self.blk, 0, float(step), 1.0, 1.0, 0, 1)
+
+    def build(self, step: float) -> bytes:
+        from ._sga_format import block_segment, header_segment, index_segment
+
+        m = self.F.shape[0]
+        o = tuple(self.origin)
+        p = self.params(step)
+        head = header_segment(
+            self.method, self.n, m, o, self.scale, p, self.F, self.anchors, self.reordered
+        )
+        out = [head]
+        off = len(out[0])
+        entries = []
+        for b, (t0, enc) in enumerate(self.parts):
+            seg = block_segment(
+                self.method, self.n, m, o, self.scale, b, t0, enc.T, step, enc.chunks(step)
+            )
+            entries.append((t0, enc.T, off, len(seg)))
+            off += len(seg)
+            out.append(seg)
+        out.append(index_segment(self.method, self.n, m, o, self.scale, entries))
+        return b"".join(out)
+
+    def frames(self, step: float) -> np.ndarray:
+        """The decoded frames (T, n, 3) of the file at ``step`` (products by BLAS: within
+        rounding of the decoder's fixed-order ones)."""
+        out = []
+        for _t0, enc in self.parts:
+            Q, mean, B = enc.quantise(step)[4:7]
+            Y = mean + (Q * step) @ B.T
+            out.append(Y.reshape(enc.n, 3, enc.T).transpose(2, 0, 1))
+        return np.concatenate(out) * self.scale + self.origin
+
+    def sq_error(self, step: float) -> float:
+        """Squared Frobenius error of :meth:`frames` against the coded frames."""
+        e2 = 0.0
+        for _t0, enc in self.parts:
+            Q, mean, B = enc.quantise(step)[4:7]
+            D = (Q * step) @ B.T
+            D -= enc.Yc
+            D += mean - enc.mu
+            e2 += float(np.einsum("ij,ij->", D, D))
+        return e2 * self.scale * self.scale

@@ -1,0 +1,178 @@
+"""Adaptive binary range coder (LZMA's) and an adaptive symbol code built on it.
+
+The coder state ``st`` is an int64 array ``(low, range, cache, cache_size, code, pos)``; ``buf``
+a uint8 array the encoder writes into and the decoder reads from. A probability of a zero bit
+is an integer of ``pb`` bits, updated by ``p += ((1 << pb) - p) >> 5`` after a zero and
+``p -= p >> 5`` after a one. All integer arithmetic: both ends agree on every machine.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_TOP = 1 << 24
+#: probability bits of :func:`code_symbol` (long runs of one symbol cost about 1e-3 bit each)
+PB_SYM = 16
+#: truncated-unary nodes of :func:`code_symbol` before its Elias-gamma escape
+UNARY = 8
+#: probabilities per adaptive symbol model
+SYM_STRIDE = UNARY + 66
+
+
+@numba.njit(cache=True, inline="always")
+def bitlen(x):
+    k = 0
+    while x > 0:
+        x >>= 1
+        k += 1
+    return k
+
+
+@numba.njit(cache=True)
+def start(enc, st, buf):
+    """Initial state; the decoder reads its first five bytes."""
+    st[:] = 0
+    st[1] = 0xFFFFFFFF
+    st[3] = 1
+    if not enc:
+        for _ in range(5):
+            st[4] = ((st[4] << 8) | _next_byte(st, buf)) & 0xFFFFFFFF
+
+
+@numba.njit(cache=True)
+def finish(st, buf):
+    """Encoder: flush; returns the byte count."""
+    for _ in range(5):
+        _shift_low(st, buf)
+    return st[5]
+
+
+@numba.njit(cache=True)
+def _shift_low(st, buf):
+    low = st[0]
+    if low < 0xFF000000 or low >= (1 << 32):
+        carry = low >> 32
+        temp = st[2]
+        while True:
+            p = st[5]
+            if p < buf.size:
+                buf[p] = (temp + carry) & 0xFF
+            st[5] = p + 1
+            temp = 0xFF
+            st[3] -= 1
+            if st[3] == 0:
+                break
+        st[2] = (low >> 24) & 0xFF
+    st[3] += 1
+    st[0] = (low & 0x00FFFFFF) << 8
+
+
+@numba.njit(cache=True)
+def _next_byte(st, buf):
+    p = st[5]
+    st[5] = p + 1
+    return np.int64(buf[p]) if p < buf.size else np.int64(0)
+
+
+@numba.njit(cache=True, inline="always")
+def _dec_normalise(st, buf):
+    """Decoder: shift in bytes until the range is back above ``_TOP``."""
+    while st[1] < _TOP:
+        st[1] <<= 8
+        st[4] = ((st[4] << 8) | _next_byte(st, buf)) & 0xFFFFFFFF
+
+
+@numba.njit(cache=True)
+def bit(enc, st, buf, probs, i, b, pb):
+    """Code bit ``b`` (encoder) or return the decoded bit, with adaptive probability
+    ``probs[i]`` of ``pb`` bits."""
+    p = probs[i]
+    bound = (st[1] >> pb) * p
+    if enc:
+        if b == 0:
+            st[1] = bound
+            probs[i] = p + (((1 << pb) - p) >> 5)
+        else:
+            st[0] += bound
+            st[1] -= bound
+            probs[i] = p - (p >> 5)
+        while st[1] < _TOP:
+            st[1] <<= 8
+            _shift_low(st, buf)
+        return b
+    if st[4] < bound:
+        st[1] = bound
+        probs[i] = p + (((1 << pb) - p) >> 5)
+        b = 0
+    else:
+        st[4] -= bound
+        st[1] -= bound
+        probs[i] = p - (p >> 5)
+        b = 1
+    _dec_normalise(st, buf)
+    return b
+
+
+@numba.njit(cache=True)
+def direct(enc, st, buf, b):
+    """Code one equiprobable bit."""
+    st[1] >>= 1
+    if enc:
+        if b:
+            st[0] += st[1]
+        while st[1] < _TOP:
+            st[1] <<= 8
+            _shift_low(st, buf)
+        return b
+    b = 0
+    if st[4] >= st[1]:
+        st[4] -= st[1]
+        b = 1
+    _dec_normalise(st, buf)
+    return b
+
+
+@numba.njit(cache=True)
+def code_symbol(enc, st, buf, probs, base, s, alpha):
+    """Symbol ``s`` of ``range(alpha)`` with the adaptive model at ``probs[base:base +
+    SYM_STRIDE]``: truncated unary over the first :data:`UNARY` values, then the Elias-gamma
+    code of the rest (adaptive length, equiprobable mantissa). Returns the symbol (decoder: may
+    be ``>= alpha`` on damaged data)."""
+    top = min(alpha - 1, UNARY)
+    for k in range(top):
+        if bit(enc, st, buf, probs, base + k, 1 if s == k else 0, PB_SYM) == 1:
+            return np.int64(k)
+    if top == alpha - 1:
+        return np.int64(top)
+    z = s - top + 1 if enc else 0
+    nb = bitlen(z)
+    length = 1
+    while length < 64 and bit(
+        enc, st, buf, probs, base + UNARY + length, 1 if length < nb else 0, PB_SYM
+    ):
+        length += 1
+    m = np.int64(1)
+    for j in range(length - 2, -1, -1):
+        m = (m << 1) | direct(enc, st, buf, (z >> j) & 1 if enc else 0)
+    return m - 1 + top
+
+
+@numba.njit(cache=True)
+def code_streams(enc, data, offsets, alphas, buf):
+    """Code the streams ``data[offsets[k]:offsets[k + 1]]`` (symbols of ``range(alphas[k])``),
+    each with its own adaptive model. Encoder: returns the byte count; decoder: fills ``data``
+    and returns the bytes read, or -1 on damaged data."""
+    st = np.zeros(6, np.int64)
+    start(enc, st, buf)
+    probs = np.full(alphas.size * SYM_STRIDE, 1 << (PB_SYM - 1), np.int64)
+    for k in range(alphas.size):
+        for i in range(offsets[k], offsets[k + 1]):
+            s = code_symbol(enc, st, buf, probs, k * SYM_STRIDE, data[i], alphas[k])
+            if not enc:
+                if s < 0 or s >= alphas[k] or st[5] > buf.size + 8:
+                    return -1
+                data[i] = s
+    if enc:
+        return finish(st, buf)
+    return st[5] if st[5] <= buf.size + 4 else -1
