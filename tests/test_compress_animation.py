@@ -251,6 +251,20 @@ def test_cli_round_trip(tmp_path, anim):
     # mismatches are one clear error, no traceback
     assert main(["compress", str(src), str(tmp_path / "x.sgc")]) != 0
     assert main(["compress", str(src), str(out), "--method", "spectral"]) != 0
+    # --reorder: taken by pca-pred (same vertices, renumbered), refused by an order-keeping method
+    assert main(["compress", str(src), str(out), "--method", "pca-qp", "--reorder"]) != 0
+    ro = tmp_path / "r.sga"
+    assert main(["compress", str(src), str(ro), "--method", "pca-pred", "--reorder"]) == 0
+    assert not compress.info_animation(ro.read_bytes())["order_preserved"]
+    R, G = compress.decode_animation(ro.read_bytes())
+    assert R.shape == A.shape and G.shape == F.shape
+    from scipy.spatial import cKDTree
+
+    # each decoded vertex sits on its own original one (a permutation; 5 % of the edge length is
+    # far above this step's error and far below the spacing of the icosphere's vertices)
+    d, j = cKDTree(A[0]).query(R[0])
+    edge = np.linalg.norm(A[0][F[:, 0]] - A[0][F[:, 1]], axis=1).mean()
+    assert d.max() < 0.05 * edge and len(np.unique(j)) == len(j)
 
 
 def test_evaluate_compress_animation_tuning(shared_data, tmp_path):

@@ -54,8 +54,11 @@ def _compress_animation(args) -> int:
         raise InvalidInputError("animations take --bpvf (bits per vertex per frame), not --bpv.")
     if getattr(args, "max_error", None) is not None:
         raise InvalidInputError("--max-error is for meshes; animations take --error (KG).")
-    if args.reorder:
-        raise InvalidInputError("--reorder is for meshes; animations always keep vertex order.")
+    if args.reorder and method != "pca-pred":
+        raise InvalidInputError(
+            "--reorder applies to meshes and to the animation method pca-pred; "
+            f"{method!r} keeps vertex order."
+        )
     anim, _rep = read_reported(args.input, kind="animation", weld=False)
     if not isinstance(anim, MeshAnimation):
         raise InvalidInputError(f"{args.input!r} is not a mesh animation.")
@@ -69,10 +72,16 @@ def _compress_animation(args) -> int:
         bpvf=args.bpvf,
         error=args.error,
         step=args.step,
+        **({"reorder": True} if args.reorder else {}),
+    )
+    order = (
+        "vertices and faces REORDERED by the codec (--reorder)"
+        if not d.get("order_preserved", True)
+        else "vertex and face order kept"
     )
     status(
         f"wrote {args.output}: {d['bytes']} bytes, {d['bpvf']:.3f} bpvf, {method}, "
-        f"{d['n_frames']} frames in {d['n_blocks']} block(s), vertex and face order kept, "
+        f"{d['n_frames']} frames in {d['n_blocks']} block(s), {order}, "
         f"{dt:.2f} s ({1e3 * dt / d['n_frames']:.1f} ms/frame)"
     )
     return 0

@@ -7,7 +7,9 @@ encode / decode wall time per frame.
 
 Methods (this package, Section 5.2.2): ``pca`` (kept-coefficient counts :data:`PCA_ROWS` x n),
 ``pca-q``, ``pca-qs``, ``pca-qp``, ``blocks`` and ``pca-spectral`` (eigen-trajectories in the
-partitioned GFT basis, :mod:`spectrageo.compress._pca_spectral`; not a method of the thesis) at
+partitioned GFT basis, :mod:`spectrageo.compress._pca_spectral`; not a method of the thesis) and
+``pca-pred`` (trajectory PCA with coefficients predicted along the mesh,
+:mod:`spectrageo.compress._pca_pred`; not of the thesis; here with the vertex order kept) at
 the quantisation steps :data:`STEPS`, and the streaming ``layered`` codec (Section 5.2.4) at the
 layers :data:`LAYERS`; the methods of :data:`TARGETED` also once through their rate control with
 ``error=`` set to the KG error of Draco per frame at 12 bits (setting ``kg=draco12``), so that
@@ -48,7 +50,7 @@ from ._tables import (
 TUNING_SPLIT = _files("compress-animation", "tuning")
 VALIDATION_SPLIT = _files("compress-animation", "validation")
 SPLITS = {"tuning": TUNING_SPLIT, "validation": VALIDATION_SPLIT}
-METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "layered")
+METHODS = ("pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "layered", "pca-pred")
 #: ``layered`` (Section 5.2.4): fraction of the vertices sent per frame
 LAYERS = (0.05, 0.1, 0.2)
 PEERS = ("draco", "draco-ordered", "quant-delta-zstd")
@@ -58,10 +60,11 @@ STEPS = {
     "pca-qp": (1e-3, 3e-4, 1e-4),
     "blocks": (1e-3, 3e-4, 1e-4),
     "pca-spectral": (1e-3, 3e-4, 1e-4),
+    "pca-pred": (1e-3, 3e-4, 1e-4),
 }
 #: methods also run with ``error=`` set to Draco-12's KG error (their rate control; the
 #: other methods stay far from it on the shared animations)
-TARGETED = ("pca-qp", "blocks", "pca-spectral", "layered")
+TARGETED = ("pca-qp", "blocks", "pca-spectral", "layered", "pca-pred")
 #: ``pca``: kept rows of U^ (the count of kept coefficients is rows x n)
 PCA_ROWS = (4, 16)
 DRACO_BITS = (8, 10, 12, 14, 16)
