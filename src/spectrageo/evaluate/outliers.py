@@ -793,9 +793,11 @@ def _fmt(v: Any) -> str:
 
 
 def _write(rows: list[dict], out: Any) -> tuple[Path, Path]:
+    only_scans = bool(rows) and all(r.get("suite") == "scan-types" for r in rows)
+    title = "## Outlier removal per scan type" if only_scans else "## Outlier removal"
     return write_md_csv(
         out,
-        "## Outlier removal\n\n"
+        title + "\n\n"
         "Produced by `spectrageo evaluate outliers`; injected, labelled outliers on the shared "
         "scans (far: uniform in the enlarged bounding box; near: 1-3 spacings along the normal), "
         "F1 of the removed points. `sor-grid` is the best SOR over k x std_ratio chosen with "
