@@ -182,7 +182,7 @@ class Trials:
 def _search(
     f, target: float, x: float, slope0: float, what: str, to_step=math.exp, bounds=None, aim=AIM
 ):
-    """The step ``s = to_step(x)`` with ``f(s)`` within :data:`AIM` of ``target``, ``log f``
+    """The step ``s = to_step(x)`` with ``f(s)`` within ``aim`` (default :data:`AIM`) of ``target``, ``log f``
     monotone in ``x`` (increasing when ``slope0 > 0``), starting at ``x``: secant steps on
     ``(x, log f)`` (initial slope ``slope0``), inverse quadratic interpolation once the target is
     bracketed, ``x`` clamped to ``bounds`` (default ``log`` of ``[STEP_MIN, STEP_MAX]``)."""
