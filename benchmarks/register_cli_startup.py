@@ -9,8 +9,9 @@ a child process (``getrusage``; load inflates CPU seconds less than wall time, b
 - ``spectrageo register SRC TGT --out T.json``;
 - a fresh Python process reading both files and calling :func:`spectrageo.register.register`;
 - a warm call: the second read + ``register()`` in one process (its CPU seconds only);
-- the floor of any process on the register path: importing numpy and scipy.spatial, then also
-  numba and one first call of a cached numba kernel.
+- the floor of any process on the register path: importing numpy and scipy.spatial; and, for
+  comparison, the floor of the path before the robustification's RPCA ran on NumPy (Eq. 6.42;
+  docs/decisions.md#register-numpy-rpca): also numba and one first call of a cached numba kernel.
 
 The CLI overhead is the CLI's figure minus the warm call's; the poses of all runs are compared
 (they must be identical). ``--baseline DIR`` measures another version's ``src`` folder too
@@ -63,12 +64,12 @@ _WARM = (
 )
 
 
-#: what any process running the register path pays before spectrageo's own work: numpy,
-#: scipy.spatial (cKDTree), numba, and numba's first call of a cached kernel (the robustification's
-#: RPCA of Eq. 6.42 runs numba kernels)
+#: what any process running the register path pays before spectrageo's own work: numpy and
+#: scipy.spatial (cKDTree); with numba and numba's first call of a cached kernel, the floor of the
+#: path while the robustification's RPCA (Eq. 6.42) ran numba kernels
 _FLOOR = {
     "floor: import numpy, scipy.spatial": "import numpy, scipy.spatial",
-    "floor: ... + numba + first cached kernel call": (
+    "numba floor: ... + numba + first cached kernel call": (
         "import numpy, scipy.spatial, numba\n"
         "from spectrageo.outliers._common import morton_codes\n"
         "morton_codes(numpy.random.default_rng(0).random((10, 3)))\n"
@@ -133,6 +134,7 @@ def main() -> None:
         trees.insert(0, {"name": "baseline", "exe": exe, "env": env})
     runs: dict = defaultdict(list)
     poses: dict = {}
+    load0 = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         src, tgt = write_pair(folder)
@@ -144,12 +146,15 @@ def main() -> None:
         for _ in range(args.repeats):
             for tree in trees:
                 _measure(tree, src, tgt, out, runs, poses)
+    load = (load0, os.getloadavg())
     med = {k: float(np.median(v)) for k, v in runs.items()}
     lines = [
         "## Start-up cost of `spectrageo register` (CPU seconds)",
         "",
         f"Machine: {machine_line()}. Pair: validation real RGB-D fragment pair "
-        f"(cloud_bin_0 moved -> cloud_bin_1). Median of {args.repeats} runs, user + system.",
+        f"(cloud_bin_0 moved -> cloud_bin_1). Median of {args.repeats} runs, user + system. "
+        f"Load average (1, 5, 15 min) at the start {' '.join(f'{x:.1f}' for x in load[0])}, "
+        f"at the end {' '.join(f'{x:.1f}' for x in load[1])}.",
         "",
         "| tree | run | CPU s (median) | min | all runs |",
         "|---|---|---:|---:|---|",
@@ -173,10 +178,12 @@ def main() -> None:
     for tree in trees:
         key = tree["name"]
         same = all(np.array_equal(ref, poses[key, k]) for k in ("cli", "api", "warm"))
+        diff = max(float(np.abs(ref - poses[key, k]).max()) for k in ("cli", "api", "warm"))
         lines.append(
             f"- {key}: CLI overhead over the warm call {med[key, 'cli'] - med[key, 'warm']:.2f} s "
             f"(medians; minima: {min(runs[key, 'cli']) - min(runs[key, 'warm']):.2f} s; target "
-            f"<= 1 s); poses identical to {trees[0]['name']}'s warm call: {same}."
+            f"<= 1 s); poses identical to {trees[0]['name']}'s warm call: {same} (largest "
+            f"entry difference {diff:.1e})."
         )
     text = "\n".join(lines)
     print(text)

@@ -84,6 +84,12 @@ _DEFAULTS = [
        "flat 0.1 with group 10 lost 0.01 F1 at 10 %"),
     _d(_O + "_support.SUPPORT_GROUP", 20, "tuning", "outliers-scantypes", _EO,
        "chin's 94-point removed group falls to 9; group 10 kept 0.04 % more, 50 less"),
+    _d(_O + "_rpca_types.RESCORE_SHARE", 0.11, "tuning", "outliers-scantypes", _EO,
+       "7 fast tuning scans, injected 5-40 %: first-pass removed share 0.084-0.091 at 10 % "
+       "(second pass: mean F1 lower), 0.124-0.130 at 15 % (higher on every scan)"),
+    _d(_O + "static.RESCORE_SPREAD", 2.08, "tuning", "outliers", _EO,
+       "kept-point spacing spread Q90/Q50: second pass helped at <= 2.003 (milk_cartoon 30 %), "
+       "harmed the table scene without a viewpoint at 2.156-2.185 (10 % halo 0.714 -> 0.624)"),
     _d(_O + "static.DEFAULT_THRESHOLD_RULE", "valley", "tuning", "outliers", _EO,
        "mean F1 0.890 against 0.887 (density) on the tuning split"),
     _d(_O + "static.VALLEY_BIN", 0.05, "tuning", "outliers", _EO,

@@ -124,7 +124,11 @@ def _scan_type_cases() -> list[Case]:
                 note=(f"viewpoint {vp}" if vp is not None else "")
                 + ("; RANGE_POWER chosen on it" if rel in _RANGE_TUNING else "")
                 + ("; GRID_ALPHA, GRID_SUPPORT chosen on it" if rel in _GRID_TUNING else "")
-                + ("; the SUPPORT_* constants chosen on it" if split == "tuning" else ""),
+                + (
+                    "; the SUPPORT_* constants, RESCORE_SHARE chosen on it"
+                    if split == "tuning"
+                    else ""
+                ),
             )
         )
     return out

@@ -7,43 +7,27 @@
   (Eq. 5.100-5.101).
 * :func:`clean_sequence` -- Section 5.4.3: spatio-temporal RPCA (Eq. 5.102-5.103) and weighted
   Laplacian refill (Eq. 5.104-5.109).
+
+Names are imported from their submodules on first use, so that the NumPy path of the patch RPCA
+(``RPCAOptions(backend="numpy")``) runs without loading numba.
 """
 
-from ._organized import OrganizedGrid
-from ._rpca_types import scan_options, viewpoint_options
-from .robot import RobotResult, bilateral_point_filter, knn_triangles, robot_pipeline
-from .rpca import PatchRPCAResult, RPCAOptions, knn_patch_matrix, rpca_scores
-from .sequence import SequenceResult, clean_sequence, weighted_laplacian
-from .static import (
-    OutlierResult,
-    auto_threshold,
-    detect_outliers,
-    radius_scores,
-    remove_outliers,
-    sor_scores,
-    valley_threshold,
-)
+from .._plugins import lazy_exports
 
-__all__ = [
-    "OrganizedGrid",
-    "OutlierResult",
-    "PatchRPCAResult",
-    "RPCAOptions",
-    "RobotResult",
-    "SequenceResult",
-    "auto_threshold",
-    "bilateral_point_filter",
-    "clean_sequence",
-    "detect_outliers",
-    "knn_patch_matrix",
-    "knn_triangles",
-    "radius_scores",
-    "remove_outliers",
-    "robot_pipeline",
-    "rpca_scores",
-    "scan_options",
-    "sor_scores",
-    "valley_threshold",
-    "viewpoint_options",
-    "weighted_laplacian",
-]
+_EXPORTS = {
+    "OrganizedGrid": "._organized",
+    **dict.fromkeys(("scan_options", "viewpoint_options"), "._rpca_types"),
+    **dict.fromkeys(
+        ("RobotResult", "bilateral_point_filter", "knn_triangles", "robot_pipeline"), ".robot"
+    ),
+    **dict.fromkeys(("PatchRPCAResult", "RPCAOptions", "knn_patch_matrix", "rpca_scores"), ".rpca"),
+    **dict.fromkeys(("SequenceResult", "clean_sequence", "weighted_laplacian"), ".sequence"),
+    **dict.fromkeys(
+        "OutlierResult auto_threshold detect_outliers radius_scores remove_outliers sor_scores "
+        "valley_threshold".split(),
+        ".static",
+    ),
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -264,3 +264,33 @@ def knn_grid(
     if subset is not None:
         idx = subset.astype(idx.dtype, copy=False)[idx]
     return Neighbours(idx, dmean, dlast, int(np.count_nonzero(dzero)))
+
+
+#: Grid of :func:`resolvable`: the square of any non-zero multiple is a normal float64.
+RESOLUTION = 1e-150
+
+
+def resolvable(X: np.ndarray) -> np.ndarray:
+    """``X`` (n, 3) with the coordinates below ``2**52 * RESOLUTION`` in magnitude rounded to
+    multiples of :data:`RESOLUTION`, so that distinct rows lie at a non-zero squared distance:
+    points the search finds at distance 0 (their squared distance underflows) become copies.
+    """
+    small = np.abs(X) < RESOLUTION * 2.0**52
+    if not small.any():
+        return X
+    return np.where(small, np.round(X / RESOLUTION) * RESOLUTION, X)
+
+
+def check_span(X: np.ndarray, spacing: float, dtype) -> None:
+    """Refuse a cloud whose extent in point spacings overflows the products of ``dtype``
+    (squares of coordinates in spacings, summed over a patch)."""
+    limit = 1e15 if np.dtype(dtype) == np.float32 else 1e100
+    lo, hi = float(X.min()), float(X.max())
+    span = float(np.ptp(X, axis=0).max())
+    if not span <= limit * spacing:
+        raise InvalidInputError(
+            f"the point cloud spans {span:.3g} (coordinates from {lo:.3g} to {hi:.3g}), "
+            f"{span / spacing:.3g} times its point spacing {spacing:.3g}; the RPCA arithmetic "
+            f"({np.dtype(dtype).name}) overflows beyond {limit:.0e} spacings. Remove the distant "
+            "points or rescale the cloud."
+        )

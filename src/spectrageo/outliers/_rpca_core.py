@@ -6,34 +6,31 @@ threads are already limited by the caller.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from .._errors import InvalidInputError
 from . import _kernels as _k
 from . import _thresholds
 from ._clusters import cluster_outliers
 from ._common import (
     Neighbours,
     SortedCloud,
+    check_span,
     knn_grid,
     morton_codes,
     numba_threads,
     sort_codes,
     spacing_from,
 )
-from ._grid import check_span, resolvable
 from ._rpca_solver import replay_blocks, solve_blocks
-from ._rpca_types import PatchRPCAResult, report
-
-#: Flagging floor of the refinement pass, in spacings (step 5); chosen on the tuning split; see
-#: docs/decisions.md#outlier-rpca-constants.
-REFINE_MIN_TAU = 1.0
-#: Quantile of the first-pass patch scores subtracted in step 6 (the local baseline); chosen on
-#: the tuning split; see docs/decisions.md#outliers-baseline-quantile.
-BASELINE_QUANTILE = 0.3
+from ._rpca_types import (  # noqa: F401 - the constants and scores_deduplicated are re-exported
+    BASELINE_QUANTILE,
+    REFINE_MIN_TAU,
+    PatchRPCAResult,
+    report,
+    scores_deduplicated,
+)
 
 
 def score_in_threads(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
@@ -213,32 +210,3 @@ def has_duplicates(X: np.ndarray) -> bool:
     if not np.any(sc[1:] == sc[:-1]):
         return False
     return int(np.unique(X, axis=0).shape[0]) < X.shape[0]
-
-
-def scores_deduplicated(
-    X: np.ndarray, k: int, score: Callable[..., PatchRPCAResult], kw: dict
-) -> PatchRPCAResult:
-    """``score(U, k, **kw)`` on the unique positions ``U`` (points closer than float64 resolves
-    count as copies: :func:`~._grid.resolvable`); every copy gets its position's score."""
-    U, inverse = np.unique(resolvable(X), axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    if U.shape[0] == X.shape[0]:  # nothing merged: the search met no copy to remove
-        raise InvalidInputError("the point cloud has points the neighbour search cannot separate.")
-    if U.shape[0] < k + 1:
-        raise InvalidInputError(
-            f"`k` = {k} neighbours need at least {k + 1} distinct points; the cloud has "
-            f"{U.shape[0]} distinct positions among {X.shape[0]} points."
-        )
-    r = score(U, k, **kw)
-    return PatchRPCAResult(
-        scores=r.scores[inverse],
-        spacing=r.spacing,
-        smoothed=None if r.smoothed is None else r.smoothed[inverse],
-        n_iter=r.n_iter,
-        converged=r.converged,
-        residual=r.residual,
-        n_blocks=r.n_blocks,
-        n_refined=r.n_refined,
-        clusters=None if r.clusters is None else r.clusters[inverse],
-        kth_distance=None if r.kth_distance is None else r.kth_distance[inverse],
-    )

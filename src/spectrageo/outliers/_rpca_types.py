@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from .._errors import ConvergenceError, ConvergenceWarning, InvalidInputError
 from .._validation import check_choice, check_positive
+from ._common import resolvable
 from ._organized import OrganizedGrid
 from ._range import RANGE_POWER, check_viewpoint
 
@@ -19,6 +21,14 @@ __all__ = ["PatchRPCAResult", "RPCAOptions", "scan_options", "viewpoint_options"
 SPARSE_FACTOR = 3.0
 #: Default ``rank_tol``: chosen on the tuning split; see docs/decisions.md#outliers-rank-tol.
 RANK_TOL = 3e-3
+#: Default ``rescore_share``: chosen on the tuning split; see docs/decisions.md#outliers-rescore.
+RESCORE_SHARE = 0.11
+#: Flagging floor of the refinement pass, in spacings (step 5); chosen on the tuning split; see
+#: docs/decisions.md#outlier-rpca-constants.
+REFINE_MIN_TAU = 1.0
+#: Quantile of the first-pass patch scores subtracted in step 6 (the local baseline); chosen on
+#: the tuning split; see docs/decisions.md#outliers-baseline-quantile.
+BASELINE_QUANTILE = 0.3
 
 
 @dataclass(frozen=True)
@@ -59,10 +69,17 @@ class RPCAOptions:
     sparse_regions : bool
         :func:`remove_outliers` keeps the removed points that form large sparse surface regions
         (:mod:`._support`).
+    rescore_share : float, optional
+        :func:`remove_outliers` scores the kept points again (a second pass) when the first
+        removed at least this share of the cloud and their spacing is homogeneous
+        (``static.RESCORE_SPREAD``); None: off.
     grid : OrganizedGrid, optional
         Image grid of an organized depth frame: :func:`remove_outliers` removes its flying pixels
         and keeps its image-supported points (:mod:`._organized`); the viewpoint defaults to the
         origin (camera coordinates).
+    backend : {"numba", "numpy"}
+        Steps 1-7 by the numba kernels, or by NumPy/SciPy without numba (:mod:`._rpca_numpy`:
+        one block, no steps 8-9, scores equal within rounding; docs/decisions.md#register-numpy-rpca).
     """
 
     lam: float | None = None
@@ -82,15 +99,24 @@ class RPCAOptions:
     range_power: float = RANGE_POWER
     sparse_factor: float | None = SPARSE_FACTOR
     sparse_regions: bool = True
+    rescore_share: float | None = RESCORE_SHARE
     grid: OrganizedGrid | None = None
+    backend: str = "numba"
 
     def __post_init__(self) -> None:
+        check_choice(self.backend, "backend", ("numba", "numpy"))
         if self.grid is not None and not isinstance(self.grid, OrganizedGrid):
             raise InvalidInputError(f"`grid` must be an OrganizedGrid; got {type(self.grid)}.")
         object.__setattr__(self, "viewpoint", check_viewpoint(self.viewpoint))
         check_positive(self.range_power, "range_power", allow_zero=True)
         if self.sparse_factor is not None:
             check_positive(self.sparse_factor, "sparse_factor")
+        if self.rescore_share is not None:
+            check_positive(self.rescore_share, "rescore_share")
+        if self.rescore_share is not None and self.rescore_share > 1:
+            raise InvalidInputError(
+                f"`rescore_share` must be in (0, 1] or None; got {self.rescore_share!r}."
+            )
         if self.lam is not None:
             check_positive(self.lam, "lam")
         check_positive(self.rho, "rho")
@@ -259,3 +285,32 @@ def report(res: PatchRPCAResult, policy: str, max_iter: int) -> None:
     if policy == "raise":
         raise ConvergenceError(msg, partial=res)
     warnings.warn(msg, ConvergenceWarning, stacklevel=3)
+
+
+def scores_deduplicated(
+    X: np.ndarray, k: int, score: Callable[..., PatchRPCAResult], kw: dict
+) -> PatchRPCAResult:
+    """``score(U, k, **kw)`` on the unique positions ``U`` (points closer than float64 resolves
+    count as copies: :func:`~._common.resolvable`); every copy gets its position's score."""
+    U, inverse = np.unique(resolvable(X), axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    if U.shape[0] == X.shape[0]:  # nothing merged: the search met no copy to remove
+        raise InvalidInputError("the point cloud has points the neighbour search cannot separate.")
+    if U.shape[0] < k + 1:
+        raise InvalidInputError(
+            f"`k` = {k} neighbours need at least {k + 1} distinct points; the cloud has "
+            f"{U.shape[0]} distinct positions among {X.shape[0]} points."
+        )
+    r = score(U, k, **kw)
+    return PatchRPCAResult(
+        scores=r.scores[inverse],
+        spacing=r.spacing,
+        smoothed=None if r.smoothed is None else r.smoothed[inverse],
+        n_iter=r.n_iter,
+        converged=r.converged,
+        residual=r.residual,
+        n_blocks=r.n_blocks,
+        n_refined=r.n_refined,
+        clusters=None if r.clusters is None else r.clusters[inverse],
+        kth_distance=None if r.kth_distance is None else r.kth_distance[inverse],
+    )

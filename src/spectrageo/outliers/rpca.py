@@ -15,14 +15,14 @@ from .._errors import InvalidInputError
 from .._validation import options_with_legacy
 from ._common import as_cloud, check_k, knn_chunked
 from ._range import range_ratio
-from ._rpca_core import (  # noqa: F401 - REFINE_MIN_TAU is re-exported
+from ._rpca_types import (  # noqa: F401 - RANK_TOL and REFINE_MIN_TAU are re-exported
+    RANK_TOL,
     REFINE_MIN_TAU,
-    has_duplicates,
-    score_in_threads,
+    PatchRPCAResult,
+    RPCAOptions,
+    report,
     scores_deduplicated,
 )
-from ._rpca_tiled import rpca_tiles_in_memory
-from ._rpca_types import RANK_TOL, PatchRPCAResult, RPCAOptions, report  # noqa: F401
 from ._svt import RANK_BIN, RANK_FLOOR  # noqa: F401 - re-exported
 
 __all__ = ["PatchRPCAResult", "RPCAOptions", "knn_patch_matrix", "rpca_scores"]
@@ -124,8 +124,8 @@ def rpca_scores(
         Threads (-1: all cores); the scores do not depend on it
         (docs/decisions.md#outliers-deterministic).
     device : {"cpu", "cuda", "auto"} or torch.device
-        Where step 3 runs: numba kernels, or the PyTorch path (within ``1e-3`` spacings;
-        docs/decisions.md#outliers-gpu-tolerance).
+        Where step 3 runs: numba kernels (or NumPy, ``options.backend``), or the PyTorch path
+        (within ``1e-3`` spacings; docs/decisions.md#outliers-gpu-tolerance).
     **legacy
         Deprecated: the fields of :class:`RPCAOptions` as keyword arguments.
 
@@ -146,6 +146,12 @@ def rpca_scores(
     block_size = BLOCK_SIZE if opts.block_size is None else int(opts.block_size)
     if block_size < k + 1:
         raise InvalidInputError(f"`block_size` must be >= k + 1 = {k + 1}; got {block_size}.")
+    if opts.backend == "numpy":
+        if not (isinstance(device, str) and device in ("cpu", "auto")):
+            raise InvalidInputError(f"backend='numpy' runs on the CPU; got device={device!r}.")
+        from ._rpca_numpy import score_numpy
+
+        return score_numpy(X, k, opts, block_size=block_size, smoothed=smoothed)
     kw = opts.solver_kwargs(
         block_size=block_size, smoothed=smoothed, workers=workers, device=device
     )
@@ -159,7 +165,11 @@ def rpca_scores(
 
 
 def _dispatch(X: np.ndarray, k: int, **kw: Any) -> PatchRPCAResult:
-    """One region, or the k-d tiles of a cloud above ``block_size`` points."""
+    """One region, or the k-d tiles of a cloud above ``block_size`` points (numba kernels,
+    imported here: ``backend="numpy"`` never loads numba)."""
+    from ._rpca_core import has_duplicates, score_in_threads
+    from ._rpca_tiled import rpca_tiles_in_memory
+
     if kw["partition"] == "tiles" and X.shape[0] > kw["block_size"]:
         if has_duplicates(X):  # score the distinct positions (a tile of copies has no patch)
             return scores_deduplicated(X, k, _dispatch, kw)

@@ -4,7 +4,7 @@ the statistical (SOR) and radius filters, one contract (:func:`remove_outliers`)
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -48,6 +48,9 @@ METHODS = ("rpca", "sor", "radius")
 #: Score gate of the sparse-point stage, a fraction of the threshold; chosen on the tuning split
 #: (docs/decisions.md#outliers-sparse-stage).
 SPARSE_GATE = 0.25
+#: Largest ``Q_0.9 / Q_0.5`` of the kept points' ``k``-th neighbour distances at which the second
+#: pass runs; chosen on the tuning split (docs/decisions.md#outliers-rescore).
+RESCORE_SPREAD = 2.08
 
 
 @dataclass(frozen=True)
@@ -147,6 +150,47 @@ def _sparse_points(r, s: np.ndarray, tau: float, factor: float | None) -> np.nda
     return (d > factor * float(np.median(d))) & (s >= SPARSE_GATE * tau)
 
 
+def _rpca_pass(X, k, options, threshold, rule, smoothed, workers, device, info: dict):
+    """One scoring pass of ``method="rpca"`` on ``X`` without the grid stage: ``(keep, result of
+    rpca_scores, tau)``; ``rule`` None uses ``threshold``. Counts go to ``info``."""
+    r = rpca_scores(X, k, options, smoothed=smoothed, workers=workers, device=device)
+    s = r.scores
+    blob = r.clusters if r.clusters is not None else np.zeros(s.size, dtype=bool)
+    if rule is None:
+        tau = float(threshold)
+    elif rule == "valley":
+        tau, vinfo = valley_threshold(s, minimum=RPCA_MIN_TAU)
+        info.update(vinfo)
+    else:
+        tau = auto_threshold(s, minimum=RPCA_MIN_TAU, rule=rule)
+    sparse = _sparse_points(r, s, tau, options.sparse_factor)
+    keep = (s < tau) & ~blob & ~sparse
+    # large sparse surface regions are kept (docs/decisions.md#outliers-sparse-regions);
+    # clouds scored on k-d tiles skip it, as the sparse stage
+    if options.sparse_regions and r.kth_distance is not None and not keep.all():
+        surface = sparse_surface(X, ~keep, k, r.knn)
+        info["n_sparse_region_kept"] = int(np.count_nonzero(surface))
+        keep |= surface
+    info["n_cluster_outliers"] = int(np.count_nonzero(blob))
+    info["n_sparse_outliers"] = int(np.count_nonzero(sparse & ~blob & (s < tau)))
+    return keep, r, tau
+
+
+def _rescore_due(options: RPCAOptions, r, keep: np.ndarray, k: int, info: dict) -> bool:
+    """Whether the first pass removed at least ``options.rescore_share`` of the cloud, kept more
+    than ``k`` points and their (range-normalised) ``k``-th neighbour distances ``d`` are
+    homogeneous: ``Q_0.9(d) <= RESCORE_SPREAD Q_0.5(d)`` (scores in global spacings compare)."""
+    n_kept = int(np.count_nonzero(keep))
+    share = 1.0 - n_kept / max(keep.size, 1)
+    if options.rescore_share is None or share < options.rescore_share or n_kept <= k:
+        return False
+    if r.kth_distance is None:  # k-d tiles: no distances to judge the spread by
+        return False
+    q50, q90 = np.quantile(r.kth_distance[keep], [0.5, 0.9])
+    info["rescore_spread"] = float(q90 / q50) if q50 > 0 else float("inf")
+    return bool(q90 <= RESCORE_SPREAD * q50)
+
+
 def remove_outliers(
     cloud: Any,
     *,
@@ -170,7 +214,11 @@ def remove_outliers(
     ``options.sparse_factor`` (:func:`_sparse_points`), unless they lie in a large sparse
     surface region (``options.sparse_regions``: :func:`._support.sparse_surface`); with
     ``options.grid`` (an organized depth frame) the flying pixels are removed and the
-    image-supported points kept (:func:`._organized.grid_labels`). ``threshold=None`` uses
+    image-supported points kept (:func:`._organized.grid_labels`). When the stages before the
+    grid remove at least ``options.rescore_share`` of the cloud and the kept points' spacing is
+    homogeneous (:data:`RESCORE_SPREAD`), the kept points are scored again the same way and the
+    second pass's outliers removed too (``scores`` and ``threshold`` stay the first pass's;
+    ``info["rescore"]``). ``threshold=None`` uses
     ``threshold_rule`` (``"valley"``: :func:`valley_threshold`; ``"density"``, ``"otsu"``:
     :func:`auto_threshold`) with the floor :data:`RPCA_MIN_TAU` = 0.5 spacings (chosen on the tuning
     split; see docs/decisions.md#outlier-rpca-constants). ``method="sor"``: keep points whose mean
@@ -268,24 +316,18 @@ def _outliers(
     info: dict[str, Any] = {}
     sm = None
     if method == "rpca":
-        r = rpca_scores(X, k, options, smoothed=smoothed, workers=workers, device=device)
+        rule = None if threshold is not None else threshold_rule
+        keep_f, r, tau = _rpca_pass(X, k, options, threshold, rule, smoothed, workers, device, info)
         s = r.scores
-        blob = r.clusters if r.clusters is not None else np.zeros(s.size, dtype=bool)
-        if threshold is not None:
-            tau = float(threshold)
-        elif threshold_rule == "valley":
-            tau, vinfo = valley_threshold(s, minimum=RPCA_MIN_TAU)
-            info.update(vinfo)
-        else:
-            tau = auto_threshold(s, minimum=RPCA_MIN_TAU, rule=threshold_rule)
-        sparse = _sparse_points(r, s, tau, options.sparse_factor)
-        keep_f = (s < tau) & ~blob & ~sparse
-        # large sparse surface regions are kept (docs/decisions.md#outliers-sparse-regions);
-        # clouds scored on k-d tiles skip it, as the sparse stage
-        if options.sparse_regions and r.kth_distance is not None and not keep_f.all():
-            surface = sparse_surface(X, ~keep_f, k, r.knn)
-            info["n_sparse_region_kept"] = int(np.count_nonzero(surface))
-            keep_f |= surface
+        if _rescore_due(options, r, keep_f, k, info):
+            # a second pass on the kept points (docs/decisions.md#outliers-rescore)
+            sub = np.flatnonzero(keep_f)
+            again = replace(options, grid=None, viewpoint=options.sensor_origin)
+            keep2, _, tau2 = _rpca_pass(
+                X[sub], k, again, threshold, rule, False, workers, device, {}
+            )
+            keep_f[sub[~keep2]] = False
+            info["rescore"] = {"threshold": tau2, "n_removed": int(sub.size - keep2.sum())}
         if options.grid is not None:  # the grid stage (docs/decisions.md#outliers-organized-grid)
             pix = options.grid.pixels(X.shape[0] if finite is None else finite.size)
             pix = pix if finite is None else pix[finite]
@@ -293,8 +335,6 @@ def _outliers(
             info["n_flying"] = int(np.count_nonzero(flying))
             info["n_supported_kept"] = int(np.count_nonzero(supported & ~keep_f))
             keep_f = (keep_f | supported) & ~flying
-        info["n_cluster_outliers"] = int(np.count_nonzero(blob))
-        info["n_sparse_outliers"] = int(np.count_nonzero(sparse & ~blob & (s < tau)))
         info.setdefault("contamination", float(np.count_nonzero(~keep_f) / max(s.size, 1)))
         info["threshold_rule"] = "given" if threshold is not None else threshold_rule
         sm = r.smoothed

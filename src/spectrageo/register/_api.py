@@ -26,7 +26,7 @@ from ._common import (
     thin,
 )
 from ._narrow import TargetIndex, _score, check_icp_options, constraint, run_narrow
-from ._robust import boundary_mask, outlier_scores
+from ._robust import boundary_mask, exact_neighbors, outlier_result
 
 #: :func:`register` keeps at most TARGET_POINTS * max_points target points for the narrow phase
 #: (docs/decisions.md#register-speed)
@@ -118,10 +118,13 @@ def robustify(
     check_positive(k_boundary, "k_boundary", integer=True)
     check_positive(outlier_threshold, "outlier_threshold")
     keep = np.ones(P.shape[0], dtype=bool)
+    nbrs = None  # the RPCA's exact kNN, reused by the boundary test
     if remove_outliers and P.shape[0] > k_outliers + 1:
-        keep &= outlier_scores(P, int(k_outliers)) <= outlier_threshold
+        res = outlier_result(P, int(k_outliers))
+        keep &= res.scores <= outlier_threshold
+        nbrs = exact_neighbors(res)
     if remove_boundary and P.shape[0] > k_boundary + 1:
-        keep &= ~boundary_mask(P, int(k_boundary))
+        keep &= ~boundary_mask(P, int(k_boundary), nbrs)
     if keep.sum() < 3:  # never leave less than a registrable cloud
         keep[:] = True
     return P[keep], keep

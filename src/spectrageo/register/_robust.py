@@ -2,28 +2,53 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ._common import WORKERS
 
 
-def boundary_mask(P: np.ndarray, k: int) -> np.ndarray:
-    """Boundary points: mean kNN distance at least twice the cloud mean (Eq. 6.43-6.44)."""
+def boundary_mask(P: np.ndarray, k: int, neighbors: np.ndarray | None = None) -> np.ndarray:
+    """Boundary points: mean kNN distance at least twice the cloud mean (Eq. 6.43-6.44).
+
+    ``neighbors`` (n, k): the exact ``k`` nearest neighbours of every point (self excluded), when
+    already known; otherwise they are searched.
+    """
     n = P.shape[0]
-    kk = int(min(k + 1, n))
-    d, _ = cKDTree(P).query(P, k=kk, workers=WORKERS)
-    d = np.asarray(d).reshape(n, kk)[:, 1:]
+    if neighbors is not None and neighbors.shape == (n, k):
+        d = np.sqrt(np.square(P[neighbors] - P[:, None, :]).sum(axis=2))
+    else:
+        kk = int(min(k + 1, n))
+        d, _ = cKDTree(P).query(P, k=kk, workers=WORKERS)
+        d = np.asarray(d).reshape(n, kk)[:, 1:]
     d_psi = d.mean(axis=1) if d.shape[1] else np.zeros(n)
     d_bar = float(d_psi.mean())
     return d_psi >= 2.0 * d_bar
 
 
-def outlier_scores(P: np.ndarray, k: int) -> np.ndarray:
-    """``m_i`` of Eq. 6.42: RPCA sparse-row norm in point spacings."""
+def outlier_result(P: np.ndarray, k: int) -> Any:
+    """The RPCA scores of Eq. 6.42 (a :class:`~spectrageo.outliers.PatchRPCAResult`)."""
     from ..outliers import RPCAOptions, rpca_scores
 
     # the cluster flags (step 8 of rpca_scores) leave the scores unchanged and are not used here
-    # (docs/decisions.md#register-cli-startup)
-    opts = RPCAOptions(on_nonconvergence="ignore", clusters=False)
-    return np.asarray(rpca_scores(P, k, opts).scores)
+    # (docs/decisions.md#register-cli-startup); the NumPy backend computes the same scores
+    # without loading numba (docs/decisions.md#register-numpy-rpca)
+    opts = RPCAOptions(on_nonconvergence="ignore", clusters=False, backend="numpy")
+    return rpca_scores(P, k, opts)
+
+
+def outlier_scores(P: np.ndarray, k: int) -> np.ndarray:
+    """``m_i`` of Eq. 6.42: RPCA sparse-row norm in point spacings."""
+    return np.asarray(outlier_result(P, k).scores)
+
+
+def exact_neighbors(res: Any) -> np.ndarray | None:
+    """The exact kNN (n, k) in input order that :func:`outlier_result` searched, or None."""
+    if res.knn is None:
+        return None
+    order, idx = res.knn
+    out = np.empty_like(idx)
+    out[order] = order[idx]
+    return out
