@@ -7,6 +7,7 @@ import math
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,8 +24,11 @@ from conftest import icosphere
 #: coordinate, so these are the same on every machine
 PINNED = {
     "step": "feb2c900e9253ef5e16c20cc01d4b356be4e75b62c196c62941260409e6eebee",
-    "reorder": "2b679a2af72a67be92de77c87c5ac6f88b8e1d0ea7db13f58b7c234922e434d4",
+    "reorder": "ec7c0730e98f48be7e641840ff1ce6531e61c742d0944c3aa264ac51290a2d62",
 }
+#: sha256 of the decoded vertices of tests/data/sgc/predictive_format1.sgc (the embedded fandisk
+#: at max_error 2e-3 with --reorder, written by the format-1 encoder, residual chunk tag 6)
+PINNED_FORMAT1 = "87d8d62a1ed9dbf8f0f4ff7115e6118a3857f8d22795e39935282948ee938935"
 
 
 def _sha(X: np.ndarray) -> str:
@@ -107,6 +111,28 @@ def test_decoded_values_are_pinned(mesh):
     b = compress.encode(V, F, method="predictive", max_error=2e-4, reorder=True)
     assert _sha(a) == PINNED["step"]
     assert _sha(compress.decode(b)[0]) == PINNED["reorder"]
+
+
+def test_format1_files_still_decode():
+    data = (Path(__file__).parent / "data" / "sgc" / "predictive_format1.sgc").read_bytes()
+    tags = [t for t, _ in _container.parse(data).chunks]
+    assert _predictive.TAG_RESIDUALS in tags and _predictive.TAG_RESIDUALS_2 not in tags
+    assert _sha(compress.decode(data)[0]) == PINNED_FORMAT1
+
+
+def test_format2_is_smaller_than_format1_at_equal_bound(mesh, monkeypatch):
+    # adaptive signs and model-cost choices (docs/decisions.md#codec-model-cost): the new files
+    # are smaller at every bound, coarse or fine, and keep the bound
+    V, F = mesh
+    for bound, most in ((5e-3, 0.95), (5e-4, 0.98), (5e-5, 0.99)):
+        new = compress.encode(V, F, method="predictive", max_error=bound, reorder=True)
+        assert _predictive.TAG_RESIDUALS_2 in [t for t, _ in _container.parse(new).chunks]
+        V2, F2 = compress.decode(new)
+        assert hausdorff(V2, F2, V, F, symmetric=True).hd_symmetric / _diag(V) <= bound
+        monkeypatch.setattr(_predictive, "FORMAT", 1)
+        old = compress.encode(V, F, method="predictive", max_error=bound, reorder=True)
+        monkeypatch.setattr(_predictive, "FORMAT", 2)
+        assert len(new) < most * len(old)
 
 
 def test_decoding_is_the_same_for_a_generic_cpu(mesh, tmp_path):

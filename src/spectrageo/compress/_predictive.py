@@ -7,8 +7,10 @@ diagonal), so every coordinate is within ``q / 2`` of the input and every vertex
 prediction). The integer
 coordinates are predicted along a traversal of the connectivity (multi-parallelogram, the
 subset chosen by the encoder) and the residuals coded with an adaptive binary range coder
-(:mod:`._predictive_kernel`); decoding is integer arithmetic and one product by ``q``, so it is
-bit-identical on every machine. See docs/decisions.md#codec-predictive.
+(:mod:`._predictive_kernel`; residual format 2, chunk tag 7, since
+docs/decisions.md#codec-model-cost; format 1 files, tag 6, still decode); decoding is integer
+arithmetic and one product by ``q``, so it is bit-identical on every machine. See
+docs/decisions.md#codec-predictive.
 """
 
 from __future__ import annotations
@@ -23,6 +25,11 @@ from ._container import Reader, varint
 from ._rate import STEP_MAX, STEP_MIN
 
 TAG_RESIDUALS = 6
+#: residual chunk of format 2 (:func:`._predictive_kernel._visit2`)
+TAG_RESIDUALS_2 = 7
+#: residual format the encoder writes (1 or 2)
+FORMAT = 2
+_TAGS = {TAG_RESIDUALS: 1, TAG_RESIDUALS_2: 2}
 _P = struct.Struct("<dd")  # grid step, bound on each coordinate's error
 #: largest integer coordinate a file may hold (the kernel codes residuals below 2**42)
 MAX_GRID = 1 << 40
@@ -54,7 +61,7 @@ class PredictivePlan:
         return G.astype(np.int64)
 
     def _encode(self, q: float) -> tuple[bytes, np.ndarray]:
-        key = (float(q), self.sphere)
+        key = (float(q), self.sphere, FORMAT)
         if self._cache[0] != key:
             from . import _predictive_kernel as kernel
 
@@ -63,7 +70,7 @@ class PredictivePlan:
             rho = self.sphere / q if self.sphere else 0.0
             G = np.zeros_like(R)
             buf = np.zeros(self.n * 3 * 16 + 64, dtype=np.uint8)
-            nb = kernel.run(True, self.F, self.n, G, buf, R, R, X, rho)
+            nb = kernel.run(True, self.F, self.n, G, buf, R, R, X, rho, FORMAT)
             self._cache = (key, varint(self.n) + buf[:nb].tobytes(), G)
         return self._cache[1], self._cache[2]
 
@@ -73,7 +80,7 @@ class PredictivePlan:
         return _P.pack(float(q), float(q) / 2)
 
     def chunks(self, q: float) -> list[tuple[int, bytes]]:
-        return [(TAG_RESIDUALS, self._encode(q)[0])]
+        return [(TAG_RESIDUALS_2 if FORMAT == 2 else TAG_RESIDUALS, self._encode(q)[0])]
 
     def reconstruct(self, q: float | None) -> np.ndarray:
         return self.X.copy() if q is None else self._encode(q)[1] * float(q)
@@ -138,7 +145,7 @@ def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str, *, complet
     from . import _predictive_kernel as kernel
 
     q = _step(params)[0]
-    if len(chunks) != 1 or chunks[0][0] != TAG_RESIDUALS:
+    if len(chunks) != 1 or chunks[0][0] not in _TAGS:
         raise InvalidInputError(".sgc predictive stream lacks its residual chunk.")
     r = Reader(chunks[0][1], "predictive residuals")
     if r.varint() != n:
@@ -147,7 +154,8 @@ def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str, *, complet
     G = np.zeros((n, 3), dtype=np.int64)
     F = np.ascontiguousarray(F, dtype=np.int64)
     none = np.zeros((0, 3), dtype=np.int64)
-    if kernel.run(False, F, n, G, buf, none, none, np.zeros((1, 3)), 0.0) < 0:
+    ver = _TAGS[chunks[0][0]]
+    if kernel.run(False, F, n, G, buf, none, none, np.zeros((1, 3)), 0.0, ver) < 0:
         raise InvalidInputError(".sgc predictive residuals are truncated or malformed.")
     if G.size and np.abs(G).max() >= MAX_GRID:
         raise InvalidInputError(".sgc predictive residuals are malformed (out of range).")

@@ -10,7 +10,11 @@ binary range coder (LZMA's: 11-bit probabilities, shift-5 update): a zero flag, 
 the bit length in unary and the top mantissa bit adaptive, the other bits direct. Contexts: the
 coordinate, the decoded neighbours' residual bit lengths and whether the previous coordinate's
 residual was zero. The encoder may choose each vertex's grid point within a sphere around the
-input (:func:`_choose`). Decoding is integer arithmetic: bit-identical on every machine.
+input (:func:`_choose`). Format 2 (:func:`_visit2`) codes the signs with adaptive models in
+the context of the gate face's integer normal and of the decoded neighbours' residual signs
+along theirs, mixes the parallelograms' spread into the magnitude context, and has the encoder
+compare subsets and grid points by their cost under the current models. Decoding is integer
+arithmetic: bit-identical on every machine (docs/decisions.md#codec-model-cost).
 """
 
 from __future__ import annotations
@@ -35,9 +39,18 @@ _NCTX = 3 * NB * 3
 MAXP = 4
 _FLAGS = _NCTX * _STRIDE
 _NPROB = _FLAGS + (MAXP + 1) * MAXP * 2
+#: classes of a coordinate axis against the gate face's normal (signs of format 2)
+NAX = 3
+#: weight of the parallelograms' spread against the neighbours' residual lengths in the
+#: magnitude context of format 2 (docs/decisions.md#codec-model-cost)
+SPREAD_WEIGHT = 1
+_SIGNS = _NPROB
+_NPROB2 = _SIGNS + 3 * NAX * 3 * 2
 #: probability bits of the residual models
 PB = 11
 _ONE = 1 << PB
+#: encoder's cost, in 1/16 bit, of a bit of probability ``i / 2**PB``
+_COST = np.array([round(-16 * np.log2(max(i, 0.5) / _ONE)) for i in range(_ONE + 1)], np.int64)
 
 
 @numba.njit(cache=True)
@@ -62,9 +75,19 @@ def _vertex_faces(F, n):
 @numba.njit(cache=True)
 def _code_int(enc, st, buf, probs, base, value):
     """Code one residual (encoder: ``value``; decoder: returns it)."""
+    return _code_signed(enc, st, buf, probs, base, value, -1)
+
+
+@numba.njit(cache=True)
+def _code_signed(enc, st, buf, probs, base, value, sign):
+    """:func:`_code_int` with the sign coded by the adaptive model ``probs[sign]`` (``sign``
+    < 0: a direct bit)."""
     if _rbit(enc, st, buf, probs, base, 1 if value == 0 else 0, PB) == 1:
         return np.int64(0)
-    neg = _direct(enc, st, buf, 1 if value < 0 else 0)
+    if sign < 0:
+        neg = _direct(enc, st, buf, 1 if value < 0 else 0)
+    else:
+        neg = _rbit(enc, st, buf, probs, sign, 1 if value < 0 else 0, PB)
     a = -value if value < 0 else value
     n_bits = _bitlen(a) if enc else 0
     k = 1
@@ -85,6 +108,13 @@ def _code_int(enc, st, buf, probs, base, value):
 def _parallelograms(F, ptr, vf, G, vis, v, P):
     """Parallelogram predictions ``a + b - c`` of ``v`` into the rows of ``P``; returns their
     count (at most ``P.shape[0]``)."""
+    return _parallelograms_at(F, ptr, vf, G, vis, v, P, np.zeros(0, np.int64))
+
+
+@numba.njit(cache=True)
+def _parallelograms_at(F, ptr, vf, G, vis, v, P, gate):
+    """:func:`_parallelograms`; ``gate[0]`` (when ``gate`` is not empty) gets the face of the
+    first parallelogram's opposite corner."""
     k = 0
     for t in range(ptr[v], ptr[v + 1]):
         g = vf[t]
@@ -112,6 +142,8 @@ def _parallelograms(F, ptr, vf, G, vis, v, P):
                 elif w != a:
                     c = w
             if hasb and c >= 0 and c != v and vis[c]:
+                if k == 0 and gate.size:
+                    gate[0] = h
                 for d in range(3):
                     P[k, d] = G[a, d] + G[b, d] - G[c, d]
                 k += 1
@@ -144,75 +176,25 @@ def _clamp(x, lo, hi):
 
 
 @numba.njit(cache=True)
-def _choose(L, H, X, rho, v, p, e):
-    """Encoder: residuals ``e`` (3,) of vertex ``v`` from prediction ``p``; returns their cost
-    estimate. ``rho > 0``: the grid point within distance ``rho`` of ``X[v]`` (grid units) near
-    the prediction; else each coordinate the integer of ``[L, H]`` nearest it."""
-    if rho > 0:
-        n2 = 0.0
-        for d in range(3):
-            n2 += (p[d] - X[v, d]) ** 2
-        if n2 <= rho * rho:
-            e[:] = 0
-            return 0
-        t = rho / np.sqrt(n2)
-        best = -1
-        for mask in range(8):
-            r2 = 0.0
-            c = 0
-            for d in range(3):
-                y = X[v, d] + (p[d] - X[v, d]) * t
-                g = np.int64(np.floor(y)) + ((mask >> d) & 1)
-                r2 += (g - X[v, d]) ** 2
-                a = g - p[d]
-                c += _bitlen(-a if a < 0 else a) * 2 + (1 if a != 0 else 0)
-            if r2 <= rho * rho and (best < 0 or c < best):
-                best = c
-                for d in range(3):
-                    y = X[v, d] + (p[d] - X[v, d]) * t
-                    e[d] = np.int64(np.floor(y)) + ((mask >> d) & 1) - p[d]
-        if best >= 0:
-            return best
-        c = 0
-        for d in range(3):
-            e[d] = np.int64(np.floor(X[v, d] + 0.5)) - p[d]
-            c += _bitlen(-e[d] if e[d] < 0 else e[d]) * 2 + (1 if e[d] != 0 else 0)
-        return c
-    c = 0
-    for d in range(3):
-        e[d] = _clamp(p[d], L[v, d], H[v, d]) - p[d]
-        c += _bitlen(-e[d] if e[d] < 0 else e[d]) * 2 + (1 if e[d] != 0 else 0)
-    return c
-
-
-@numba.njit(cache=True)
-def _predict(enc, st, buf, probs, F, ptr, vf, G, T, vis, v, f, prev, p, P, e):
+def _predict(enc, st, buf, probs, F, ptr, vf, G, T, vis, v, f, prev, p, P, e, W):
     """Prediction of vertex ``v`` (met in face ``f``) into ``p``; returns its class 0-2. With
     parallelograms, the subset averaged is chosen by the encoder and sent as one flag each."""
-    k = _parallelograms(F, ptr, vf, G, vis, v, P)
+    gate = W[0]
+    gate[0] = -1
+    k = _parallelograms_at(F, ptr, vf, G, vis, v, P, gate)
     if k > 0:
         best = (1 << k) - 1
         if enc and k > 1:
             _mean_of(P, best, k, p)
-            bc = _choose(T[0], T[1], T[2], T[3], v, p, e)
+            bc = _choose(T, v, p, e, probs, W[6], W[3], W[4])
             for mask in range(1, (1 << k) - 1):
                 _mean_of(P, mask, k, p)
-                c = _choose(T[0], T[1], T[2], T[3], v, p, e) + 1
+                c = _choose(T, v, p, e, probs, W[6], W[3], W[4]) + 1
                 if c < bc:
                     bc = c
                     best = mask
         if k > 1:
-            base = _FLAGS + (k * MAXP) * 2
-            mask = 0
-            used = 0
-            for j in range(k):
-                if j == k - 1 and used == 0:
-                    mask |= 1 << j
-                    break
-                b = _rbit(enc, st, buf, probs, base + j * 2 + min(used, 1), (best >> j) & 1, PB)
-                mask |= b << j
-                used += b
-            best = mask
+            best = _code_flags(enc, st, buf, probs, k, best)
         _mean_of(P, best, k, p)
         return 2
     a = -1
@@ -248,10 +230,43 @@ def _predict(enc, st, buf, probs, F, ptr, vf, G, T, vis, v, f, prev, p, P, e):
 
 
 @numba.njit(cache=True)
-def _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, f, prev, p, P, e3):
-    cls = _predict(enc, st, buf, probs, F, ptr, vf, G, T, vis, v, f, prev, p, P, e3)
+def _normal(F, G, h, nv):
+    """Integer normal of face ``h`` into ``nv`` (3,), scaled down below ``2**15``; zero when
+    ``h < 0``."""
+    nv[:] = 0
+    if h < 0:
+        return
+    a = F[h, 0]
+    b = F[h, 1]
+    c = F[h, 2]
+    u0 = G[b, 0] - G[a, 0]
+    u1 = G[b, 1] - G[a, 1]
+    u2 = G[b, 2] - G[a, 2]
+    w0 = G[c, 0] - G[a, 0]
+    w1 = G[c, 1] - G[a, 1]
+    w2 = G[c, 2] - G[a, 2]
+    m = max(max(abs(u0), abs(u1)), max(abs(u2), max(abs(w0), max(abs(w1), abs(w2)))))
+    s = max(_bitlen(m) - 24, 0)
+    u0 >>= s
+    u1 >>= s
+    u2 >>= s
+    w0 >>= s
+    w1 >>= s
+    w2 >>= s
+    nv[0] = u1 * w2 - u2 * w1
+    nv[1] = u2 * w0 - u0 * w2
+    nv[2] = u0 * w1 - u1 * w0
+    m = max(max(abs(nv[0]), abs(nv[1])), abs(nv[2]))
+    s = max(_bitlen(m) - 15, 0)
+    for d in range(3):
+        nv[d] >>= s
+
+
+@numba.njit(cache=True)
+def _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, f, prev, p, P, e3, W):
+    cls = _predict(enc, st, buf, probs, F, ptr, vf, G, T, vis, v, f, prev, p, P, e3, W)
     if enc:
-        _choose(T[0], T[1], T[2], T[3], v, p, e3)
+        _choose(T, v, p, e3, probs, W[6], W[3], W[4])
     t = 0
     cnt = 0
     for u in range(ptr[v], ptr[v + 1]):
@@ -277,16 +292,215 @@ def _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, f, prev, p, P, e3)
 
 
 @numba.njit(cache=True)
-def run(enc, F, n, G, buf, L, H, X, rho):
+def _bit_cost(p, b):
+    return _COST[p] if b == 0 else _COST[_ONE - p]
+
+
+@numba.njit(cache=True)
+def _cost_int(probs, base, value, sign):
+    """Encoder: cost (1/16 bit) of :func:`_code_signed` under the current models."""
+    if value == 0:
+        return _COST[_ONE - probs[base]]
+    c = _COST[probs[base]]
+    c += 16 if sign < 0 else _bit_cost(probs[sign], 1 if value < 0 else 0)
+    nb = _bitlen(-value if value < 0 else value)
+    k = 1
+    while k < KMAX:
+        if k < nb:
+            c += _COST[_ONE - probs[base + k]]
+            k += 1
+        else:
+            c += _COST[probs[base + k]]
+            break
+    if k >= 2:
+        a = -value if value < 0 else value
+        c += _bit_cost(probs[base + KMAX + k], (a >> (k - 2)) & 1) + 16 * (k - 2)
+    return c
+
+
+@numba.njit(cache=True)
+def _cost3(probs, bk, e, sg):
+    c = 0
+    prev_zero = 1
+    for d in range(3):
+        ctx = (d * NB + bk[d]) * 3 + (0 if d == 0 else 1 + prev_zero)
+        c += _cost_int(probs, ctx * _STRIDE, e[d], sg[d])
+        prev_zero = 1 if e[d] == 0 else 0
+    return c
+
+
+@numba.njit(cache=True)
+def _cost(probs, bk, e, sg):
+    """Encoder: cost of the residuals ``e`` (3,): under the current models (1/16 bit), or the
+    estimate ``2 bitlen + (e != 0)`` each when ``bk[0] < 0`` (format 1)."""
+    if bk[0] >= 0:
+        return _cost3(probs, bk, e, sg)
+    c = 0
+    for d in range(3):
+        c += _bitlen(-e[d] if e[d] < 0 else e[d]) * 2 + (1 if e[d] != 0 else 0)
+    return c
+
+
+@numba.njit(cache=True)
+def _choose(T, v, p, e, probs, bk, sg, tmp):
+    """Encoder: residuals ``e`` (3,) of vertex ``v`` from prediction ``p``; returns their cost
+    (:func:`_cost`). ``rho > 0``: of the grid points within distance ``rho`` of ``X[v]`` (grid
+    units) around the sphere's point toward the prediction, the cheapest; else each coordinate
+    the integer of ``[L, H]`` nearest the prediction."""
+    L, H, X, rho = T
+    if rho <= 0:
+        for d in range(3):
+            e[d] = _clamp(p[d], L[v, d], H[v, d]) - p[d]
+        return _cost(probs, bk, e, sg)
+    n2 = 0.0
+    for d in range(3):
+        n2 += (p[d] - X[v, d]) ** 2
+    if n2 <= rho * rho:
+        e[:] = 0
+        return _cost(probs, bk, e, sg)
+    t = rho / np.sqrt(n2)
+    best = -1
+    for mask in range(8):
+        r2 = 0.0
+        for d in range(3):
+            y = X[v, d] + (p[d] - X[v, d]) * t
+            g = np.int64(np.floor(y)) + ((mask >> d) & 1)
+            r2 += (g - X[v, d]) ** 2
+            tmp[d] = g - p[d]
+        if r2 <= rho * rho:
+            c = _cost(probs, bk, tmp, sg)
+            if best < 0 or c < best:
+                best = c
+                e[:] = tmp
+    if best >= 0:
+        return best
+    for d in range(3):
+        e[d] = np.int64(np.floor(X[v, d] + 0.5)) - p[d]
+    return _cost(probs, bk, e, sg)
+
+
+@numba.njit(cache=True)
+def _code_flags(enc, st, buf, probs, k, best):
+    """The subset ``best`` of ``k > 1`` parallelograms as one adaptive flag each (the last
+    implied when no other is set); returns it (decoder: the decoded subset)."""
+    base = _FLAGS + (k * MAXP) * 2
+    mask = 0
+    used = 0
+    for j in range(k):
+        if j == k - 1 and used == 0:
+            mask |= 1 << j
+            break
+        b = _rbit(enc, st, buf, probs, base + j * 2 + min(used, 1), (best >> j) & 1, PB)
+        mask |= b << j
+        used += b
+    return mask
+
+
+@numba.njit(cache=True)
+def _flag_cost(probs, k, mask):
+    base = _FLAGS + (k * MAXP) * 2
+    used = 0
+    c = 0
+    for j in range(k):
+        if j == k - 1 and used == 0:
+            break
+        b = (mask >> j) & 1
+        c += _bit_cost(probs[base + j * 2 + min(used, 1)], b)
+        used += b
+    return c
+
+
+@numba.njit(cache=True)
+def _visit2(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, prev, p, P, e3, W):
+    """Format 2: :func:`_visit` with adaptive signs in the context of the gate face's normal
+    and the decoded neighbours' residuals along theirs, and the encoder's choices (subset,
+    grid point) by their cost under the current models."""
+    gate, nv, conv, sg, tmp, bk, _ = W
+    gate[0] = -1
+    k = _parallelograms_at(F, ptr, vf, G, vis, v, P, gate)
+    cls = 2
+    if k == 0:
+        cls = _predict(enc, st, buf, probs, F, ptr, vf, G, T, vis, v, -1, prev, p, P, e3, W)
+    t = 0
+    cnt = 0
+    sc = 0
+    for u in range(ptr[v], ptr[v + 1]):
+        g = vf[u]
+        for j in range(3):
+            w = F[g, j]
+            if w != v and vis[w]:
+                t += ek[w]
+                cnt += 1
+                sc += conv[w]
+    bucket = 0 if cls == 0 else min(1 + (t + cnt // 2) // max(cnt, 1), NB - 1)
+    for d in range(3):
+        bk[d] = bucket
+        if k >= 2:
+            lo = P[0, d]
+            hi = P[0, d]
+            for j in range(1, k):
+                lo = min(lo, P[j, d])
+                hi = max(hi, P[j, d])
+            sp = _bitlen((hi - lo) >> 1)
+            c = max(cnt, 1) * (SPREAD_WEIGHT + 1)
+            bk[d] = min(1 + (t + SPREAD_WEIGHT * sp * cnt + c // 2) // c, NB - 1)
+    s3 = 0 if sc < 0 else (1 if sc == 0 else 2)
+    _normal(F, G, gate[0], nv)
+    mn = max(max(abs(nv[0]), abs(nv[1])), abs(nv[2]))
+    for d in range(3):
+        an = abs(nv[d])
+        ax = 2 if 4 * an >= 3 * mn else (1 if 20 * an >= 7 * mn else 0)
+        sg[d] = _SIGNS + ((d * NAX + ax) * 3 + s3) * 2 + (1 if nv[d] < 0 else 0)
+        if mn == 0:
+            sg[d] = -1
+    if k > 0:
+        best = (1 << k) - 1
+        if enc and k > 1:
+            bc = -1
+            for mask in range(1, 1 << k):
+                _mean_of(P, mask, k, p)
+                c = _choose(T, v, p, e3, probs, bk, sg, tmp) + _flag_cost(probs, k, mask)
+                if bc < 0 or c < bc:
+                    bc = c
+                    best = mask
+        if k > 1:
+            best = _code_flags(enc, st, buf, probs, k, best)
+        _mean_of(P, best, k, p)
+    if enc:
+        _choose(T, v, p, e3, probs, bk, sg, tmp)
+    mx = 0
+    prev_zero = 1
+    dot = 0
+    for d in range(3):
+        ctx = (d * NB + bk[d]) * 3 + (0 if d == 0 else 1 + prev_zero)
+        e = e3[d] if enc else np.int64(0)
+        e = _code_signed(enc, st, buf, probs, ctx * _STRIDE, e, sg[d])
+        G[v, d] = p[d] + e
+        dot += e * nv[d]
+        a = _bitlen(-e if e < 0 else e)
+        prev_zero = 1 if a == 0 else 0
+        mx = max(mx, a)
+    conv[v] = 0 if dot == 0 else (1 if dot > 0 else -1)
+    ek[v] = mx
+    vis[v] = True
+
+
+@numba.njit(cache=True)
+def run(enc, F, n, G, buf, L, H, X, rho, ver=1):
     """Encode into ``buf`` (returns the byte count) or decode ``buf`` into ``G`` (n, 3) int64
     (returns the bytes read, or -1 when the data ran out). The encoder sends for each coordinate
     the integer in ``[L, H]`` closest to its prediction (``rho > 0``: the grid point within ``rho``
-    of ``X``, grid units, near it) and writes it to ``G``."""
+    of ``X``, grid units, near it) and writes it to ``G``. ``ver``: the residual format (1: tag
+    6, :func:`_visit`; 2: tag 7, :func:`_visit2`)."""
     T = (L, H, X, rho)
     e3 = np.zeros(3, np.int64)
     m = F.shape[0]
     ptr, vf = _vertex_faces(F, n)
-    probs = np.full(_NPROB, _ONE >> 1, np.int64)
+    probs = np.full(_NPROB2, _ONE >> 1, np.int64)
+    # work arrays: gate face, normal, convexity signs, sign models, candidate residuals,
+    # magnitude buckets, and buckets of -1 (format 1's cost estimate)
+    z = np.zeros(3, np.int64)
+    W = (np.zeros(1, np.int64), z, np.zeros(n, np.int64), z.copy(), z.copy(), z.copy(), z - 1)
     st = np.zeros(6, np.int64)
     start(enc, st, buf)
     vis = np.zeros(n, np.bool_)
@@ -309,7 +523,10 @@ def run(enc, F, n, G, buf, L, H, X, rho):
             neg, _sq, v = heapq.heappop(heap)
             if vis[v] or -neg != gates[v]:
                 continue
-            _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, -1, prev, p, P, e3)
+            if ver == 1:
+                _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, -1, prev, p, P, e3, W)
+            else:
+                _visit2(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, prev, p, P, e3, W)
             prev = v
             # most decoded neighbourhood first: a vertex gains a gate with each face whose two
             # other corners are decoded
