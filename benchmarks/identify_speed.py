@@ -8,8 +8,11 @@ the tuning and validation seeds of ``spectrageo evaluate identify``), each holdi
 the decisions (found / not found) are checked against the ground truth.
 
     python benchmarks/identify_speed.py
+    python benchmarks/identify_speed.py --screen-ab   # grid screen of hypotheses on / off
 
-Writes ``benchmarks/_out/identify_speed.md``.
+Writes ``benchmarks/_out/identify_speed.md``. ``--screen-ab`` instead times the tuning scenes 1-3
+of ``spectrageo evaluate identify`` (10 models, with the viewpoint) with the grid screen of pose
+hypotheses off and on, alternating in one process (docs/decisions.md#identify-screening).
 """
 
 from __future__ import annotations
@@ -66,5 +69,35 @@ def main() -> None:
     write_section("identify_speed", "\n".join(lines))
 
 
+def screen_ab(seeds=(1, 2, 3)) -> None:
+    from spectrageo.datasets import data_dir
+    from spectrageo.evaluate.identify import load_library
+    from spectrageo.register import _identify, identify, make_scene
+
+    lib = load_library(Path(data_dir(required=True)))
+    identify(make_scene(lib, n_objects=3, rng=0).points[:20000], lib, rng=0)  # warm-up
+    default = _identify.N_SCREEN
+    lines = ["| scene | screen off (s) | screen on (s) | ratio | found off | found on |",
+             "|---|---|---|---|---|---|"]  # fmt: skip
+    try:
+        for seed in seeds:
+            sc = make_scene(lib, n_objects=3 + seed % 4, rng=seed)
+            cell = []
+            for n in (0, default):
+                _identify.N_SCREEN = n
+                t0 = time.perf_counter()
+                res = identify(sc.points, lib, rng=0, viewpoint=sc.viewpoint)
+                cell.append((time.perf_counter() - t0, sum(m.found for m in res)))
+            (a, fa), (b, fb) = cell
+            lines.append(f"| {seed} | {a:.1f} | {b:.1f} | {b / a:.2f} | {fa} | {fb} |")
+            print(lines[-1], flush=True)
+    finally:
+        _identify.N_SCREEN = default
+    print(f"Machine: {machine_line()}")
+
+
 if __name__ == "__main__":
-    main()
+    if "--screen-ab" in sys.argv:
+        screen_ab()
+    else:
+        main()

@@ -295,6 +295,12 @@ _DEFAULTS = [
        "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
     _d(_R + "_identify.FLIP_H", 0.8, "tuning", "identify", _EI,
        "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
+    _d(_R + "_identify.N_SCREEN", 64, "tuning", "identify", _EI,
+       "set equal to N_RERANK before the tuning runs, not varied; generated scenes, seeds 1-10; "
+       "docs/decisions.md#identify-screening"),
+    _d(_R + "_identify.SCREEN_POINTS", 100, "tuning", "identify", _EI,
+       "set before the tuning runs (400 took 1.6x the time, same decisions); generated scenes, "
+       "seeds 1-10; docs/decisions.md#identify-screening"),
     _d(_R + "_visibility.RAY_STEPS", 1.0, "tuning", "identify", _EI,
        "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
     _d(_R + "_visibility.RAY_NEIGHBORS", 4, "tuning", "identify", _EI,

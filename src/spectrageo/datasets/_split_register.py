@@ -166,7 +166,8 @@ def _register_cases() -> list[Case]:
                 seed,
                 f"scene {seed}",
                 lib,
-                note="seeds 1-6 chose the defaults (1-10 those of free space); 1-3 are reported",
+                note="seeds 1-6 chose the defaults (1-10 those of free space and the hypothesis "
+                "screen); 1-3 are reported",
             )
         )
     for seed in range(11, 19):

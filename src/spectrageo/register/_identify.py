@@ -5,8 +5,8 @@ Scene and models share one sampling step; planes are removed and adaptive DBSCAN
 features (Eq. 6.30-6.36) give correspondences, RANSAC and Tukey ICP a pose, and the dissimilarity
 ``h`` of the salient pairs (Eq. 6.37-6.38) decides ``found`` (``h < zeta``). With a sensor
 ``viewpoint``, a pose must also respect free space (``_visibility``) and half turns of a rejected
-pose are tried. Departures from the thesis: docs/decisions.md#identify-pipeline and
-#identify-visibility.
+pose are tried. Departures from the thesis: docs/decisions.md#identify-pipeline,
+#identify-visibility and #identify-screening.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from scipy.spatial import cKDTree
 
 from .._errors import InvalidInputError
 from ._common import WORKERS, apply_transform, knn_normals, make_transform, voxel_downsample
+from ._identify_cover import ModelGrid
 from ._kernels import compatible_lists, count_inliers
 from ._segment import adaptive_dbscan, remove_planes
 from ._visibility import SceneRays
@@ -30,6 +31,10 @@ INLIER_COS = 0.8
 N_ANCHORS = 500
 #: hypotheses re-ranked by the explained fraction of the segment
 N_RERANK = 64
+#: more hypotheses re-ranked: the best by the grid-screened explained fraction (all are screened)
+N_SCREEN = 64
+#: segment points of the screen (a subset of the re-ranking's)
+SCREEN_POINTS = 100
 #: guided sampling: largest change of ``|n_i . n_j|`` between the model and the segment pair
 PAIR_COS_TOL = 0.25
 #: free-space verification (with a viewpoint): range tolerance in sampling steps
@@ -183,6 +188,7 @@ class _Cloud:
     keep: np.ndarray  # non-boundary mask (Eq. 6.43)
     tree: cKDTree
     diag: float
+    grid: ModelGrid | None = None  # built on first use as a model
 
 
 def _pair_histograms(P, N, idx, n_bins: int = 6) -> np.ndarray:
@@ -310,10 +316,18 @@ def _ransac_poses(
     score = count_inliers(
         np.ascontiguousarray(R), np.ascontiguousarray(t), A, B, thr2, NA, NB, INLIER_COS
     ).astype(np.float64)
-    # re-rank the best hypotheses by the fraction of segment points the moved model explains
-    top = np.argsort(-score, kind="stable")[:N_RERANK]
+    # re-rank the best hypotheses by the fraction of segment points the moved model explains;
+    # candidates: the most inliers, and the most explained points on a grid screen of all
     step = max(1, seg.P.shape[0] // 400)
     Qs, Ns = seg.P[::step], seg.N[::step]
+    top = np.argsort(-score, kind="stable")[:N_RERANK]
+    if N_SCREEN > 0:
+        if model.grid is None:
+            model.grid = ModelGrid(model.P, model.tree, 1.5 * voxel, voxel)
+        sk = max(1, Qs.shape[0] // SCREEN_POINTS)
+        gcov = model.grid.coverage(R, t, Qs[::sk], Ns[::sk], model.N, 0.8)
+        extra = np.argsort(-gcov, kind="stable")[:N_SCREEN]
+        top = np.r_[top, extra[~np.isin(extra, top)]]
     cover = np.empty(top.size)
     for c, h in enumerate(top):
         Pm = (Qs - t[h]) @ R[h]  # segment points in model coordinates
@@ -532,6 +546,8 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
                     key = (v > VIS_MAX, h)
                     if np.isfinite(h) and key < best_key:
                         best_key, best = key, (h, T, idx)
+        if mc is not None:
+            mc.grid = None  # up to MAX_CELLS_AXIS^3 cells; not needed after the search
         cands.append((mi_, *best, mc))
         admissible.append(not best_key[0])
     # --- decisions, conflicts resolved by h
