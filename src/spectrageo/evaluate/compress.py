@@ -365,8 +365,9 @@ def format_markdown(rows: list[dict]) -> str:
         "",
         "Our bits per vertex at the symmetric Hausdorff error of each Draco setting, interpolated "
         "log-log on our rate curve (`-` where Draco's error lies outside it); `ratio` = ours / "
-        "Draco. Order kept: the best of spectral, feature and saliency against Draco's "
-        "order-preserving mode; `spectral-reorder` against Draco's default (reordering) mode.",
+        "Draco. Order kept: the best of spectral, predictive, feature and saliency against "
+        "Draco's order-preserving mode; the better of `spectral-reorder` and "
+        "`predictive-reorder` against Draco's default (reordering) mode.",
         "",
         *markdown_table(
             equal_error_rows(rows),
