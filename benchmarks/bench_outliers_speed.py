@@ -17,13 +17,19 @@ each method on ``N`` points (default 10^7) in a fresh process, with its peak res
     python benchmarks/bench_outliers_speed.py --large 10000000   # also 10^7, time and memory
 
 Writes ``benchmarks/_out/bench_outliers_speed.md``. Run it against another checkout of the package
-with ``PYTHONPATH=<checkout>/src`` (the section names the package path it imported).
+with ``PYTHONPATH=<checkout>/src`` (the section names the package path it imported), or compare
+two builds in one run with ``--baseline <dir holding spectrageo/>``: per size, fresh processes
+of this build and of the baseline take turns (``--rounds`` each, order swapped every round), each
+timing both methods alternately (best of ``--repeat``) and hashing the removed set, so the
+section reports both builds' ratios to Open3D and whether their removed sets are identical.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -153,13 +159,113 @@ def large_run(n: int) -> list[tuple[str, dict]]:
     return out
 
 
+CHILD = """
+import json, sys, time, hashlib
+sys.path.insert(0, {bench!r})
+import numpy as np
+import spectrageo
+from bench_outliers_speed import _open3d, _rpca, make_cloud
+z = np.load({path!r})
+P = z["P"]
+warm = make_cloud(20_000, seed=1)[0]
+_rpca(warm)
+_open3d(warm)
+t_r, t_o = [], []
+for _ in range({repeat}):
+    t = time.perf_counter()
+    removed, _ = _rpca(P)
+    t_r.append(time.perf_counter() - t)
+    t = time.perf_counter()
+    _open3d(P)
+    t_o.append(time.perf_counter() - t)
+digest = hashlib.sha1(np.packbits(removed).tobytes()).hexdigest()
+print(json.dumps({{"rpca_s": min(t_r), "o3d_s": min(t_o), "removed": digest,
+                  "n_removed": int(removed.sum()), "package": spectrageo.__file__}}))
+"""
+
+
+def baseline_run(sizes, repeat: int, rounds: int, baseline: str) -> list[dict]:
+    """This build and the one under ``baseline`` in alternating fresh processes, per size."""
+    here = str(Path(__file__).resolve().parent)
+    builds = {
+        "current": str(Path(here).parent / "src"),
+        "baseline": str(Path(baseline).resolve()),
+    }
+    rows = []
+    for n in sizes:
+        P, _ = make_cloud(n)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "cloud.npz")
+            np.savez(path, P=P)
+            code = CHILD.format(bench=here, path=path, repeat=repeat)
+            runs: dict[str, list[dict]] = {"current": [], "baseline": []}
+            for r in range(rounds):
+                for name in ("current", "baseline")[:: 1 if r % 2 == 0 else -1]:
+                    env = {**os.environ, "PYTHONPATH": builds[name], "SPECTRAGEO_PROGRESS": "0"}
+                    out = subprocess.run(
+                        [sys.executable, "-c", code], capture_output=True, text=True, env=env
+                    )
+                    if out.returncode != 0:
+                        raise RuntimeError(f"benchmark child failed:\n{out.stderr[-4000:]}")
+                    runs[name].append(json.loads(out.stdout.strip().splitlines()[-1]))
+                    print(name, n, runs[name][-1], os.getloadavg(), flush=True)
+        row = {"n": P.shape[0]}
+        for name, rs in runs.items():
+            row[name] = {
+                "rpca_s": min(x["rpca_s"] for x in rs),
+                "o3d_s": min(x["o3d_s"] for x in rs),
+                "ratio": max(x["o3d_s"] / x["rpca_s"] for x in rs),
+                "ratios": [round(x["o3d_s"] / x["rpca_s"], 3) for x in rs],
+                "package": rs[0]["package"],
+            }
+        digests = {x["removed"] for rs in runs.values() for x in rs}
+        row["identical"] = len(digests) == 1
+        row["n_removed"] = runs["current"][0]["n_removed"]
+        rows.append(row)
+    return rows
+
+
+def _baseline_lines(rows: list[dict], args) -> list[str]:
+    lines = [
+        "",
+        f"Against a baseline build (`--baseline {args.baseline}`): fresh processes of each build "
+        f"in turn, {args.rounds} per build, each best of {args.repeat} (rpca and Open3D SOR "
+        "(20, 2) alternately); load average at the end "
+        + ", ".join(f"{x:.2f}" for x in os.getloadavg())
+        + ". Ratio = Open3D time / rpca time in the same process (best process; all listed).",
+        "",
+        "| points | build | rpca (s) | Open3D SOR (s) | rpca / Open3D throughput | per process "
+        "| removed sets identical |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        for name in ("baseline", "current"):
+            b = r[name]
+            lines.append(
+                f"| {r['n']:,} | {name} | {b['rpca_s']:.3f} | {b['o3d_s']:.3f} | "
+                f"{b['ratio']:.2f} | {', '.join(f'{x:.2f}' for x in b['ratios'])} | "
+                f"{'yes' if r['identical'] else 'NO'} ({r['n_removed']:,} removed) |"
+            )
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--sizes", type=lambda s: [int(x) for x in s.split(",") if x], default=SIZES)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--large", type=int, nargs="?", const=10_000_000, default=0)
+    ap.add_argument("--baseline", default=None, help="directory holding another spectrageo/")
+    ap.add_argument("--rounds", type=int, default=2)
     args = ap.parse_args()
 
+    if args.baseline:
+        rows = baseline_run(args.sizes, args.repeat, args.rounds, args.baseline)
+        head = ["## Outlier removal throughput: this build vs a baseline, both vs Open3D SOR"]
+        head += ["", f"Machine: {machine_line()}. Clouds as `same_run`."]
+        write_section(
+            "bench_outliers_speed_baseline", "\n".join(head + _baseline_lines(rows, args))
+        )
+        return
     rows = same_run(args.sizes, args.repeat) if args.sizes else []
     lines = [
         "## Outlier removal throughput: rpca vs Open3D SOR",

@@ -82,6 +82,7 @@ def morton_codes(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     points coincide), and the three 21-bit integers are interleaved (x in bit 0).
     """
     from ._grid import morton_encode
+    from ._kernels import morton_quantised
 
     n = P.shape[0]
     if n == 0:
@@ -90,12 +91,26 @@ def morton_codes(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     ext = float(np.max(hi - lo))
     scale = (2**21 - 1) / ext if ext > 0 else 0.0
     codes = np.empty(n, dtype=np.uint64)
+    if P.dtype == np.float64:  # same codes (docs/decisions.md#outliers-speed-exact-paths)
+        morton_quantised(P, lo, scale, codes)
+        return codes, lo, scale
     step = 1 << 20
     for s in range(0, n, step):
         q = ((P[s : s + step] - lo) * scale).astype(np.uint64)
         np.minimum(q, np.uint64(2**21 - 1), out=q)
         codes[s : s + step] = morton_encode(q)
     return codes, lo, scale
+
+
+def take_rows(P: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``P[rows]`` as a new C-contiguous array (an (n, 3) float64 ``P``: a compiled gather)."""
+    if P.ndim != 2 or P.shape[1] != 3 or P.dtype != np.float64:
+        return np.ascontiguousarray(P[rows])
+    from ._kernels import gather_rows
+
+    out = np.empty((rows.shape[0], 3))
+    gather_rows(P, np.asarray(rows), out)
+    return out
 
 
 def morton_order(P: np.ndarray) -> np.ndarray:
@@ -218,7 +233,7 @@ class SortedCloud:
     def of(cls, P: np.ndarray) -> SortedCloud:
         codes, lo, scale = morton_codes(P)
         order = sort_codes(codes)
-        return cls(np.ascontiguousarray(P[order]), order, codes[order], lo, scale)
+        return cls(take_rows(P, order), order, codes[order], lo, scale)
 
 
 def knn_grid(
@@ -244,7 +259,7 @@ def knn_grid(
 
     X, codes = sc.points, sc.codes
     if subset is not None:
-        X, codes = np.ascontiguousarray(X[subset]), codes[subset]
+        X, codes = take_rows(X, subset), codes[subset]
     if query is None and subset is None:
         idx, dmean, dlast, dzero = knn_sorted(X, codes, k, sc.lo, sc.scale)
     else:
@@ -257,7 +272,7 @@ def knn_grid(
             k,
             sc.lo,
             sc.scale,
-            query=np.ascontiguousarray(sc.points[qi]),
+            query=take_rows(sc.points, qi),
             qcodes=sc.codes[qi],
             self_index=self_index,
         )
@@ -285,8 +300,9 @@ def check_span(X: np.ndarray, spacing: float, dtype) -> None:
     """Refuse a cloud whose extent in point spacings overflows the products of ``dtype``
     (squares of coordinates in spacings, summed over a patch)."""
     limit = 1e15 if np.dtype(dtype) == np.float32 else 1e100
-    lo, hi = float(X.min()), float(X.max())
-    span = float(np.ptp(X, axis=0).max())
+    cmin, cmax = column_bounds(X)  # contiguous column passes, not a strided np.ptp(axis=0)
+    lo, hi = float(cmin.min()), float(cmax.max())
+    span = float(np.max(cmax - cmin))
     if not span <= limit * spacing:
         raise InvalidInputError(
             f"the point cloud spans {span:.3g} (coordinates from {lo:.3g} to {hi:.3g}), "

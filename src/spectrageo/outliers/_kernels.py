@@ -15,9 +15,32 @@ import numpy as np
 from numba import njit, prange
 
 from ..geometry._numba_kernels import min_eigvec3, patch_covariance
+from ._grid import _spread3
 
 #: Points per tile of the patch kernels (``3 * TILE`` rows of ``M`` in the tile buffers).
 TILE = 128
+
+
+@njit(cache=True, nogil=True)
+def morton_quantised(P, lo, scale, out):  # pragma: no cover - compiled
+    """``out[i]``: the Morton code of ``min(floor((P[i] - lo) * scale), 2^21 - 1)`` (x in bit 0),
+    :func:`._grid.morton_encode` of the quantised coordinates without their (n, 3) temporary."""
+    top = np.uint64(2**21 - 1)
+    for i in range(P.shape[0]):
+        code = np.uint64(0)
+        for j in range(3):
+            q = np.uint64((P[i, j] - lo[j]) * scale)
+            code |= _spread3(min(q, top)) << np.uint64(j)
+        out[i] = code
+
+
+@njit(cache=True, nogil=True)
+def gather_rows(P, order, out):  # pragma: no cover - compiled
+    """``out[i] = P[order[i]]`` for an (n, 3) ``P`` (``P[order]`` is a slow fancy index there)."""
+    for i in range(order.shape[0]):
+        o = order[i]
+        for c in range(3):
+            out[i, c] = P[o, c]
 
 
 @njit(cache=True, nogil=True)

@@ -71,7 +71,10 @@ def solve_blocks(
             vec = S_s[lo:hi] if vectors else S_s
             steps: list | None = None
             if record is not None:
-                steps = []
+                steps = _BlockRecord()
+                # one block: its normalised cloud serves the replay as it is
+                if n_blocks == 1 and isinstance(device, str):
+                    steps.Pn, steps.centre = Pn, centre
                 record.append(steps)
             if not isinstance(device, str):  # the torch path (spectrageo.outliers._torch)
                 from ._torch import patch_ialm_torch
@@ -86,6 +89,14 @@ def solve_blocks(
             converged = converged and out[3]
             residual = max(residual, out[4])
     return scores_s, E0_s, (S_s if vectors else None), n_iter, converged, residual, n_blocks
+
+
+class _BlockRecord(list):
+    """The recorded iterations of one block (:func:`replay_blocks`); when it is the only block,
+    also its normalised cloud ``Pn`` and centre (:func:`_normalise`), else None."""
+
+    Pn: np.ndarray | None = None
+    centre: np.ndarray | None = None
 
 
 def _normalise(Xs: np.ndarray, lo: int, hi: int, inv_h: float, Pn: np.ndarray) -> np.ndarray:
@@ -121,7 +132,7 @@ def replay_blocks(
     n_blocks = len(record)
     bounds = np.linspace(0, n, n_blocks + 1).astype(np.int64)
     inv_h = 1.0 / h
-    Pn = np.empty(Xs.shape, dtype=dtype)
+    Pn = None
     with single_thread_blas():
         for b in range(n_blocks):
             lo, hi = int(bounds[b]), int(bounds[b + 1])
@@ -129,7 +140,12 @@ def replay_blocks(
             sel = rows[inb]
             if sel.size == 0:
                 continue
-            centre = _normalise(Xs, lo, hi, inv_h, Pn)
+            kept = getattr(record[b], "Pn", None)
+            if kept is not None and kept.dtype == dtype:
+                Pn, centre = kept, record[b].centre
+            else:
+                Pn = np.empty(Xs.shape, dtype=dtype) if Pn is None else Pn
+                centre = _normalise(Xs, lo, hi, inv_h, Pn)
             centers = sel.astype(idx.dtype)
             vec = (
                 np.empty((sel.size, 3), dtype=np.float32)
