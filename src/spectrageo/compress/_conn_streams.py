@@ -39,6 +39,26 @@ def static_words(streams, alphas) -> bytes:
     return coder.get_compressed().astype("<u4").tobytes()
 
 
+def adaptive_blob(streams, alphas, counted: bool = False) -> bytes:
+    """The streams under adaptive models (:func:`._rangecoder.code_streams`)."""
+    data = np.concatenate([np.zeros(0, np.int64), *(s.astype(np.int64) for s in streams)])
+    offsets = np.r_[0, np.cumsum([s.size for s in streams])].astype(np.int64)
+    buf = np.zeros(8 * data.size + 64, dtype=np.uint8)
+    nb = rangecoder.code_streams(True, data, offsets, np.array(alphas, np.int64), buf, counted)
+    return buf[:nb].tobytes()
+
+
+def adaptive_read(blob: bytes, sizes, alphas, counted: bool = False) -> list[np.ndarray]:
+    """Inverse of :func:`adaptive_blob` for streams of the given sizes."""
+    buf = np.frombuffer(blob, dtype=np.uint8).copy()
+    data = np.zeros(sum(sizes), dtype=np.int64)
+    offsets = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+    a = np.array(alphas, np.int64)
+    if rangecoder.code_streams(False, data, offsets, a, buf, counted) < 0:
+        raise InvalidInputError(".sgc connectivity is malformed (adaptive streams).")
+    return np.split(data, offsets[1:-1])
+
+
 def _read_table(r: Reader, size: int, alpha: int):
     if not size:
         return None
@@ -77,12 +97,7 @@ def read_streams(r: Reader, adaptive: bool, n_topo: int, alphas, m: int, nv: int
         tables = [None] * n_topo + [
             _read_table(r, z, a) for z, a in zip(sizes[n_topo:], alphas[n_topo:])
         ]
-        blob = np.frombuffer(r.take(r.varint()), dtype=np.uint8).copy()
-        data = np.zeros(sum(sizes[:n_topo]), dtype=np.int64)
-        offsets = np.r_[0, np.cumsum(sizes[:n_topo])].astype(np.int64)
-        if rangecoder.code_streams(False, data, offsets, np.array(alphas[:n_topo]), blob) < 0:
-            raise InvalidInputError(".sgc connectivity is malformed (adaptive streams).")
-        streams = np.split(data, offsets[1:-1])
+        streams = adaptive_read(r.take(r.varint()), sizes[:n_topo], alphas[:n_topo])
         first = n_topo
     bits = []
     for _ in range(3):
@@ -105,3 +120,31 @@ def read_streams(r: Reader, adaptive: bool, n_topo: int, alphas, m: int, nv: int
     except (ValueError, RuntimeError, OverflowError) as exc:
         raise InvalidInputError(f".sgc connectivity is malformed ({exc}).") from None
     return sizes, streams, bits
+
+
+def canonical_sizes(topo) -> bytes:
+    """Sizes of the stage-1 streams (gate, orient, seed, far, third vertex by context) in the
+    canonical format, less what the face count implies: the orient stream has one symbol per
+    face that is not a seed, every gate not in it closed a border edge, and the last context
+    holds the third vertices the others do not."""
+    gate, orient, seed, far, *w = (s.size for s in topo)
+    return b"".join(varint(x) for x in (seed, gate - orient, far, *w[:-1]))
+
+
+def read_canonical(r: Reader, alphas, m: int):
+    """Stage-1 streams and raw bits of the canonical format; stages 2-3 are empty. Returns
+    ``(sizes, streams, bits)`` as :func:`read_streams`."""
+    seed, closed, far, *w = (r.varint() for _ in range(len(alphas) - 2))
+    if seed % 3 or not 3 <= seed <= 3 * m:
+        raise InvalidInputError(".sgc connectivity is malformed (stream lengths).")
+    orient = m - seed // 3
+    sizes = [orient + closed, orient, seed, far, *w, orient - sum(w)]
+    if sizes[-1] < 0 or max(sizes) > 3 * m + 3 or sum(sizes) > 9 * m + 16:
+        raise InvalidInputError(".sgc connectivity is malformed (stream too long).")
+    nb = r.varint()
+    if nb > 64 * (3 * m + 3):
+        raise InvalidInputError(".sgc connectivity is malformed (bit stream too long).")
+    raw = np.frombuffer(r.take((nb + 7) // 8), dtype=np.uint8)
+    streams = adaptive_read(r.rest(), sizes, alphas, True)
+    empty = (np.zeros(8, np.uint8), 0)
+    return sizes, streams, [(np.r_[raw, np.zeros(8, np.uint8)], nb), empty, empty]

@@ -17,7 +17,9 @@ order-preserving code needs about ``log2(m!) + log2(n!)`` bits plus a few bits p
 symbols use adaptive models (:mod:`._rangecoder`, first byte :data:`MARKER_ADAPTIVE`), the
 third vertex in :data:`NV_CTX` contexts (faces already decoded around the gate's end); the other
 stages static categorical models with ``constriction``'s ANS coder. Files of the static format
-(:data:`MARKER`: every stream static, the third vertex in 16 contexts) still decode. Both sides
+(:data:`MARKER`: every stream static, the third vertex in 16 contexts) still decode. Faces
+already in canonical order are written as :data:`MARKER_CANONICAL`: stages 2-3 implied, stage 1
+with counted adaptive models (docs/decisions.md#codec-conn-canonical). Both sides
 run one compiled state machine (:func:`_topology`). See docs/decisions.md#compress-connectivity,
 docs/decisions.md#compress-conn-contexts and docs/decisions.md#codec-conn-adaptive.
 """
@@ -28,8 +30,14 @@ import numba
 import numpy as np
 
 from .._errors import InvalidInputError
-from . import _rangecoder
-from ._conn_streams import read_streams, static_tables, static_words
+from ._conn_streams import (
+    adaptive_blob,
+    canonical_sizes,
+    read_canonical,
+    read_streams,
+    static_tables,
+    static_words,
+)
 from ._container import Reader, varint
 from ._rangecoder import bitlen as _bitlen
 
@@ -703,12 +711,15 @@ def _bitbuf(nbits_max: int) -> np.ndarray:
 MARKER = 0x40
 #: first byte of the traversal code whose stage-1 streams use adaptive models (written)
 MARKER_ADAPTIVE = 0x41
-MARKERS = (MARKER, MARKER_ADAPTIVE)
+#: first byte of the adaptive code of faces already in :func:`canonical` order: stages 2-3 are
+#: implied (docs/decisions.md#codec-conn-canonical)
+MARKER_CANONICAL = 0x42
+MARKERS = (MARKER, MARKER_ADAPTIVE, MARKER_CANONICAL)
 
 
 def _layout(marker: int) -> tuple[int, tuple[int, ...]]:
     """Number of third-vertex contexts and the alphabets of all streams of a format."""
-    n_ctx = N_CTX if marker == MARKER else NV_CTX
+    n_ctx = N_CTX if marker == MARKER else NV_CTX  # the canonical format is adaptive's
     alphas = ALPHABETS[:4] + (W_ALPHA,) * n_ctx + ALPHABETS[N_TOPO:]
     return n_ctx, alphas
 
@@ -736,7 +747,7 @@ def _traverse(F: np.ndarray):
     nw = int(lens[4])
     head = [syms[k, : lens[k]] for k in range(4)]
     topo = {}
-    for marker in MARKERS:
+    for marker in MARKERS[:2]:
         n_ctx = _layout(marker)[0]
         c = wctx[:nw] >> 6 if marker == MARKER else np.minimum(wctx[:nw] & 63, n_ctx - 1)
         by_ctx = np.argsort(c, kind="stable")
@@ -779,12 +790,19 @@ def encode(F: np.ndarray) -> bytes:
     bitsC = _bitbuf(64 * m + 64)
     st, n_fb, posC = _face_order(True, m, Fc, nptr, nbrs, vptr, vf, inv, fc, fb, bitsC, 0, 0)
     rest = [vb, fc, fb[:n_fb], _rotation_symbols(F[order], L[Fc])]
+    n_topo = 4 + NV_CTX
+    out = []
+    if nv == n_univ and (L == np.arange(nv)).all() and (order == np.arange(m)).all():
+        if not rest[3].any():  # every face starts at its smallest index
+            head = bytes([MARKER_CANONICAL]) + varint(nv) + canonical_sizes(topo[MARKER_ADAPTIVE])
+            head += varint(posA) + bitsA[: (posA + 7) // 8].tobytes()
+            alphas = _layout(MARKER_ADAPTIVE)[1][:n_topo]
+            out.append(bytes(head) + adaptive_blob(topo[MARKER_ADAPTIVE], alphas, True))
     raw = b"".join(
         varint(pos) + bb[: (pos + 7) // 8].tobytes()
         for bb, pos in ((bitsA, posA), (bitsB, posB), (bitsC, posC))
     )
-    out = []
-    for marker in MARKERS:
+    for marker in MARKERS[:2]:
         n_ctx, alphas = _layout(marker)
         streams = topo[marker] + rest
         head = bytearray([marker]) + varint(n_univ) + varint(nv)
@@ -793,15 +811,11 @@ def encode(F: np.ndarray) -> bytes:
                 head += varint(s.size) + static_tables([s], [alpha])
             out.append(bytes(head) + raw + static_words(streams, alphas))
             continue
-        n_topo = 4 + n_ctx
         for s in streams:
             head += varint(s.size)
         head += static_tables(rest, alphas[n_topo:])
-        data = np.concatenate([s.astype(np.int64) for s in topo[marker]])
-        offsets = np.r_[0, np.cumsum([s.size for s in topo[marker]])].astype(np.int64)
-        buf = np.zeros(8 * data.size + 64, dtype=np.uint8)
-        nb = _rangecoder.code_streams(True, data, offsets, np.array(alphas[:n_topo]), buf)
-        head += varint(nb) + buf[:nb].tobytes()
+        blob = adaptive_blob(topo[marker], alphas[:n_topo])
+        head += varint(len(blob)) + blob
         out.append(bytes(head) + raw + static_words(rest, alphas[n_topo:]))
     return min(out, key=len)
 
@@ -825,12 +839,15 @@ def decode(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
         raise InvalidInputError(".sgc connectivity is malformed (unknown scheme).")
     m = int(n_faces)
     n_univ = r.varint()
-    nv = r.varint()
+    nv = n_univ if marker == MARKER_CANONICAL else r.varint()
     if not (1 <= n_univ <= n_vertices and 1 <= nv <= n_univ and nv <= 3 * m):
         raise InvalidInputError(".sgc connectivity is malformed (bad vertex counts).")
     n_ctx, alphas = _layout(marker)
     n_topo = 4 + n_ctx
-    sizes, streams, bits = read_streams(r, marker == MARKER_ADAPTIVE, n_topo, alphas, m, nv)
+    if marker == MARKER_CANONICAL:
+        sizes, streams, bits = read_canonical(r, alphas[:n_topo], m)
+    else:
+        sizes, streams, bits = read_streams(r, marker == MARKER_ADAPTIVE, n_topo, alphas, m, nv)
     syms = np.zeros((4, max(1, max(sizes[:4]))), dtype=np.int32)
     for k in range(4):
         syms[k, : sizes[k]] = streams[k]
@@ -847,6 +864,9 @@ def decode(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
     )
     if st != 0 or nv2 != nv:
         raise InvalidInputError(".sgc connectivity is malformed (topology stream).")
+    if marker == MARKER_CANONICAL:
+        idx = (np.argmin(Fc, axis=1)[:, None] + np.arange(3)[None, :]) % 3
+        return np.take_along_axis(Fc, idx, axis=1)
     L = np.zeros(nv, dtype=np.int64)
     st, _ = _ranks(False, nv, L, n_univ, streams[n_topo], bB, 0, nB)
     if st != 0:

@@ -18,6 +18,10 @@ PB_SYM = 16
 UNARY = 8
 #: probabilities per adaptive symbol model
 SYM_STRIDE = UNARY + 66
+#: counted models (:func:`bit_counted`): the n-th update moves a probability by
+#: ``1 / min(n + RATE0, RATE_MAX)`` of the way (docs/decisions.md#codec-conn-canonical)
+RATE0 = 2
+RATE_MAX = 32
 
 
 @numba.njit(cache=True, inline="always")
@@ -83,35 +87,58 @@ def _dec_normalise(st, buf):
         st[4] = ((st[4] << 8) | _next_byte(st, buf)) & 0xFFFFFFFF
 
 
-@numba.njit(cache=True)
-def bit(enc, st, buf, probs, i, b, pb):
-    """Code bit ``b`` (encoder) or return the decoded bit, with adaptive probability
-    ``probs[i]`` of ``pb`` bits."""
-    p = probs[i]
+@numba.njit(cache=True, inline="always")
+def _bit_at(enc, st, buf, p, b, pb):
+    """Code bit ``b`` (encoder) or return the decoded bit, probability ``p`` of a zero."""
     bound = (st[1] >> pb) * p
     if enc:
         if b == 0:
             st[1] = bound
-            probs[i] = p + (((1 << pb) - p) >> 5)
         else:
             st[0] += bound
             st[1] -= bound
-            probs[i] = p - (p >> 5)
         while st[1] < _TOP:
             st[1] <<= 8
             _shift_low(st, buf)
         return b
     if st[4] < bound:
         st[1] = bound
-        probs[i] = p + (((1 << pb) - p) >> 5)
         b = 0
     else:
         st[4] -= bound
         st[1] -= bound
-        probs[i] = p - (p >> 5)
         b = 1
     _dec_normalise(st, buf)
     return b
+
+
+@numba.njit(cache=True)
+def bit(enc, st, buf, probs, i, b, pb):
+    """Code bit ``b`` (encoder) or return the decoded bit, with adaptive probability
+    ``probs[i]`` of ``pb`` bits."""
+    p = probs[i]
+    b = _bit_at(enc, st, buf, p, b, pb)
+    probs[i] = p + (((1 << pb) - p) >> 5) if b == 0 else p - (p >> 5)
+    return b
+
+
+@numba.njit(cache=True)
+def bit_counted(enc, st, buf, probs, cnts, i, b, pb):
+    """:func:`bit` whose first updates are larger: the n-th (``cnts[i]``) moves the
+    probability ``1 / min(n + RATE0, RATE_MAX)`` of the way to the bit seen."""
+    p = probs[i]
+    b = _bit_at(enc, st, buf, p, b, pb)
+    d = min(cnts[i] + RATE0, RATE_MAX)
+    cnts[i] = min(cnts[i] + 1, RATE_MAX)
+    probs[i] = p + ((1 << pb) - p) // d if b == 0 else p - p // d
+    return b
+
+
+@numba.njit(cache=True, inline="always")
+def _sym_bit(enc, st, buf, probs, cnts, i, b):
+    if cnts.size:
+        return bit_counted(enc, st, buf, probs, cnts, i, b, PB_SYM)
+    return bit(enc, st, buf, probs, i, b, PB_SYM)
 
 
 @numba.njit(cache=True)
@@ -134,22 +161,23 @@ def direct(enc, st, buf, b):
 
 
 @numba.njit(cache=True)
-def code_symbol(enc, st, buf, probs, base, s, alpha):
+def code_symbol(enc, st, buf, probs, cnts, base, s, alpha):
     """Symbol ``s`` of ``range(alpha)`` with the adaptive model at ``probs[base:base +
     SYM_STRIDE]``: truncated unary over the first :data:`UNARY` values, then the Elias-gamma
-    code of the rest (adaptive length, equiprobable mantissa). Returns the symbol (decoder: may
-    be ``>= alpha`` on damaged data)."""
+    code of the rest (adaptive length, equiprobable mantissa). ``cnts``: update counts of
+    :func:`bit_counted`, or empty for :func:`bit`. Returns the symbol (decoder: may be
+    ``>= alpha`` on damaged data)."""
     top = min(alpha - 1, UNARY)
     for k in range(top):
-        if bit(enc, st, buf, probs, base + k, 1 if s == k else 0, PB_SYM) == 1:
+        if _sym_bit(enc, st, buf, probs, cnts, base + k, 1 if s == k else 0) == 1:
             return np.int64(k)
     if top == alpha - 1:
         return np.int64(top)
     z = s - top + 1 if enc else 0
     nb = bitlen(z)
     length = 1
-    while length < 64 and bit(
-        enc, st, buf, probs, base + UNARY + length, 1 if length < nb else 0, PB_SYM
+    while length < 64 and _sym_bit(
+        enc, st, buf, probs, cnts, base + UNARY + length, 1 if length < nb else 0
     ):
         length += 1
     m = np.int64(1)
@@ -159,16 +187,18 @@ def code_symbol(enc, st, buf, probs, base, s, alpha):
 
 
 @numba.njit(cache=True)
-def code_streams(enc, data, offsets, alphas, buf):
+def code_streams(enc, data, offsets, alphas, buf, counted):
     """Code the streams ``data[offsets[k]:offsets[k + 1]]`` (symbols of ``range(alphas[k])``),
-    each with its own adaptive model. Encoder: returns the byte count; decoder: fills ``data``
-    and returns the bytes read, or -1 on damaged data."""
+    each with its own adaptive model (``counted``: :func:`bit_counted` updates). Encoder:
+    returns the byte count; decoder: fills ``data`` and returns the bytes read, or -1 on
+    damaged data."""
     st = np.zeros(6, np.int64)
     start(enc, st, buf)
     probs = np.full(alphas.size * SYM_STRIDE, 1 << (PB_SYM - 1), np.int64)
+    cnts = np.zeros(probs.size if counted else 0, np.int64)
     for k in range(alphas.size):
         for i in range(offsets[k], offsets[k + 1]):
-            s = code_symbol(enc, st, buf, probs, k * SYM_STRIDE, data[i], alphas[k])
+            s = code_symbol(enc, st, buf, probs, cnts, k * SYM_STRIDE, data[i], alphas[k])
             if not enc:
                 if s < 0 or s >= alphas[k] or st[5] > buf.size + 8:
                     return -1
