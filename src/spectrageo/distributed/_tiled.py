@@ -324,8 +324,12 @@ def remove_outliers_tiled(
 ) -> TiledResult:
     """Outlier removal of a cloud too large for memory, scored in tiles on Dask, written streaming.
 
-    ``sor`` and ``radius`` give the untiled keep mask exactly, ``rpca`` too when ``tile >=
-    block_size`` (docs/decisions.md#outliers-tiles); smaller tiles approximate it.
+    ``sor`` and ``radius`` give the untiled keep mask exactly. ``rpca`` gives the keep mask of
+    the first scoring pass of :func:`~spectrageo.outliers.remove_outliers` (threshold rule and
+    cluster flags) when ``tile >= block_size`` (docs/decisions.md#outliers-tiles); smaller tiles
+    approximate it. The stages that need a whole-cloud neighbourhood are not applied: sparse
+    points and sparse surface regions, the organized grid, and the second pass at high
+    contamination (docs/decisions.md#outliers-rescore).
 
     Parameters
     ----------
