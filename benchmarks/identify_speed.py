@@ -9,10 +9,13 @@ the decisions (found / not found) are checked against the ground truth.
 
     python benchmarks/identify_speed.py
     python benchmarks/identify_speed.py --screen-ab   # grid screen of hypotheses on / off
+    python benchmarks/identify_speed.py --pieces-ab   # pieces of wide segments on / off
 
 Writes ``benchmarks/_out/identify_speed.md``. ``--screen-ab`` instead times the tuning scenes 1-3
 of ``spectrageo evaluate identify`` (10 models, with the viewpoint) with the grid screen of pose
-hypotheses off and on, alternating in one process (docs/decisions.md#identify-screening).
+hypotheses off and on, alternating in one process (docs/decisions.md#identify-screening);
+``--pieces-ab`` times tuning scenes 1-10 with and without the pieces of wide segments
+(docs/decisions.md#identify-pieces).
 """
 
 from __future__ import annotations
@@ -69,35 +72,41 @@ def main() -> None:
     write_section("identify_speed", "\n".join(lines))
 
 
-def screen_ab(seeds=(1, 2, 3)) -> None:
+def ab(attr: str, off, seeds=(1, 2, 3)) -> None:
+    """Time tuning scenes with ``_identify.<attr>`` at ``off`` and at its default, alternating."""
     from spectrageo.datasets import data_dir
     from spectrageo.evaluate.identify import load_library
     from spectrageo.register import _identify, identify, make_scene
 
     lib = load_library(Path(data_dir(required=True)))
     identify(make_scene(lib, n_objects=3, rng=0).points[:20000], lib, rng=0)  # warm-up
-    default = _identify.N_SCREEN
-    lines = ["| scene | screen off (s) | screen on (s) | ratio | found off | found on |",
+    default = getattr(_identify, attr)
+    lines = [f"| scene | {attr} off (s) | on (s) | ratio | found off | found on |",
              "|---|---|---|---|---|---|"]  # fmt: skip
+    tot = [0.0, 0.0]
     try:
         for seed in seeds:
             sc = make_scene(lib, n_objects=3 + seed % 4, rng=seed)
             cell = []
-            for n in (0, default):
-                _identify.N_SCREEN = n
+            for k, n in enumerate((off, default)):
+                setattr(_identify, attr, n)
                 t0 = time.perf_counter()
                 res = identify(sc.points, lib, rng=0, viewpoint=sc.viewpoint)
                 cell.append((time.perf_counter() - t0, sum(m.found for m in res)))
+                tot[k] += cell[-1][0]
             (a, fa), (b, fb) = cell
             lines.append(f"| {seed} | {a:.1f} | {b:.1f} | {b / a:.2f} | {fa} | {fb} |")
             print(lines[-1], flush=True)
     finally:
-        _identify.N_SCREEN = default
+        setattr(_identify, attr, default)
+    print(f"all: {tot[0]:.1f} / {tot[1]:.1f} s, ratio {tot[1] / tot[0]:.2f}")
     print(f"Machine: {machine_line()}")
 
 
 if __name__ == "__main__":
     if "--screen-ab" in sys.argv:
-        screen_ab()
+        ab("N_SCREEN", 0)
+    elif "--pieces-ab" in sys.argv:  # tuning scenes 1-10 (docs/decisions.md#identify-pieces)
+        ab("SPLIT_DIAG", float("inf"), seeds=tuple(range(1, 11)))
     else:
         main()

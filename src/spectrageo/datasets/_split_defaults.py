@@ -311,6 +311,20 @@ _DEFAULTS = [
        "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
     _d(_R + "_visibility.RAY_NEIGHBORS", 4, "tuning", "identify", _EI,
        "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
+    _d(_R + "_identify.SPLIT_DIAG", 1.3, "tuning", "identify", _EI,
+       "mixed segments of seeds 4 and 10 are 1.55-1.84 diagonals, pure ones <= 1.04; set before "
+       "the tuning runs, not varied; docs/decisions.md#identify-pieces"),
+    _d(_R + "_identify.CREASE", 0.2, "tuning", "identify", _EI,
+       "0.3 left the seed-10 rocker-arm joined to clutter, 0.2 cut it out; generated scenes, "
+       "seeds 1-10; docs/decisions.md#identify-pieces"),
+    _d(_R + "_identify.PIECE_HYPOTHESES", 5000, "tuning", "identify", _EI,
+       "a quarter of n_hypotheses, for time; generated scenes, seeds 1-10; "
+       "docs/decisions.md#identify-pieces"),
+    _d(_R + "_identify.PIECE_REFINE", 1, "tuning", "identify", _EI,
+       "for time; generated scenes, seeds 1-10; docs/decisions.md#identify-pieces"),
+    _d(_R + "_segment.split_creases.k", 10, "tuning", "identify", _EI,
+       "the neighbours of the normals; set before the tuning runs, not varied; "
+       "docs/decisions.md#identify-pieces"),
 ]
 # fmt: on
 #: every tuned default with the data it was chosen on

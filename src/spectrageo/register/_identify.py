@@ -4,9 +4,10 @@ Scene and models share one sampling step; planes are removed and adaptive DBSCAN
 (Eq. 6.28-6.29); boundary points are left out (Eq. 6.43-6.44); point saliency and multi-scale
 features (Eq. 6.30-6.36) give correspondences, RANSAC and Tukey ICP a pose, and the dissimilarity
 ``h`` of the salient pairs (Eq. 6.37-6.38) decides ``found`` (``h < zeta``). With a sensor
-``viewpoint``, a pose must also respect free space (``_visibility``) and half turns of a rejected
-pose are tried. Departures from the thesis: docs/decisions.md#identify-pipeline,
-#identify-visibility and #identify-screening.
+``viewpoint``, a pose must also respect free space (``_visibility``), half turns of a rejected
+pose are tried, and segments wider than a model also give hypotheses from their pieces cut along
+concave creases. Departures from the thesis: docs/decisions.md#identify-pipeline,
+#identify-visibility, #identify-screening and #identify-pieces.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from .._errors import InvalidInputError
 from ._common import WORKERS, apply_transform, knn_normals, make_transform, voxel_downsample
 from ._identify_cover import ModelGrid
 from ._kernels import compatible_lists, count_inliers
-from ._segment import adaptive_dbscan, remove_planes
+from ._segment import adaptive_dbscan, remove_planes, split_creases
 from ._visibility import SceneRays
 
 #: RANSAC inliers also need normals within ~37 degrees (unoriented), as in the re-ranking
@@ -43,6 +44,13 @@ VIS_TOL = 3.0
 VIS_MAX = 0.03
 #: flipped poses (half turns about the model's principal axes) are tried below this ``h``
 FLIP_H = 0.8
+#: with a viewpoint, segments wider than this many model diagonals are also searched in pieces
+SPLIT_DIAG = 1.3
+#: concavity (about radians between the normals) of the creases that cut a wide segment
+CREASE = 0.2
+#: RANSAC hypotheses drawn and poses refined on a piece
+PIECE_HYPOTHESES = 5000
+PIECE_REFINE = 1
 
 DEFAULTS: dict[str, Any] = {
     "zeta": 0.4,  # Table 6.7
@@ -380,9 +388,12 @@ def _flips(model: _Cloud, T: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def _search_segment(model, seg, voxel, o, g, rays) -> list[tuple[float, float, np.ndarray]]:
+def _search_segment(
+    model, seg, voxel, o, g, rays, hyp=None
+) -> list[tuple[float, float, np.ndarray]]:
     """Refined poses of ``model`` on ``seg`` as ``(h, violation, T)``; flips of the best pose
-    are tried when no pose is clearly accepted (docs/decisions.md#identify-visibility)."""
+    are tried when no pose is clearly accepted (docs/decisions.md#identify-visibility). The
+    hypotheses come from ``hyp`` (a piece of ``seg``) when given."""
     out: list[tuple[float, float, np.ndarray]] = []
     zeta = o["zeta"]
 
@@ -393,6 +404,11 @@ def _search_segment(model, seg, voxel, o, g, rays) -> list[tuple[float, float, n
         out.append((h, v, T))
         return h < 0.75 * zeta and v <= VIS_MAX  # a clear match: no need for the other poses
 
+    if hyp is not None:  # a piece: its best hypothesis only
+        po = {**o, "n_refine": PIECE_REFINE, "n_hypotheses": PIECE_HYPOTHESES}
+        for _score, T0 in _ransac_poses(model, hyp, voxel, po, g):
+            run(T0)
+        return out
     for _score, T0 in _ransac_poses(model, seg, voxel, o, g):
         if run(T0):
             return out
@@ -453,6 +469,26 @@ def dissimilarity(model: _Cloud, seg: _Cloud, T: np.ndarray, voxel: float, o: di
     return float(dall[:kp].mean())
 
 
+def _pieces(S, segs, o, voxel, diag) -> list[tuple[int, _Cloud]]:
+    """Model-sized pieces of the segments wider than ``SPLIT_DIAG`` model diagonals, cut along
+    concave creases (an object touching clutter; docs/decisions.md#identify-pieces)."""
+    out = []
+    for c, (idx, cl) in enumerate(segs):
+        if cl.diag <= SPLIT_DIAG * diag:
+            continue
+        lab = split_creases(cl.P, cl.N, o["viewpoint"], crease=CREASE, min_size=o["min_segment"])
+        if lab.max() < 1:
+            continue
+        _, j = cl.tree.query(S[idx], k=1, workers=WORKERS)
+        full = lab[j]
+        for p in range(int(lab.max()) + 1):
+            sub = idx[full == p]
+            pc = _prepare(S[sub], voxel, o)
+            if pc is not None and pc.diag <= SPLIT_DIAG * diag:
+                out.append((c, pc))
+    return out
+
+
 # ------------------------------------------------------------------------------------- API
 
 
@@ -469,7 +505,8 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
     **options
         Overrides of :data:`DEFAULTS` (``zeta``, ``k_a``, ``k_d``, ``k_s``, ``k_p``, ``tau``, ...);
         unknown names raise InvalidInputError. ``viewpoint`` (3,): the sensor position; a found
-        pose then leaves at most :data:`VIS_MAX` of the model in observed free space.
+        pose then leaves at most :data:`VIS_MAX` of the model in observed free space, and
+        segments wider than :data:`SPLIT_DIAG` model diagonals are also searched in pieces.
 
     Returns
     -------
@@ -527,6 +564,10 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
         cl = _prepare(S[idx], voxel, o)
         if cl is not None:
             segs.append((idx, cl))
+    # (segment, cloud giving the hypotheses): the segments, then pieces of the wide ones
+    jobs = [(c, sc) for c, (_, sc) in enumerate(segs)]
+    if o["viewpoint"] is not None:
+        jobs += _pieces(S, segs, o, voxel, float(np.median(diags)))
     # --- every model against every segment
     rays = None if o["viewpoint"] is None else SceneRays(Sd, o["viewpoint"], voxel)
     cands, admissible = [], []
@@ -535,13 +576,16 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
         best = (np.inf, np.eye(4), np.zeros(0, dtype=np.int64))
         best_key = (True, np.inf)
         if mc is not None:
-            for c, (idx, sc) in enumerate(segs):
-                # one stream per (model, segment): a model's answer does not depend on the others
+            for c, (si, hc) in enumerate(jobs):
+                idx, sc = segs[si]
+                # one stream per (model, job): a model's answer does not depend on the others
                 g = np.random.default_rng([int(seed), 1, _key_seed(items[mi_][0]), c])
                 # too small to decide (a few dozen points fit anywhere on any model)
-                if sc.diag < 0.15 * mc.diag or sc.P.shape[0] < o["min_fraction"] * mc.P.shape[0]:
+                if hc.diag < 0.15 * mc.diag or hc.P.shape[0] < o["min_fraction"] * mc.P.shape[0]:
                     continue
-                tried = _search_segment(mc, sc, voxel, o, g, rays)
+                if hc is not sc and not best_key[0] and best_key[1] < 0.75 * o["zeta"]:
+                    continue  # a piece, for a model already clearly found
+                tried = _search_segment(mc, sc, voxel, o, g, rays, None if hc is sc else hc)
                 for h, v, T in tried:
                     key = (v > VIS_MAX, h)
                     if np.isfinite(h) and key < best_key:

@@ -91,6 +91,55 @@ def adaptive_dbscan(
     return _relabel(labels, min_cluster_size)
 
 
+def split_creases(
+    points, normals, viewpoint, *, crease: float = 0.2, k: int = 10, min_size: int = 30
+) -> np.ndarray:
+    """Pieces of a segment cut along its concave creases, as seen from ``viewpoint``.
+
+    With normals ``n`` turned towards the viewpoint, a neighbour pair ``(i, j)`` among the ``k``
+    nearest is concave when ``(n_j - n_i) . (p_j - p_i) / |p_j - p_i| < -crease`` (about the
+    angle between the normals, in radians). Points with a concave pair are crease points; the
+    other points are linked to their neighbours closer than 3 median spacings and the connected
+    parts are the pieces; a crease point joins the piece of its nearest non-crease point.
+
+    Parameters
+    ----------
+    points, normals : (n, 3) arrays
+        Segment points and (unoriented) unit normals.
+    viewpoint : (3,) array
+        Sensor position.
+    crease, k, min_size
+        Concavity threshold, neighbours, smallest piece kept.
+
+    Returns
+    -------
+    (n,) int64 labels ``0 .. n_p - 1`` by decreasing size, ``-1`` for points of small pieces.
+    """
+    P = as_points(points, "points")
+    N = np.asarray(normals, dtype=np.float64)
+    e = np.asarray(viewpoint, dtype=np.float64)
+    n = P.shape[0]
+    if n <= k:
+        return _relabel(np.zeros(n, dtype=np.int64), min_size)
+    N = N * np.where(np.einsum("ij,ij->i", N, e - P) < 0, -1.0, 1.0)[:, None]
+    tree = cKDTree(P)
+    d, idx = tree.query(P, k=k + 1)
+    d, idx = d[:, 1:], idx[:, 1:]
+    D = P[idx] - P[:, None, :]
+    conc = np.einsum("ikc,ikc->ik", N[idx] - N[:, None, :], D) / np.maximum(d, 1e-300)
+    cr = (conc < -crease).any(axis=1)
+    if not cr.any() or cr.all():
+        return _relabel(np.zeros(n, dtype=np.int64), min_size)
+    ok = ~cr[:, None] & ~cr[idx] & (d < 3.0 * np.median(d[:, 0]))
+    rows = np.repeat(np.arange(n), k).reshape(n, k)
+    G = sp.coo_matrix((np.ones(int(ok.sum())), (rows[ok], idx[ok])), shape=(n, n)).tocsr()
+    _, comp = connected_components(G, directed=False)
+    inner = np.flatnonzero(~cr)
+    _, j = cKDTree(P[inner]).query(P[cr], k=1)
+    comp[cr] = comp[inner[j]]
+    return _relabel(comp.astype(np.int64), min_size)
+
+
 def _relabel(labels: np.ndarray, min_size: int) -> np.ndarray:
     """Renumber clusters by decreasing size; small ones become -1."""
     out = np.full(labels.shape, -1, dtype=np.int64)
@@ -176,4 +225,4 @@ def remove_planes(
     return keep, planes
 
 
-__all__ = ["adaptive_dbscan", "adaptive_eps", "fit_plane_ransac", "remove_planes"]
+__all__ = ["adaptive_dbscan", "adaptive_eps", "fit_plane_ransac", "remove_planes", "split_creases"]
