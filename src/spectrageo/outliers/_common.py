@@ -19,8 +19,8 @@ from ..geometry import PointCloud
 
 #: Query points per kNN chunk: bounds the temporaries of a query to O(chunk * k).
 KNN_CHUNK = 131_072
-#: Below this many query points the kd-tree is queried on the calling thread (starting the
-#: query threads costs more than it saves).
+#: Below this many query points the kd-tree and the grid/octree kernels are queried on the
+#: calling thread (starting the query threads costs more than it saves).
 KNN_SERIAL_BELOW = 16_384
 
 
@@ -260,22 +260,25 @@ def knn_grid(
     X, codes = sc.points, sc.codes
     if subset is not None:
         X, codes = take_rows(X, subset), codes[subset]
-    if query is None and subset is None:
-        idx, dmean, dlast, dzero = knn_sorted(X, codes, k, sc.lo, sc.scale)
-    else:
-        qi = np.arange(sc.points.shape[0]) if query is None else query
-        if query is None and self_index is None:
-            self_index = qi
-        idx, dmean, dlast, dzero = knn_sorted(
-            X,
-            codes,
-            k,
-            sc.lo,
-            sc.scale,
-            query=take_rows(sc.points, qi),
-            qcodes=sc.codes[qi],
-            self_index=self_index,
-        )
+    n_query = sc.points.shape[0] if query is None else query.shape[0]
+    # few queries: on the calling thread (docs/decisions.md#outliers-speed-serial-regions)
+    with numba_threads(1) if n_query < KNN_SERIAL_BELOW else contextlib.nullcontext():
+        if query is None and subset is None:
+            idx, dmean, dlast, dzero = knn_sorted(X, codes, k, sc.lo, sc.scale)
+        else:
+            qi = np.arange(sc.points.shape[0]) if query is None else query
+            if query is None and self_index is None:
+                self_index = qi
+            idx, dmean, dlast, dzero = knn_sorted(
+                X,
+                codes,
+                k,
+                sc.lo,
+                sc.scale,
+                query=take_rows(sc.points, qi),
+                qcodes=sc.codes[qi],
+                self_index=self_index,
+            )
     if subset is not None:
         idx = subset.astype(idx.dtype, copy=False)[idx]
     return Neighbours(idx, dmean, dlast, int(np.count_nonzero(dzero)))

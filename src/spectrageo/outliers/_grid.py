@@ -65,46 +65,39 @@ def morton_encode(q):  # pragma: no cover - compiled
     return out
 
 
+#: Multiplier of the hash of cell keys (Fibonacci hashing: ``2^64`` over the golden ratio).
+_HASH_MUL = np.uint64(0x9E3779B97F4A7C15)
+
+
+@njit(cache=True)
+def _cell_table(keys):  # pragma: no cover - compiled
+    """Open-addressing hash table of the occupied cells ``keys`` (distinct): slots hold the
+    position of a key in ``keys`` (-1: empty); at most half of the ``2^b`` slots are used.
+    Returns the table and ``64 - b`` (the shift of :func:`_find_cell`)."""
+    b = 1
+    while (1 << b) < 2 * keys.shape[0]:
+        b += 1
+    table = np.full(1 << b, -1, dtype=np.int64)
+    mask = (1 << b) - 1
+    shift = np.uint64(64 - b)
+    for p in range(keys.shape[0]):
+        h = np.int64((keys[p] * _HASH_MUL) >> shift)
+        while table[h] >= 0:
+            h = (h + 1) & mask
+        table[h] = p
+    return table, shift
+
+
 @njit(cache=True, inline="always")
-def _lower_bound(a, key, hint):  # pragma: no cover - compiled
-    """First index ``i`` with ``a[i] >= key`` (sorted ``a``), galloping from ``hint``."""
-    n = a.shape[0]
-    if n == 0:
-        return 0
-    if hint < 0:
-        hint = 0
-    if hint >= n:
-        hint = n - 1
-    if a[hint] < key:
-        lo = hint  # a[lo] < key
-        step = 1
-        hi = hint + 1
-        while hi < n and a[hi] < key:
-            lo = hi
-            step *= 2
-            hi = hint + step
-        if hi > n:
-            hi = n
-        # a[lo] < key, and a[hi] >= key or hi == n
-        lo += 1
-    else:
-        hi = hint  # a[hi] >= key
-        step = 1
-        lo = hint - 1
-        while lo >= 0 and a[lo] >= key:
-            hi = lo
-            step *= 2
-            lo = hint - step
-        if lo < -1:
-            lo = -1
-        lo += 1
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if a[mid] < key:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
+def _find_cell(table, shift, keys, key):  # pragma: no cover - compiled
+    """Position of ``key`` in ``keys`` (the cells of :func:`_cell_table`), or -1."""
+    mask = table.shape[0] - 1
+    h = np.int64((key * _HASH_MUL) >> shift)
+    while True:
+        p = table[h]
+        if p < 0 or keys[p] == key:
+            return p
+        h = (h + 1) & mask
 
 
 def _offsets() -> np.ndarray:
@@ -149,13 +142,15 @@ def _write(qi, bd, bi, k, out_idx, dmean, dlast, dzero):  # pragma: no cover - c
 
 @njit(cache=True, parallel=True)
 def _grid_pass(
-    X, ukeys, ustarts, Q, gstart, gkeys, self_idx, k, L, lo, w, out_idx, dmean, dlast, dzero, bound
-):  # pragma: no cover - compiled
+    X, ukeys, ustarts, table, shift, Q, gstart, gkeys, self_idx, k, L, lo, w, out_idx, dmean,
+    dlast, dzero, bound,
+):  # pragma: no cover - compiled  # fmt: skip
     """Grid pass at level ``L``: the ``k`` nearest data points ``X`` of every query ``Q``.
 
     Queries are grouped by cell (``gstart``, ``gkeys``); ``ukeys`` / ``ustarts`` are the occupied
-    data cells and their runs. Certified queries get their neighbours and ``bound[q] = -1``; the
-    others keep in ``bound[q]`` the squared ``k``-th distance found, for the octree pass.
+    data cells and their runs, found through the hash table ``table`` (:func:`_cell_table`).
+    Certified queries get their neighbours and ``bound[q] = -1``; the others keep in
+    ``bound[q]`` the squared ``k``-th distance found, for the octree pass.
     """
     ng = gkeys.shape[0]
     maxc = (1 << (BITS - L)) - 1
@@ -174,13 +169,11 @@ def _grid_pass(
         bzs = np.empty(BUFMAX)
         dd = np.empty(BUFMAX)
         bjs = np.empty(BUFMAX, dtype=np.int64)
-        hint = _lower_bound(ukeys, gkeys[g0], ukeys.shape[0] >> 1)
         for g in range(g0, g1):
             key = gkeys[g]
             cx = np.int64(_compact3(key))
             cy = np.int64(_compact3(key >> np.uint64(1)))
             cz = np.int64(_compact3(key >> np.uint64(2)))
-            hint = _lower_bound(ukeys, key, hint)
             nr = 0
             for o in range(27):  # the cell itself, then faces, edges, corners
                 x = cx + _OFFSETS[o, 0]
@@ -193,8 +186,8 @@ def _grid_pass(
                     | (_spread3(np.uint64(y)) << np.uint64(1))
                     | (_spread3(np.uint64(z)) << np.uint64(2))
                 )
-                p = _lower_bound(ukeys, nk, hint)
-                if p < ukeys.shape[0] and ukeys[p] == nk:
+                p = _find_cell(table, shift, ukeys, nk)
+                if p >= 0:
                     rs[nr] = ustarts[p]
                     re[nr] = ustarts[p + 1]
                     ro[nr, 0] = _OFFSETS[o, 0]
@@ -242,16 +235,22 @@ def _grid_pass(
                         ddy = bys[c] - qy
                         ddz = bzs[c] - qz
                         dd[c] = ddx * ddx + ddy * ddy + ddz * ddz
-                    for c in range(nb):
-                        d = dd[c]
-                        if cnt == k and d >= worst:
-                            continue
+                    c = 0
+                    while c < nb and cnt < k:  # the first k candidates
                         j = bjs[c]
-                        if j == me:
-                            continue
-                        cnt = _insert(bd, bi, cnt, k, d, j)
-                        if cnt == k:
-                            worst = bd[k - 1]
+                        if j != me:
+                            cnt = _insert(bd, bi, cnt, k, dd[c], j)
+                        c += 1
+                    if cnt == k:
+                        worst = bd[k - 1]
+                    while c < nb:  # then only those nearer than the k-th
+                        d = dd[c]
+                        if d < worst:
+                            j = bjs[c]
+                            if j != me:
+                                _insert(bd, bi, k, k, d, j)
+                                worst = bd[k - 1]
+                        c += 1
                 else:
                     for r in range(nr):
                         if cnt == k:  # skip a cell that cannot hold a nearer point
@@ -282,24 +281,36 @@ def _grid_pass(
                 bound[qi] = -1.0
 
 
+@njit(cache=True)
+def _cell_boxes(ckey, clev, wl, lo):  # pragma: no cover - compiled
+    """The (slightly enlarged) box of every octree cell: ``(x0, y0, z0, x1, y1, z1)`` rows, the
+    cell of key ``ckey[f]`` and side ``wl[clev[f]]`` grown by ``1e-9`` of its side."""
+    out = np.empty((ckey.shape[0], 6))
+    for f in range(ckey.shape[0]):
+        key = ckey[f]
+        w = wl[clev[f]]
+        e = 1e-9 * w
+        w2 = w + 2 * e
+        for a in range(3):
+            x0 = lo[a] + np.float64(_compact3(key >> np.uint64(a))) * w - e
+            out[f, a] = x0
+            out[f, 3 + a] = x0 + w2
+    return out
+
+
 @njit(cache=True, inline="always")
-def _box_dist2(key, w, lo, qx, qy, qz):  # pragma: no cover - compiled
-    """Squared distance from a point to the (slightly enlarged) box of a cell of side ``w``."""
-    e = 1e-9 * w
-    x0 = lo[0] + np.float64(_compact3(key)) * w - e
-    y0 = lo[1] + np.float64(_compact3(key >> np.uint64(1))) * w - e
-    z0 = lo[2] + np.float64(_compact3(key >> np.uint64(2))) * w - e
-    w2 = w + 2 * e
-    gx = max(x0 - qx, 0.0, qx - (x0 + w2))
-    gy = max(y0 - qy, 0.0, qy - (y0 + w2))
-    gz = max(z0 - qz, 0.0, qz - (z0 + w2))
+def _box_dist2(box, f, qx, qy, qz):  # pragma: no cover - compiled
+    """Squared distance from a point to the box ``f`` of :func:`_cell_boxes`."""
+    gx = max(box[f, 0] - qx, 0.0, qx - box[f, 3])
+    gy = max(box[f, 1] - qy, 0.0, qy - box[f, 4])
+    gz = max(box[f, 2] - qz, 0.0, qz - box[f, 5])
     return gx * gx + gy * gy + gz * gz
 
 
 @njit(cache=True, parallel=True)
 def _tree_pass(
     X,
-    ckey,
+    box,
     cbeg,
     cend,
     clev,
@@ -307,13 +318,11 @@ def _tree_pass(
     chhi,
     top_lo,
     top_hi,
-    wl,
     Q,
     sel,
     self_idx,
     bound,
     k,
-    lo,
     out_idx,
     dmean,
     dlast,
@@ -321,13 +330,13 @@ def _tree_pass(
 ):  # pragma: no cover - compiled
     """Octree pass: exact ``k`` nearest data points of the queries ``Q[sel]``.
 
-    Cells of all levels are flat arrays: key ``ckey``, data run ``cbeg:cend``, level ``clev``
-    (0 = the grid level, side ``wl[clev]``), children ``chlo:chhi`` (flat indices; none for level
-    0); the coarsest level is ``top_lo:top_hi``. ``bound[q]`` (squared distance) prunes before
-    ``k`` points are found. ``self_idx`` as in :func:`_grid_pass`.
+    Cells of all levels are flat arrays: box ``box`` (:func:`_cell_boxes`), data run
+    ``cbeg:cend``, level ``clev`` (0 = the grid level), children ``chlo:chhi`` (flat indices; none
+    for level 0); the coarsest level is ``top_lo:top_hi``. ``bound[q]`` (squared distance)
+    prunes before ``k`` points are found. ``self_idx`` as in :func:`_grid_pass`.
     """
     m = sel.shape[0]
-    nlev = wl.shape[0]
+    nlev = clev[top_lo] + 1
     self_query = self_idx.shape[0] == 0
     n_chunks = min(m, 1024)
     for ch in prange(n_chunks):
@@ -352,7 +361,7 @@ def _tree_pass(
             # the top cells, pushed farthest first
             nc = 0
             for f in range(top_lo, top_hi):
-                d = _box_dist2(ckey[f], wl[clev[f]], lo, qx, qy, qz)
+                d = _box_dist2(box, f, qx, qy, qz)
                 pos = nc
                 nc += 1
                 while pos > 0 and sd[pos - 1] < d:
@@ -370,7 +379,7 @@ def _tree_pass(
                 sp -= 1
                 f = stk[sp]
                 lim = worst if cnt == k else b0
-                if _box_dist2(ckey[f], wl[clev[f]], lo, qx, qy, qz) > lim:
+                if _box_dist2(box, f, qx, qy, qz) > lim:
                     continue
                 if clev[f] == 0 or cend[f] - cbeg[f] <= SCAN_RUN:
                     for j in range(cbeg[f], cend[f]):
@@ -386,7 +395,7 @@ def _tree_pass(
                     continue
                 nc = 0
                 for c in range(chlo[f], chhi[f]):
-                    d = _box_dist2(ckey[c], wl[clev[c]], lo, qx, qy, qz)
+                    d = _box_dist2(box, c, qx, qy, qz)
                     if d > lim:
                         continue
                     pos = nc
@@ -507,10 +516,13 @@ def knn_sorted(
     gkeys, gstart = _cells_at(qcodes, np.uint64(3 * L0))
     bound = np.empty(m)
     w0 = float(2**L0) / scale
+    table, shift = _cell_table(keys)
     _grid_pass(
         X,
         keys,
         starts,
+        table,
+        shift,
         query,
         gstart,
         gkeys,
@@ -551,7 +563,7 @@ def knn_sorted(
     wl = np.array([float(2 ** (L0 + i)) / scale for i in range(len(lev_keys))])
     _tree_pass(
         X,
-        ckey,
+        _cell_boxes(ckey, clev, wl, lo),
         cbeg,
         cend,
         clev,
@@ -559,13 +571,11 @@ def knn_sorted(
         chhi,
         int(off[-2]),
         int(off[-1]),
-        wl,
         query,
         sel,
         self_index,
         bound,
         k,
-        lo,
         out_idx,
         dmean,
         dlast,

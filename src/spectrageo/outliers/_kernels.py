@@ -44,6 +44,22 @@ def gather_rows(P, order, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def centre_and_scale(X, lo, hi, inv_h, centre, out):  # pragma: no cover - compiled
+    """``centre = X[lo:hi].mean(axis=0)`` (rows added in order to 0, as numpy sums over axis 0
+    of an (m, 3) array) and ``out = (X - centre) * inv_h`` rounded to ``out``'s dtype."""
+    for c in range(3):
+        centre[c] = 0.0  # numpy's sum starts from its identity (-0.0 sums give +0.0)
+    for i in range(lo, hi):
+        for c in range(3):
+            centre[c] += X[i, c]
+    for c in range(3):
+        centre[c] /= hi - lo
+    for i in range(X.shape[0]):
+        for c in range(3):
+            out[i, c] = (X[i, c] - centre[c]) * inv_h
+
+
+@njit(cache=True, nogil=True)
 def _gather_tile(Pn, centers, nbrs, s, nt, Mt):  # pragma: no cover - compiled
     """Rows ``3s .. 3(s + nt)`` of ``M`` into the column-major tile buffer ``Mt`` (K, >= 3 nt)."""
     K = nbrs.shape[1] + 1
@@ -286,12 +302,13 @@ def bilateral_offsets(P, N, nbrs, sigma1, sigma2, out):  # pragma: no cover - co
         out[i] = num / den if den > 0 else 0.0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def count_flagged(idx, flagged):  # pragma: no cover - compiled
-    """Number of flagged neighbours ``sum_j flagged[idx[i, j]]`` of every point (int64)."""
+    """Number of flagged neighbours ``sum_j flagged[idx[i, j]]`` of every point (int64), on the
+    calling thread (docs/decisions.md#outliers-speed-serial-regions)."""
     n, k = idx.shape
     out = np.zeros(n, dtype=np.int64)
-    for i in prange(n):
+    for i in range(n):
         c = 0
         for j in range(k):
             if flagged[idx[i, j]]:
@@ -303,7 +320,10 @@ def count_flagged(idx, flagged):  # pragma: no cover - compiled
 @njit(cache=True, parallel=True)
 def subtract_patch_quantile(scores, s1, idx, q):  # pragma: no cover - compiled
     """``scores[i] = max(scores[i] - Q_q(s1[idx[i, :]]), 0)`` in place, ``Q_q`` the ``q``-quantile
-    with linear interpolation between order statistics (:func:`numpy.quantile`'s default)."""
+    with linear interpolation between order statistics (:func:`numpy.quantile`'s default).
+
+    The two order statistics are found by rank counting (``rank_j`` = the values below ``v_j``,
+    ties by position), without the branches of a sort."""
     n, k = idx.shape
     n_chunks = min(n, 256)
     pos = q * (k - 1)
@@ -313,13 +333,111 @@ def subtract_patch_quantile(scores, s1, idx, q):  # pragma: no cover - compiled
     for ch in prange(n_chunks):
         v = np.empty(k)
         for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
-            for j in range(k):  # insertion sort of the k values
-                x = s1[idx[i, j]]
-                p = j
-                while p > 0 and v[p - 1] > x:
-                    v[p] = v[p - 1]
-                    p -= 1
-                v[p] = x
-            base = v[lo] + g * (v[hi] - v[lo])
+            for j in range(k):
+                v[j] = s1[idx[i, j]]
+            a = 0.0
+            b = 0.0
+            for j in range(k):
+                x = v[j]
+                r = 0
+                for m in range(j):
+                    r += v[m] <= x
+                for m in range(j + 1, k):
+                    r += v[m] < x
+                if r == lo:
+                    a = x
+                if r == hi:
+                    b = x
+            base = a + g * (b - a)
             d = scores[i] - base
             scores[i] = d if d > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def surely_not_surface(X, rows, nb, beta, flat, out):  # pragma: no cover - compiled
+    """``out[t]``: the point ``X[rows[t]]`` with neighbours ``X[nb[t]]`` is certainly no surface
+    candidate of :func:`._support.sparse_surface` (``off > beta d`` or ``l_1 > flat * trace``),
+    whatever the rounding of that function's arithmetic; False when unsure.
+
+    With ``C`` the neighbours' covariance (``s = tr C``, ``m_2`` the sum of its principal 2x2
+    minors): ``l_1 >= 4 det C / s^2``, ``l_2 >= (m_2 - 3 s det C / m_2) / s`` and, for the
+    smallest eigenvector ``n`` and ``u = v - mean``, ``(n^T u)^2 >= |u|^2 - u^T C u / l_2``. Each
+    test keeps a margin of many times the rounding error of ``C`` (cancellation against the
+    coordinates' magnitude included); rows where that error is not small are left unsure.
+    """
+    eps = 2.220446049250313e-16
+    k = nb.shape[1]
+    for t in range(rows.shape[0]):
+        out[t] = False
+        i = rows[t]
+        mx = 0.0
+        my = 0.0
+        mz = 0.0
+        big = max(abs(X[i, 0]), abs(X[i, 1]), abs(X[i, 2]))
+        for j in range(k):
+            q = nb[t, j]
+            mx += X[q, 0]
+            my += X[q, 1]
+            mz += X[q, 2]
+            big = max(big, abs(X[q, 0]), abs(X[q, 1]), abs(X[q, 2]))
+        mx /= k
+        my /= k
+        mz /= k
+        cxx = cyy = czz = cxy = cxz = cyz = d = 0.0
+        for j in range(k):
+            q = nb[t, j]
+            ax = X[q, 0] - mx
+            ay = X[q, 1] - my
+            az = X[q, 2] - mz
+            cxx += ax * ax
+            cyy += ay * ay
+            czz += az * az
+            cxy += ax * ay
+            cxz += ax * az
+            cyz += ay * az
+            ex = X[q, 0] - X[i, 0]
+            ey = X[q, 1] - X[i, 1]
+            ez = X[q, 2] - X[i, 2]
+            d += np.sqrt(ex * ex + ey * ey + ez * ez)
+        d /= k
+        cxx /= k
+        cyy /= k
+        czz /= k
+        cxy /= k
+        cxz /= k
+        cyz /= k
+        s = cxx + cyy + czz
+        if not s > 0.0:
+            continue
+        r = eps * big / np.sqrt(s)  # relative rounding of the centred coordinates
+        rel = 16.0 * (k + 2) * (r + (k + 2) * r * r) + 1e-12
+        if rel > 1e-4:
+            continue
+        dc = 32.0 * rel * s  # bound on the error of C (entries and spectral norm)
+        det = (
+            cxx * (cyy * czz - cyz * cyz)
+            - cxy * (cxy * czz - cyz * cxz)
+            + cxz * (cxy * cyz - cyy * cxz)
+        )
+        if 4.0 * det / (s * s) > flat * s + 64.0 * dc:  # l_1 > flat * trace
+            out[t] = True
+            continue
+        m2 = cxx * cyy - cxy * cxy + cxx * czz - cxz * cxz + cyy * czz - cyz * cyz
+        if not m2 > 16.0 * dc * s:
+            continue
+        l2 = (m2 - 3.0 * (abs(det) + 8.0 * dc * s * s) * s / m2) / s - 16.0 * dc
+        if not l2 > 0.0:
+            continue
+        ux = X[i, 0] - mx
+        uy = X[i, 1] - my
+        uz = X[i, 2] - mz
+        uu = ux * ux + uy * uy + uz * uz
+        ucu = (
+            cxx * ux * ux
+            + cyy * uy * uy
+            + czz * uz * uz
+            + 2.0 * (cxy * ux * uy + cxz * ux * uz + cyz * uy * uz)
+        )
+        lb = uu * (1.0 - 8.0 * eps) - (ucu + dc * uu) / l2 * (1.0 + 8.0 * eps)
+        if lb > 0.0 and np.sqrt(lb) - (2 * k + 8) * eps * big > beta * d * (1.0 + 1e-9):
+            out[t] = True  # off > beta * d

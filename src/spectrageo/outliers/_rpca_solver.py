@@ -101,13 +101,18 @@ class _BlockRecord(list):
 
 def _normalise(Xs: np.ndarray, lo: int, hi: int, inv_h: float, Pn: np.ndarray) -> np.ndarray:
     """``Pn = (Xs - c) / h`` for the whole cloud, ``c`` the centroid of the block ``lo .. hi``
-    (returned); rounded once from float64 into ``Pn``'s dtype, in chunks. Shared by both passes
+    (returned); rounded once from float64 into ``Pn``'s dtype. Shared by both passes
     of step 5, whose replay must see the first pass's coordinates bit for bit."""
-    centre = Xs[lo:hi].mean(axis=0)
-    n = Xs.shape[0]
-    for c0 in range(0, n, KNN_CHUNK):
-        c1 = min(n, c0 + KNN_CHUNK)
-        Pn[c0:c1] = (Xs[c0:c1] - centre) * inv_h
+    if Xs.dtype != np.float64 or not (Xs.flags.c_contiguous and Pn.flags.c_contiguous):
+        centre = Xs[lo:hi].mean(axis=0)
+        for c0 in range(0, Xs.shape[0], KNN_CHUNK):
+            c1 = min(Xs.shape[0], c0 + KNN_CHUNK)
+            Pn[c0:c1] = (Xs[c0:c1] - centre) * inv_h
+        return centre
+    # compiled, same operations in the same order as above (the mean is numpy's row-by-row sum
+    # over axis 0 of an (m, 3) array); docs/decisions.md#outliers-speed-normalise
+    centre = np.empty(3)
+    _k.centre_and_scale(Xs, lo, hi, inv_h, centre, Pn)
     return centre
 
 

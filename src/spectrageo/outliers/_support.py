@@ -51,6 +51,8 @@ def sparse_surface(
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
+    from ._kernels import surely_not_surface
+
     n = X.shape[0]
     keep = np.zeros(n, dtype=bool)
     rows = np.flatnonzero(removed)
@@ -65,20 +67,19 @@ def sparse_surface(
     else:
         _, nb = cKDTree(X).query(X[rows], k + 1)
         nb = np.where(nb[:, :1] == rows[:, None], nb[:, 1:], nb[:, :-1])  # drop the point itself
-    Y = X[nb]  # (m, k, 3)
-    mu = Y.mean(axis=1)
-    C = np.einsum("mka,mkb->mab", Y - mu[:, None], Y - mu[:, None]) / k
-    w, V = np.linalg.eigh(C)
-    tr = w.sum(axis=1)
-    normal = V[:, :, 0]
-    off = np.abs(np.einsum("ma,ma->m", X[rows] - mu, normal))
-    d = np.linalg.norm(Y - X[rows][:, None], axis=2).mean(axis=1)
-    cand = (off <= beta * d) & (w[:, 0] <= flat * np.where(tr > 0, tr, 1.0)) & (tr > 0)
+    cand = np.zeros(rows.size, dtype=bool)
+    # the rows certainly failing a test are left out of the exact tests below, which give the
+    # same bits row by row (docs/decisions.md#outliers-speed-support-bounds)
+    out = np.empty(rows.size, dtype=bool)
+    surely_not_surface(X, rows, nb, float(beta), float(flat), out)
+    unsure = np.flatnonzero(~out)
+    if unsure.size:
+        cand[unsure] = _candidates(X, rows[unsure], nb[unsure], beta, flat)
     if np.count_nonzero(cand) < group:
         return keep
     pos = np.full(n, -1, dtype=np.int64)
     pos[rows[cand]] = np.arange(np.count_nonzero(cand))
-    src = np.repeat(np.arange(rows.size), k)[cand.repeat(k)]
+    src = np.repeat(np.flatnonzero(cand), k)
     dst = pos[nb[cand].reshape(-1)]
     a, b = pos[rows[src]], dst
     ok = b >= 0
@@ -88,3 +89,17 @@ def sparse_surface(
     big = np.bincount(lab)[lab] >= group
     keep[rows[cand][big]] = True
     return keep
+
+
+def _candidates(X: np.ndarray, rows: np.ndarray, nb: np.ndarray, beta: float, flat: float):
+    """The surface candidates (module notes) among the points ``X[rows]`` with neighbours
+    ``X[nb]`` ((m, k) indices)."""
+    Y = X[nb]  # (m, k, 3)
+    mu = Y.mean(axis=1)
+    C = np.einsum("mka,mkb->mab", Y - mu[:, None], Y - mu[:, None]) / nb.shape[1]
+    w, V = np.linalg.eigh(C)
+    tr = w.sum(axis=1)
+    normal = V[:, :, 0]
+    off = np.abs(np.einsum("ma,ma->m", X[rows] - mu, normal))
+    d = np.linalg.norm(Y - X[rows][:, None], axis=2).mean(axis=1)
+    return (off <= beta * d) & (w[:, 0] <= flat * np.where(tr > 0, tr, 1.0)) & (tr > 0)

@@ -93,9 +93,10 @@ def _finite_rows(P: Any, nonfinite: str) -> tuple[np.ndarray, np.ndarray | None,
     if P is None:
         raise InvalidInputError("`cloud` must be a PointCloud or an (n, 3) array; got None.")
     X = coordinate_array(P, "cloud")
-    ok = np.isfinite(X).all(axis=1)
-    if ok.all():
+    fin = np.isfinite(X)
+    if fin.all():  # a contiguous pass; the per-row reduction only when some value is not finite
         return np.ascontiguousarray(X), None, None
+    ok = fin.all(axis=1)
     if nonfinite == "raise":
         bad = np.flatnonzero(~ok)
         raise InvalidInputError(
