@@ -21,10 +21,11 @@ from conftest import icosphere
 
 #: sha256 of the decoded float64 vertices of the embedded fandisk at step 1e-3 (order kept) and
 #: at max_error 2e-4 with --reorder: the decoder is integer arithmetic and one product per
-#: coordinate, so these are the same on every machine
+#: coordinate, so these are the same on every machine (container version 4: frame and step
+#: rounded to float32 by the encoder, docs/decisions.md#codec-container-v4)
 PINNED = {
-    "step": "feb2c900e9253ef5e16c20cc01d4b356be4e75b62c196c62941260409e6eebee",
-    "reorder": "ec7c0730e98f48be7e641840ff1ce6531e61c742d0944c3aa264ac51290a2d62",
+    "step": "cb844705b6922cee7a9e4da9479c72688b78bd968ffeb82815997c8782e40dd5",
+    "reorder": "1ba7a685adb179ef7c307b088d89efe7251783ba0d447aecc9a83269c35ec0c9",
 }
 #: sha256 of the decoded vertices of tests/data/sgc/predictive_format1.sgc (the embedded fandisk
 #: at max_error 2e-3 with --reorder, written by the format-1 encoder, residual chunk tag 6)
@@ -62,7 +63,7 @@ def test_round_trip_keeps_order_and_bounds_every_coordinate(mesh):
     assert err <= step / 2 * (1 + 1e-9)
     inf = compress.info(data)
     assert inf["method"] == "predictive" and inf["order_preserved"]
-    assert inf["parameters"]["step"] == step
+    assert inf["parameters"]["step"] == _container.f32_below(step) <= step  # stored as float32
     # a finer grid costs more bits and errs less
     fine = compress.encode(V, F, method="predictive", step=step / 4)
     assert len(fine) > len(data)

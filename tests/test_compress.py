@@ -327,12 +327,7 @@ def test_prefix_decodes_to_coarser_level(fandisk, fandisk_sgc):
     assert len(c.chunks) == 4  # connectivity + 3 frequency layers
     errs = []
     # cut right after the k-th chunk
-    pos = len(data)
-    ends = []
-    for _tag, payload in reversed(c.chunks):
-        ends.append(pos)
-        pos -= len(payload) + 9
-    ends = ends[::-1]
+    ends = [r.end for r in _container.layout(data)[2]]
     for end in ends[1:]:
         V2, F2 = compress.decode(data[:end], partial=True)
         assert np.array_equal(F2, F)

@@ -31,15 +31,10 @@ def wave():
 
 
 def _split(data: bytes) -> tuple[bytes, list[bytes]]:
-    """Header (with its checksum) and the raw chunks (table entry + payload) of a container."""
-    c = _container.parse(data)
-    pos = len(data) - sum(_container._CHUNK.size + len(p) for _t, p in c.chunks)
-    head, chunks = data[:pos], []
-    for _tag, payload in c.chunks:
-        end = pos + _container._CHUNK.size + len(payload)
-        chunks.append(data[pos:end])
-        pos = end
-    return head, chunks
+    """Header and the raw chunks (record head + payload) of a container."""
+    _container.parse(data)
+    _h, pos, records = _container.layout(data)
+    return data[:pos], [data[r.start : r.end] for r in records]
 
 
 def _rebuilt(data: bytes, **changes) -> bytes:
@@ -62,7 +57,7 @@ def _segments(data: bytes) -> list[bytes]:
 def test_chunks_swapped_duplicated_dropped_or_foreign_are_refused(sphere):
     V, F, data = sphere
     head, ch = _split(data)
-    assert data[4] == _container.FORMAT_VERSION == 3 and len(ch) == 4
+    assert data[4] == _container.FORMAT_VERSION == 4 and len(ch) == 4
     other = compress.encode(V * 1.001 + 0.002 * np.sin(7 * V), F, submesh_size=40)
     _oh, och = _split(other)
     assert other[:40] != data[:40] or och[2] != ch[2]
@@ -90,15 +85,16 @@ def test_chunks_swapped_duplicated_dropped_or_foreign_are_refused(sphere):
 def test_old_versions_decode_bit_identically_without_the_binding(sphere):
     V, F, data = sphere
     want = compress.decode(data)
-    for version in (1, 2):
+    v3 = _rebuilt(data, version=3)
+    for version in (1, 2, 3):
         old = _rebuilt(data, version=version)
-        assert old[4] == version and len(old) == len(data)
-        assert old[:4] == data[:4] and old[5:40] == data[5:40]
+        assert old[4] == version and len(old) == len(v3)
+        assert old[:4] == v3[:4] and old[5:40] == v3[5:40]
         got = compress.decode(old)
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
         assert compress.info(old)["version"] == version
-    assert compress.info(data)["version"] == 3
+    assert compress.info(data)["version"] == 4 and len(v3) > len(data)
 
 
 @pytest.mark.parametrize(

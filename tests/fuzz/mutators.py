@@ -11,6 +11,7 @@ must be refused, and ``""`` when only the generic invariants apply.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import re
@@ -173,55 +174,46 @@ def _segments(data: bytes) -> list[bytes]:
     return out
 
 
-def _split_container(data: bytes) -> tuple[bytes, list[tuple[int, bytes]]]:
-    """Header (with its checksum) and ``(tag, payload)`` chunks of one container segment."""
+def _split_container(data: bytes):
+    """Header fields (:class:`spectrageo.compress._container.Header`, as stored) and ``(tag,
+    payload)`` chunks of one container segment, read through the container's own layout."""
     from spectrageo.compress import _container
 
-    fixed = _container._FIXED
-    (plen,) = struct.unpack_from("<H", data, fixed.size)
-    p = fixed.size + 2 + plen + 4
-    head, chunks = data[:p], []
-    while p < len(data):
-        tag, length, _crc = _container._CHUNK.unpack_from(data, p)
-        p += _container._CHUNK.size
-        chunks.append((tag, data[p : p + length]))
-        p += length
-    return head, chunks
+    head, _pos, records = _container.layout(data)
+    return head, [(r.tag, data[r.body : r.end]) for r in records]
 
 
-def _join_container(head: bytes, chunks: list[tuple[int, bytes]], forge: bool) -> bytes:
-    """Reassemble a container; with ``forge`` the header's and the chunks' checksums are
-    recomputed as a writer would, so only the semantic checks can refuse the file."""
+def _join_container(head, chunks: list[tuple[int, bytes]], forge: bool) -> bytes:
+    """Reassemble a container from its header fields; with ``forge`` the chunks' checksums are
+    chained as a writer would (so only the semantic checks can refuse the file), else each is
+    the checksum of its payload alone."""
     from spectrageo.compress import _container
 
-    head = bytearray(head)
-    head[7] = len(chunks) % 256
-    body = len(head) - 4
-    if forge:
-        struct.pack_into("<I", head, body, zlib.crc32(bytes(head[:body])))
-    (prev,) = struct.unpack_from("<I", head, body)
-    out = bytes(head)
+    head = dataclasses.replace(head, n_chunks=len(chunks) % 256)
+    out = head.pack()
+    prev = _container.chain_seed(head.version, out)
     for i, (tag, payload) in enumerate(chunks):
         crc = (
-            _container._chunk_crc(head[4], i, tag, payload, prev) if forge else zlib.crc32(payload)
+            _container.chunk_crc(head.version, i, tag, payload, prev)
+            if forge
+            else zlib.crc32(payload)
         )
-        out += _container._CHUNK.pack(tag, len(payload), crc) + payload
+        out += _container.record_head(head.version, tag, len(payload), crc) + payload
         prev = crc
     return out
 
 
-def _keep_crcs(data: bytes, head: bytes, order: list[int]) -> bytes:
-    """The container with its chunks (original bytes, checksums included) in ``order``."""
+def _keep_crcs(data: bytes, head, order: list[int]) -> bytes:
+    """The container with its chunk records (original bytes, checksums included) in ``order``
+    and the header's chunk count edited (the chained checksums then fail)."""
     from spectrageo.compress import _container
 
-    p, raw = len(head), []
-    while p < len(data):
-        _tag, length, _crc = _container._CHUNK.unpack_from(data, p)
-        raw.append(data[p : p + _container._CHUNK.size + length])
-        p += _container._CHUNK.size + length
-    out = bytearray(head + b"".join(raw[i] for i in order))
-    out[7] = len(order) % 256  # the header checksum now fails unless n_chunks is unchanged
-    return bytes(out)
+    _h, pos, records = _container.layout(data)
+    raw = [data[r.start : r.end] for r in records]
+    packed = dataclasses.replace(head, n_chunks=len(order) % 256).pack()
+    if head.version < _container.COMPACT_VERSION and len(order) != head.n_chunks:
+        packed = packed[:-4] + data[pos - 4 : pos]  # the old header checksum kept
+    return packed + b"".join(raw[i] for i in order)
 
 
 def _reorder(n: int, rng) -> tuple[list[int], str]:
@@ -240,30 +232,53 @@ def _reorder(n: int, rng) -> tuple[list[int], str]:
     return [j for j in range(n) if j != i], f"chunk {i} dropped"
 
 
-def _forge_header(head: bytes, rng) -> tuple[bytes, str, str]:
-    """A header field edited; a file whose counts or method no longer match its coded streams
-    (checksums recomputed) must be refused or decode to the seed's mesh."""
+def _forge_header(head, rng):
+    """A header field edited (the layout's fields, whatever the version); a file whose counts
+    or method no longer match its coded streams (checksums recomputed) must be refused or
+    decode to the seed's mesh."""
     from spectrageo.compress import _container
 
-    buf = bytearray(head)
-    fixed = list(_container._FIXED.unpack_from(head))
-    k = int(rng.integers(4))
+    compact = head.version >= _container.COMPACT_VERSION and not head.flags & _container.FLAG_WIDE
+    k = int(rng.integers(5 if compact else 4))
     expect = "seed" if k in (1, 3) else ""
     if k == 0:
-        fixed[10] = float(rng.choice([0.0, -1.0, float("nan"), float("inf"), 1e-300, 1e300]))
-        desc = f"scale -> {fixed[10]}"
+        scale = float(rng.choice([0.0, -1.0, float("nan"), float("inf"), 1e-300, 1e300]))
+        if abs(scale) in (1e-300, 1e300):  # beyond float32: the wide layout
+            head = _widen(head)
+        head = dataclasses.replace(head, scale=scale)
+        desc = f"scale -> {scale}"
     elif k == 1:
-        i = int(rng.choice([5, 6]))
-        fixed[i] = int(rng.choice([0, 1, fixed[i] + 1, 2**28, 2**32 - 1]))
-        desc = f"{'n_vertices' if i == 5 else 'n_faces'} -> {fixed[i]}"
+        name = str(rng.choice(["n_vertices", "n_faces"]))
+        v = getattr(head, name)
+        head = dataclasses.replace(head, **{name: int(rng.choice([0, 1, v + 1, 2**28, 2**32 - 1]))})
+        desc = f"{name} -> {getattr(head, name)}"
     elif k == 2:
-        fixed[7] = float(rng.choice([float("nan"), 1e308, -float("inf")]))
-        desc = f"origin x -> {fixed[7]}"
-    else:
-        fixed[2] = int(rng.choice([m for m in (0, 1, 2, 5, 16, 21, 200) if m != fixed[2]]))
-        desc = f"method -> {fixed[2]}"
-    _container._FIXED.pack_into(buf, 0, *fixed)
-    return bytes(buf), desc, expect
+        x = float(rng.choice([float("nan"), 1e308, -float("inf")]))
+        head = _widen(head)
+        head = dataclasses.replace(head, origin=(x, *head.origin[1:]))
+        desc = f"origin x -> {x}"
+    elif k == 3:
+        limit = 32 if head.version >= _container.COMPACT_VERSION else 256
+        ids = [m for m in (0, 1, 2, 5, 16, 21, 31, 200) if m != head.method_id and m < limit]
+        head = dataclasses.replace(head, method_id=int(rng.choice(ids)))
+        desc = f"method -> {head.method_id}"
+    else:  # compact origin grid steps far out of range (a finite origin far away)
+        k0 = int(rng.choice([2**52, 2**62, -(2**62)]))
+        head = dataclasses.replace(head, origin=(k0, *head.origin[1:]))
+        desc = f"origin grid steps x -> {k0}"
+    return head, desc, expect
+
+
+def _widen(head):
+    """A compact version 4 header turned into its wide (f64 origin and scale) form."""
+    from spectrageo.compress import _container
+
+    if head.version < _container.COMPACT_VERSION or head.flags & _container.FLAG_WIDE:
+        return head
+    origin, scale = head.frame()
+    return dataclasses.replace(
+        head, flags=head.flags | _container.FLAG_WIDE, origin=origin, scale=scale
+    )
 
 
 def _mutate_container(data: bytes, rng) -> tuple[bytes, str, str]:

@@ -114,14 +114,19 @@ def model_3mf(V: np.ndarray, F: np.ndarray) -> str:
 def zip_3mf(model: str, method: int = zipfile.ZIP_DEFLATED) -> bytes:
     """A 3MF package holding ``model``."""
     buf = io.BytesIO()
+
+    def entry(name: str) -> zipfile.ZipInfo:  # a fixed timestamp: the same bytes on every run
+        return zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+
     with zipfile.ZipFile(buf, "w", method) as z:
         z.writestr(
-            "[Content_Types].xml",
+            entry("[Content_Types].xml"),
             '<?xml version="1.0" encoding="UTF-8"?><Types xmlns="http://schemas.openxmlformats.org/'
             'package/2006/content-types"><Default Extension="model" ContentType="application/'
             'vnd.ms-package.3dmanufacturing-3dmodel+xml"/></Types>',
+            compress_type=method,
         )
-        z.writestr("3D/3dmodel.model", model)
+        z.writestr(entry("3D/3dmodel.model"), model, compress_type=method)
     return buf.getvalue()
 
 

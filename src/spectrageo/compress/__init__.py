@@ -139,9 +139,10 @@ def encode(
     else:
         conn = _connectivity.encode_faces(F)
     lo, hi = V.min(axis=0), V.max(axis=0)
-    origin = 0.5 * (lo + hi)
     diag = float(np.linalg.norm(hi - lo))
-    scale = diag if diag > 0 else 1.0
+    # rounded to what the header stores exactly (docs/decisions.md#codec-container-v4)
+    origin, scale = _container.compact_frame(0.5 * (lo + hi), diag if diag > 0 else 1.0)
+    origin = np.asarray(origin)
     X = (V - origin) / scale
     if bpv is not None:  # a target below the connectivity's share is refused before any search
         check_connectivity_floor(float(bpv), len(conn), V.shape[0], bool(reorder))

@@ -21,7 +21,7 @@ import struct
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._container import Reader, varint
+from ._container import Reader, f32_below, varint
 from ._rate import STEP_MAX, STEP_MIN
 
 TAG_RESIDUALS = 6
@@ -30,7 +30,11 @@ TAG_RESIDUALS_2 = 7
 #: residual format the encoder writes (1 or 2)
 FORMAT = 2
 _TAGS = {TAG_RESIDUALS: 1, TAG_RESIDUALS_2: 2}
-_P = struct.Struct("<dd")  # grid step, bound on each coordinate's error
+_P = struct.Struct("<dd")  # grid step, bound on each coordinate's error (files before v4)
+#: the compact parameters: the step as float32 (the encoder's grid is that value) and, under
+#: ``max_error`` with a sphere, its radius as float32 (the radius the encoder used)
+_Q = struct.Struct("<f")
+_QR = struct.Struct("<ff")
 #: largest integer coordinate a file may hold (the kernel codes residuals below 2**42)
 MAX_GRID = 1 << 40
 #: radii, in grid steps, of the spheres of :meth:`PredictivePlan.for_max_error` (at least
@@ -61,7 +65,8 @@ class PredictivePlan:
         return G.astype(np.int64)
 
     def _encode(self, q: float) -> tuple[bytes, np.ndarray]:
-        key = (float(q), self.sphere, FORMAT)
+        q = f32_below(float(q))
+        key = (q, self.sphere, FORMAT)
         if self._cache[0] != key:
             from . import _predictive_kernel as kernel
 
@@ -75,15 +80,14 @@ class PredictivePlan:
         return self._cache[1], self._cache[2]
 
     def params(self, q: float) -> bytes:
-        if self.sphere:
-            return _P.pack(float(q), min(self.sphere / math.sqrt(3.0), float(q)))
-        return _P.pack(float(q), float(q) / 2)
+        q = f32_below(float(q))
+        return _QR.pack(q, self.sphere) if self.sphere else _Q.pack(q)
 
     def chunks(self, q: float) -> list[tuple[int, bytes]]:
         return [(TAG_RESIDUALS_2 if FORMAT == 2 else TAG_RESIDUALS, self._encode(q)[0])]
 
     def reconstruct(self, q: float | None) -> np.ndarray:
-        return self.X.copy() if q is None else self._encode(q)[1] * float(q)
+        return self.X.copy() if q is None else self._encode(q)[1] * f32_below(float(q))
 
     def levels(self) -> list[PredictivePlan]:
         return [self]
@@ -103,7 +107,8 @@ class PredictivePlan:
         for sphere, q in cands:
             if not STEP_MIN <= q <= STEP_MAX:
                 continue
-            self.sphere = sphere
+            sphere = None if sphere is None else f32_below(sphere)  # stored as float32
+            self.sphere, q = sphere, f32_below(q)
             data, G = self._encode(q)
             D = float(np.sqrt(((G * q - self.X) ** 2).sum(axis=1).max())) if self.n else 0.0
             score = 8 * len(data) + 3 * self.n * math.log2(max(D, 1e-300))
@@ -127,17 +132,25 @@ def make_plan(X: np.ndarray, F: np.ndarray, method: str, options: dict) -> Predi
 
 
 def describe(params: bytes, method: str) -> dict:
-    q, r = _step(params)
-    return {"step": q, "max_vertex_error": r * math.sqrt(3.0)}
+    q, e = _step(params)
+    return {"step": q, "max_vertex_error": e}
 
 
 def _step(params: bytes) -> tuple[float, float]:
-    if len(params) != _P.size:
+    """The grid step and the bound on each vertex's error."""
+    if len(params) == _Q.size:
+        (q,) = _Q.unpack(params)
+        r = q / 2
+    elif len(params) == _QR.size:
+        q, radius = _QR.unpack(params)
+        r = min(radius / math.sqrt(3.0), q) if math.isfinite(radius) and radius >= 0 else -1.0
+    elif len(params) == _P.size:
+        q, r = _P.unpack(params)
+    else:
         raise InvalidInputError(".sgc predictive parameters are malformed.")
-    q, r = _P.unpack(params)
     if not (math.isfinite(q) and 0 < q <= STEP_MAX and math.isfinite(r) and 0 <= r <= q):
         raise InvalidInputError(".sgc predictive parameters are invalid (step).")
-    return q, r
+    return q, r * math.sqrt(3.0)
 
 
 def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str, *, complete: bool = True):
