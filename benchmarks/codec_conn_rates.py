@@ -3,7 +3,8 @@
     python benchmarks/codec_conn_rates.py     # writes _out/codec_conn_rates.md
 
 For each ``(RATE0, RATE_MAX)`` of ``spectrageo.compress._rangecoder``, in a fresh process (the
-constants are compiled in): the first-byte-0x42 connectivity size of the compress tuning meshes
+constants are compiled in): the canonical-order connectivity size (first byte 0x43 since
+docs/decisions.md#codec-conn-inline, 0x42 before) of the compress tuning meshes
 in their ``--reorder`` order, and of 800- and 2,000-face quadric decimations (Open3D) of fandisk
 and partLp, the small meshes the tuning split lacks.
 """

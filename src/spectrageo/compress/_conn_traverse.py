@@ -18,8 +18,10 @@ symbols use adaptive models (:mod:`._rangecoder`, first byte :data:`MARKER_ADAPT
 third vertex in :data:`NV_CTX` contexts (faces already decoded around the gate's end); the other
 stages static categorical models with ``constriction``'s ANS coder. Files of the static format
 (:data:`MARKER`: every stream static, the third vertex in 16 contexts) still decode. Faces
-already in canonical order are written as :data:`MARKER_CANONICAL`: stages 2-3 implied, stage 1
-with counted adaptive models (docs/decisions.md#codec-conn-canonical). Both sides
+already in canonical order are written as :data:`MARKER_INLINE`: stages 2-3 implied, every
+stage-1 symbol range coded in traversal order under contexts of the decoded neighbourhood
+(docs/decisions.md#codec-conn-inline); :data:`MARKER_CANONICAL` files (the same with stage-1
+streams, docs/decisions.md#codec-conn-canonical) still decode. Both sides
 run one compiled state machine (:func:`_topology`). See docs/decisions.md#compress-connectivity,
 docs/decisions.md#compress-conn-contexts and docs/decisions.md#codec-conn-adaptive.
 """
@@ -30,6 +32,24 @@ import numba
 import numpy as np
 
 from .._errors import InvalidInputError
+from . import _rangecoder as rc
+from ._conn_orders import (
+    C_VERTEX,
+    CAP,
+    VMAX,
+    _elias_get,
+    _elias_put,
+    _face_neighbours,
+    _face_order,
+    _fen_add,
+    _fen_prefix,
+    _fen_select,
+    _get,
+    _push_unique,
+    _put,
+    _ranks,
+    _zig,
+)
 from ._conn_streams import (
     adaptive_blob,
     canonical_sizes,
@@ -43,19 +63,12 @@ from ._rangecoder import bitlen as _bitlen
 
 #: length of the candidate list for the third vertex of a traversed face
 KMAX = 30
-#: adjacency entries walked per end point when building the candidate list
-CAP = 32
 #: border steps walked from each end point of the gate for further candidates (4-6 best on the
 #: tuning meshes of ``benchmarks/connectivity.py``; 12 and 24 cost a little more, 2 clearly more)
 WALK = 6
 W_FAR = 1  # an old vertex on the decoded region's border, by its rank there
 W_ANY = KMAX + 2  # any old vertex, by its id; candidates are symbols 2 .. KMAX + 1
 W_ALPHA = KMAX + 3
-C_SEQ = 3
-C_EXPLICIT = 4
-C_VERTEX = 5
-#: faces around the previous face's corners offered as candidates for the next one
-VMAX = 24
 #: contexts of the third-vertex symbol: the classes of the two previous ones
 N_CTX = 16
 #: alphabets of the categorical streams, in stream order
@@ -75,27 +88,23 @@ N_TOPO = 4 + N_CTX  # streams of stage 1 (static format)
 #: contexts of the third-vertex symbol in the adaptive format: 0-5 faces already decoded around
 #: the gate's end ``v`` (docs/decisions.md#codec-conn-adaptive)
 NV_CTX = 6
-
-
-# ----------------------------------------------------------------------------- bit buffers
-@numba.njit(cache=True, inline="always")
-def _put(buf, pos, value, width):
-    for k in range(width - 1, -1, -1):
-        if (value >> k) & 1:
-            buf[pos >> 3] |= np.uint8(1 << (7 - (pos & 7)))
-        pos += 1
-    return pos
-
-
-@numba.njit(cache=True, inline="always")
-def _get(buf, pos, width, nbits):
-    if pos + width > nbits:
-        return -1, pos
-    value = 0
-    for _ in range(width):
-        value = (value << 1) | ((buf[pos >> 3] >> (7 - (pos & 7))) & 1)
-        pos += 1
-    return value, pos
+#: buckets ``(lo, hi)`` of the inline format's contexts: the third vertex's three mixed models
+#: take the faces decoded around the gate's end ``v``, times those around ``u``, times those
+#: around the first candidate; the gate the border gates found at ``u`` and at ``v`` (0-2
+#: each) times the faces around ``v`` (docs/decisions.md#codec-conn-inline)
+THIRD_BUCKETS = ((2, 7), (2, 5), (3, 6))
+GATE_BUCKETS = ((0, 2), (1, 4))
+_NA = THIRD_BUCKETS[0][1] - THIRD_BUCKETS[0][0] + 1
+_NB = _NA * (THIRD_BUCKETS[1][1] - THIRD_BUCKETS[1][0] + 1)
+_NC = _NB * (THIRD_BUCKETS[2][1] - THIRD_BUCKETS[2][0] + 1)
+_NG = (GATE_BUCKETS[0][1] + 1) ** 2 * (GATE_BUCKETS[1][1] - GATE_BUCKETS[1][0] + 1)
+#: models of the inline format: gate contexts, orientation, seed corner, then symbol models of
+#: :data:`._rangecoder.SYM_STRIDE` probabilities (the far step's length, the third vertex's)
+M_ORIENT = _NG
+M_SEED = _NG + 1
+M_FAR = _NG + 2
+M_THIRD = M_FAR + rc.SYM_STRIDE
+N_MODELS = M_THIRD + (_NA + _NB + _NC) * rc.SYM_STRIDE
 
 
 # ----------------------------------------------------------------------------- edge table
@@ -141,40 +150,31 @@ def _add_edge(a, b, N, hkeys, hval, ecnt, head, nxt, to, ne, bcnt, btree):
 
 
 @numba.njit(cache=True, inline="always")
-def _contains(cand, nc, y):
-    for i in range(nc):
-        if cand[i] == y:
-            return True
-    return False
-
-
-@numba.njit(cache=True, inline="always")
-def _push_unique(cand, nc, y):
-    """Append ``y`` to ``cand[:nc]`` unless it is there; returns the new length."""
-    if _contains(cand, nc, y):
-        return nc
-    cand[nc] = y
-    return nc + 1
+def _neighbours(x0, excl, border, cand, nc, ecnt, head, nxt, to):
+    """Append the decoded neighbours of ``x0`` but ``excl`` across border edges (one face) or,
+    with ``border`` False, across the others."""
+    ent = head[x0]
+    steps = 0
+    while ent != -1 and steps < CAP and nc < KMAX:
+        y = to[ent]
+        steps += 1
+        if y != excl and (ecnt[ent >> 1] == 1) == border:
+            nc = _push_unique(cand, nc, y)
+        ent = nxt[ent]
+    return nc
 
 
 @numba.njit(cache=True)
-def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to):
-    """Decoded neighbours of v, then u: border edges first (one face), then the others."""
-    nc = 0
-    for p in range(4):
-        x0 = v if p % 2 == 0 else u
-        excl = u if p % 2 == 0 else v
-        want_border = p < 2
-        ent = head[x0]
-        steps = 0
-        while ent != -1 and steps < CAP and nc < KMAX:
-            y = to[ent]
-            steps += 1
-            if y != excl and (ecnt[ent >> 1] == 1) == want_border:
-                nc = _push_unique(cand, nc, y)
-            ent = nxt[ent]
-    # then further along the border, WALK steps from v and from u (Edgebreaker's S vertices
-    # are on the border, often a few edges away)
+def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to, interior_last):
+    """Decoded neighbours of v, then u: border edges first (one face), then the others; then
+    :data:`WALK` border steps from v and from u (Edgebreaker's S vertices are on the border,
+    often a few edges away). ``interior_last``: the walks before the neighbours across
+    interior edges, which a manifold face cannot use."""
+    nc = _neighbours(v, u, True, cand, 0, ecnt, head, nxt, to)
+    nc = _neighbours(u, v, True, cand, nc, ecnt, head, nxt, to)
+    if not interior_last:
+        nc = _neighbours(v, u, False, cand, nc, ecnt, head, nxt, to)
+        nc = _neighbours(u, v, False, cand, nc, ecnt, head, nxt, to)
     for p in range(2):
         prev = u if p == 0 else v
         cur = v if p == 0 else u
@@ -194,6 +194,9 @@ def _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to):
                 break
             nc = _push_unique(cand, nc, y)
             prev, cur = cur, y
+    if interior_last:
+        nc = _neighbours(v, u, False, cand, nc, ecnt, head, nxt, to)
+        nc = _neighbours(u, v, False, cand, nc, ecnt, head, nxt, to)
     return nc
 
 
@@ -205,6 +208,68 @@ def _context(hist, fv, n_ctx):
     if n_ctx == N_CTX:
         return hist
     return min(fv, n_ctx - 1)
+
+
+@numba.njit(cache=True, inline="always")
+def _bucket(x, lo_hi):
+    """``min(max(x, lo), hi) - lo``."""
+    return min(max(x, lo_hi[0]), lo_hi[1]) - lo_hi[0]
+
+
+@numba.njit(cache=True, inline="always")
+def _io_bit(encode, st, rbuf, probs, cnts, model, syms, k, cur, lens, b):
+    """Binary symbol of stream ``k``: range coded under counted model ``model`` when ``rbuf``
+    is given (the inline format), else written to or read from ``syms``; -1 when the
+    decoder's stream is exhausted."""
+    if rbuf.size:
+        return rc.bit_counted(encode, st, rbuf, probs, cnts, model, b, rc.PB_SYM)
+    if encode:
+        syms[k, cur[k]] = b
+    elif cur[k] >= lens[k]:
+        return -1
+    else:
+        b = syms[k, cur[k]]
+    cur[k] += 1
+    return b
+
+
+@numba.njit(cache=True, inline="always")
+def _io_raw(encode, st, rbuf, bits, pos, nbits, value, width):
+    """``width`` raw bits of ``value``: equiprobable range-coder bits (inline) or the bit
+    buffer. Returns ``(value, pos)``; the value is -1 when the buffer runs out."""
+    if not rbuf.size:
+        if encode:
+            return value, _put(bits, pos, value, width)
+        return _get(bits, pos, width, nbits)
+    out = 0
+    for j in range(width - 1, -1, -1):
+        out = (out << 1) | rc.direct(encode, st, rbuf, (value >> j) & 1 if encode else 0)
+    return out, pos
+
+
+@numba.njit(cache=True)
+def _io_far(encode, st, rbuf, probs, cnts, syms, cur, lens, bits, pos, nbits, d):
+    """Signed rank step ``d`` of a far border vertex (Elias length and raw bits); returns
+    ``(d, pos, ok)``."""
+    if not rbuf.size:
+        if encode:
+            syms[3, cur[3]], pos = _elias_put(bits, pos, d)
+            cur[3] += 1
+            return d, pos, True
+        if cur[3] >= lens[3]:
+            return 0, pos, False
+        cur[3] += 1
+        return _elias_get(bits, pos, syms[3, cur[3] - 1], nbits)
+    z = _zig(d) if encode else 0
+    k = rc.code_symbol(encode, st, rbuf, probs, cnts, M_FAR, _bitlen(z), 65)
+    if k > 63:
+        return 0, pos, False
+    if k > 1:
+        lo, pos = _io_raw(encode, st, rbuf, bits, pos, nbits, z, k - 1)
+        z = (1 << (k - 1)) | lo
+    else:
+        z = k
+    return (z >> 1 if z % 2 == 0 else -((z + 1) >> 1)), pos, True
 
 
 @numba.njit(cache=True)
@@ -226,6 +291,7 @@ def _topology(
     Fc,
     order,
     L,
+    rbuf,
 ):
     """Stage 1, run identically by encoder (``encode``) and decoder.
 
@@ -233,7 +299,9 @@ def _topology(
     non-degenerate faces, sorted, with their faces). It fills ``syms`` (streams 0-3, lengths in
     ``lens``), the raw bits, ``Fc`` (canonical faces), ``order`` (file index of each canonical
     face) and ``L`` (file label of each canonical vertex). The decoder reads the same streams and
-    fills ``Fc``. Returns ``(status, n_canonical_vertices, bit_position)``; status 0 is success.
+    fills ``Fc``. With a non-empty ``rbuf`` every symbol and raw bit is range coded there in
+    traversal order instead (:data:`MARKER_INLINE`; the returned position is then the byte
+    count). Returns ``(status, n_canonical_vertices, bit_position)``; status 0 is success.
     """
     N = np.int64(3 * m + 3)
     cap = 1
@@ -262,8 +330,17 @@ def _topology(
     n_ctx = lens.size - 4
     cur = np.zeros(lens.size, dtype=np.int64)  # read/write cursor per stream
     fcnt = np.zeros(N, dtype=np.int64)  # faces decoded around each vertex
+    gdone = np.zeros(N, dtype=np.int64)  # gates found closed (mesh border) at each vertex
+    inline = rbuf.size > 0
+    st = np.zeros(6, np.int64)
+    probs = np.full(N_MODELS if inline else 0, 1 << (rc.PB_SYM - 1), np.int64)
+    cnts = np.zeros(probs.size, np.int64)
+    if inline:
+        rc.start(encode, st, rbuf)
     ctx = 0
     while t < m:
+        if inline and st[5] > rbuf.size + 8:
+            return 1, nv, pos
         if sp == 0:  # seed face, corner by corner
             if encode:
                 while done[fpos]:
@@ -271,31 +348,31 @@ def _topology(
                 f = fpos
                 for k in range(3):
                     x = F[f, k]
-                    if cid[x] == -1:
-                        syms[2, cur[2]] = 0
+                    old = cid[x] != -1
+                    _io_bit(
+                        True, st, rbuf, probs, cnts, M_SEED, syms, 2, cur, lens, 1 if old else 0
+                    )
+                    if old:
+                        _, pos = _io_raw(True, st, rbuf, bits, pos, 0, cid[x], _bitlen(nv - 1))
+                    else:
                         cid[x] = nv
                         L[nv] = x
                         nv += 1
-                    else:
-                        syms[2, cur[2]] = 1
-                        pos = _put(bits, pos, cid[x], _bitlen(nv - 1))
-                    cur[2] += 1
                     c[k] = cid[x]
                 done[f] = True
                 order[t] = f
             else:
                 for k in range(3):
-                    if cur[2] >= lens[2]:
+                    s = _io_bit(False, st, rbuf, probs, cnts, M_SEED, syms, 2, cur, lens, 0)
+                    if s < 0:
                         return 1, nv, pos
-                    s = syms[2, cur[2]]
-                    cur[2] += 1
                     if s == 0:
                         if nv >= N:
                             return 1, nv, pos
                         c[k] = nv
                         nv += 1
                     else:
-                        val, pos = _get(bits, pos, _bitlen(nv - 1), nbits)
+                        val, pos = _io_raw(False, st, rbuf, bits, pos, nbits, 0, _bitlen(nv - 1))
                         if val < 0 or val >= nv:
                             return 1, nv, pos
                         c[k] = val
@@ -324,6 +401,11 @@ def _topology(
             continue
         f = -1
         w = -1
+        gm = _bucket(gdone[u], GATE_BUCKETS[0]) * (GATE_BUCKETS[0][1] + 1)
+        gm = (gm + _bucket(gdone[v], GATE_BUCKETS[0])) * (
+            GATE_BUCKETS[1][1] - GATE_BUCKETS[1][0] + 1
+        )
+        gm += _bucket(fcnt[v], GATE_BUCKETS[1])
         if encode:
             a = L[u]
             b = L[v]
@@ -335,36 +417,32 @@ def _topology(
                     if not done[efaces[q]]:
                         f = efaces[q]
                         break
-            syms[0, cur[0]] = 1 if f >= 0 else 0
-            cur[0] += 1
-            if f < 0:
-                continue
-            orient = 1
+        g = _io_bit(encode, st, rbuf, probs, cnts, gm, syms, 0, cur, lens, 1 if f >= 0 else 0)
+        if g < 0:
+            return 1, nv, pos
+        if g == 0:
+            gdone[u] += 1
+            gdone[v] += 1
+            continue
+        orient = 1
+        if encode:
             for k in range(3):
                 if F[f, k] == b and F[f, (k + 1) % 3] == a:
                     orient = 0
                 if F[f, k] != a and F[f, k] != b:
                     w = F[f, k]
-            syms[1, cur[1]] = orient
-            cur[1] += 1
-        else:
-            if cur[0] >= lens[0]:
-                return 1, nv, pos
-            g = syms[0, cur[0]]
-            cur[0] += 1
-            if g == 0:
-                continue
-            if cur[1] >= lens[1]:
-                return 1, nv, pos
-            orient = syms[1, cur[1]]
-            cur[1] += 1
+        orient = _io_bit(encode, st, rbuf, probs, cnts, M_ORIENT, syms, 1, cur, lens, orient)
+        if orient < 0:
+            return 1, nv, pos
         p, q2 = (v, u) if orient == 0 else (u, v)
-        nc = _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to)
+        nc = _candidates(u, v, cand, hkeys, hval, ecnt, head, nxt, to, inline)
         cx = _context(ctx, fcnt[v], n_ctx)
+        d = 0
+        cw = -1
+        s = 0
         if encode:
             cw = cid[w]
             if cw == -1:
-                s = 0
                 cid[w] = nv
                 L[nv] = w
                 cw = nv
@@ -377,44 +455,53 @@ def _topology(
                         break
                 if s == W_FAR and bcnt[cw] > 0:
                     d = _fen_prefix(btree, cw) - _fen_prefix(btree, u)
-                    syms[3, cur[3]], pos = _elias_put(bits, pos, d)
-                    cur[3] += 1
                 elif s == W_FAR:
                     s = W_ANY
-                    pos = _put(bits, pos, cw, _bitlen(nv - 1))
+            done[f] = True
+            order[t] = f
+        if inline:
+            ma = _bucket(fcnt[v], THIRD_BUCKETS[0])
+            mb = ma * (THIRD_BUCKETS[1][1] - THIRD_BUCKETS[1][0] + 1)
+            mb += _bucket(fcnt[u], THIRD_BUCKETS[1])
+            mc = mb * (THIRD_BUCKETS[2][1] - THIRD_BUCKETS[2][0] + 1)
+            mc += _bucket(fcnt[cand[0]] if nc > 0 else 0, THIRD_BUCKETS[2])
+            s = rc.code_symbol(
+                encode, st, rbuf, probs, cnts, M_THIRD + ma * rc.SYM_STRIDE, s, W_ALPHA,
+                M_THIRD + (_NA + mb) * rc.SYM_STRIDE, M_THIRD + (_NA + _NB + mc) * rc.SYM_STRIDE,
+            )  # fmt: skip
+        elif encode:
             wsym[cur[4]] = s  # all contexts in one array, split by ``wctx`` afterwards
             wctx[cur[4]] = ctx * 64 + min(fcnt[v], 63)  # both formats' contexts
             cur[4] += 1
-            done[f] = True
-            order[t] = f
         else:
             if cur[4 + cx] >= lens[4 + cx]:
                 return 1, nv, pos
             s = wsym[woff[cx] + cur[4 + cx]]
             cur[4 + cx] += 1
-            if s == 0:
-                if nv >= N:
-                    return 1, nv, pos
-                cw = nv
-                nv += 1
-            elif s == W_FAR:
-                if cur[3] >= lens[3]:
-                    return 1, nv, pos
-                d, pos, ok = _elias_get(bits, pos, syms[3, cur[3]], nbits)
-                cur[3] += 1
-                if not ok:
-                    return 1, nv, pos
+        if s == W_FAR:
+            d, pos, ok = _io_far(
+                encode, st, rbuf, probs, cnts, syms, cur, lens, bits, pos, nbits, d
+            )
+            if not ok:
+                return 1, nv, pos
+            if not encode:
                 r = _fen_prefix(btree, u) + d
                 if r < 0 or r >= _fen_prefix(btree, N):
                     return 1, nv, pos
                 cw = _fen_select(btree, r)
                 if cw >= nv or cw == u or cw == v:
                     return 1, nv, pos
-            elif s == W_ANY:
-                cw, pos = _get(bits, pos, _bitlen(nv - 1), nbits)
-                if cw < 0 or cw >= nv or cw == u or cw == v:
+        elif s == W_ANY:
+            cw, pos = _io_raw(encode, st, rbuf, bits, pos, nbits, cw, _bitlen(nv - 1))
+            if not encode and (cw < 0 or cw >= nv or cw == u or cw == v):
+                return 1, nv, pos
+        elif not encode:
+            if s == 0:
+                if nv >= N:
                     return 1, nv, pos
-            elif s <= nc + 1:
+                cw = nv
+                nv += 1
+            elif 2 <= s <= nc + 1:
                 cw = cand[s - 2]
             else:
                 return 1, nv, pos
@@ -435,204 +522,16 @@ def _topology(
         su[sp] = cw
         sv[sp] = p
         sp += 1
+    if inline:
+        if encode:
+            return 0, nv, rc.finish(st, rbuf)
+        if st[5] > rbuf.size + 4:
+            return 1, nv, pos
     for k in range(lens.size):
         if not encode and cur[k] != lens[k]:
             return 1, nv, pos
         lens[k] = cur[k]
     return 0, nv, pos
-
-
-# ----------------------------------------------------------------------------- Fenwick ranks
-@numba.njit(cache=True)
-def _fen_init(n):
-    tree = np.zeros(n + 1, dtype=np.int64)
-    for i in range(1, n + 1):
-        tree[i] += 1
-        j = i + (i & -i)
-        if j <= n:
-            tree[j] += tree[i]
-    return tree
-
-
-@numba.njit(cache=True, inline="always")
-def _fen_add(tree, i, delta):
-    i += 1
-    n = tree.size - 1
-    while i <= n:
-        tree[i] += delta
-        i += i & -i
-
-
-@numba.njit(cache=True, inline="always")
-def _fen_prefix(tree, i):
-    """Number of unused items with index < i."""
-    s = 0
-    while i > 0:
-        s += tree[i]
-        i -= i & -i
-    return s
-
-
-@numba.njit(cache=True)
-def _fen_select(tree, r):
-    """Index of the unused item of rank r (0-based)."""
-    n = tree.size - 1
-    step = 1
-    while step * 2 <= n:
-        step *= 2
-    pos = 0
-    while step > 0:
-        if pos + step <= n and tree[pos + step] <= r:
-            pos += step
-            r -= tree[pos]
-        step //= 2
-    return pos
-
-
-@numba.njit(cache=True, inline="always")
-def _zig(d):
-    return 2 * d if d >= 0 else -2 * d - 1
-
-
-@numba.njit(cache=True, inline="always")
-def _unzig(z):
-    return z >> 1 if z % 2 == 0 else -((z + 1) >> 1)
-
-
-@numba.njit(cache=True, inline="always")
-def _elias_put(bits, pos, d):
-    """Signed step ``d`` as (length symbol, raw bits below the leading one); returns both."""
-    z = _zig(d)
-    k = _bitlen(z)
-    if k > 1:
-        pos = _put(bits, pos, z, k - 1)
-    return k, pos
-
-
-@numba.njit(cache=True, inline="always")
-def _elias_get(bits, pos, k, nbits):
-    """Inverse of :func:`_elias_put`; ``ok`` is False when the raw bits run out."""
-    if k <= 1:
-        return _unzig(k), pos, True
-    lo, pos = _get(bits, pos, k - 1, nbits)
-    if lo < 0:
-        return 0, pos, False
-    return _unzig((1 << (k - 1)) | lo), pos, True
-
-
-@numba.njit(cache=True)
-def _ranks(encode, n_items, seq, n_univ, sym, bits, pos, nbits):
-    """Stage 2: a sequence of distinct items of ``range(n_univ)`` as Elias-coded rank steps."""
-    tree = _fen_init(n_univ)
-    prev = -1
-    remaining = n_univ
-    for c in range(n_items):
-        p = _fen_prefix(tree, prev + 1)
-        if encode:
-            sym[c], pos = _elias_put(bits, pos, _fen_prefix(tree, seq[c]) - p)
-            x = seq[c]
-        else:
-            d, pos, ok = _elias_get(bits, pos, sym[c], nbits)
-            if not ok:
-                return 1, pos
-            r = p + d
-            if r < 0 or r >= remaining:
-                return 1, pos
-            x = _fen_select(tree, r)
-            seq[c] = x
-        _fen_add(tree, x, -1)
-        remaining -= 1
-        prev = x
-    return 0, pos
-
-
-@numba.njit(cache=True)
-def _face_order(encode, m, Fc, nptr, nbrs, vptr, vf, inv, cls, sym, bits, pos, nbits):
-    """Stage 3: the file's face order over the canonical faces (``inv[t]`` = canonical index).
-
-    Candidates for the next face: the next canonical face (:data:`C_SEQ`), up to three unplaced
-    edge neighbours of the previous face (symbols 0-2), then up to :data:`VMAX` unplaced faces
-    around its corners (symbols ``C_VERTEX + i``); otherwise its rank step (:data:`C_EXPLICIT`).
-    """
-    tree = _fen_init(m)
-    placed = np.zeros(m, dtype=np.bool_)
-    cand = np.zeros(3, dtype=np.int64)
-    vc = np.zeros(VMAX, dtype=np.int64)
-    prev = -1
-    n_sym = 0
-    for t in range(m):
-        nc = 0
-        if prev >= 0:
-            for q in range(nptr[prev], nptr[prev + 1]):
-                if not placed[nbrs[q]]:
-                    nc = _push_unique(cand, nc, nbrs[q])
-                    if nc == 3:
-                        break
-        seq = prev + 1
-        if seq >= m or placed[seq]:
-            seq = -1
-        k = 0
-        for i in range(nc):  # the next canonical face has its own symbol
-            if cand[i] != seq:
-                cand[k] = cand[i]
-                k += 1
-        nc = k
-        nvc = 0
-        if prev >= 0:
-            for corner in range(3):
-                x = Fc[prev, corner]
-                lim = min(vptr[x + 1], vptr[x] + CAP)
-                for q in range(vptr[x], lim):
-                    g = vf[q]
-                    if placed[g] or g == seq or nvc == VMAX:
-                        continue
-                    if not _contains(cand, nc, g):  # not already an edge candidate
-                        nvc = _push_unique(vc, nvc, g)
-        if encode:
-            j = inv[t]
-            s = C_EXPLICIT
-            if j == seq:
-                s = C_SEQ
-            else:
-                for i in range(nc):
-                    if cand[i] == j:
-                        s = i
-                if s == C_EXPLICIT:
-                    for i in range(nvc):
-                        if vc[i] == j:
-                            s = C_VERTEX + i
-                            break
-            cls[t] = s
-            if s == C_EXPLICIT:
-                d = _fen_prefix(tree, j) - _fen_prefix(tree, prev + 1)
-                sym[n_sym], pos = _elias_put(bits, pos, d)
-                n_sym += 1
-        else:
-            s = cls[t]
-            if s < nc:
-                j = cand[s]
-            elif s == C_SEQ and seq >= 0:
-                j = seq
-            elif C_VERTEX <= s < C_VERTEX + nvc:
-                j = vc[s - C_VERTEX]
-            elif s == C_EXPLICIT:
-                if n_sym >= sym.size:
-                    return 1, n_sym, pos
-                d, pos, ok = _elias_get(bits, pos, sym[n_sym], nbits)
-                n_sym += 1
-                if not ok:
-                    return 1, n_sym, pos
-                r = _fen_prefix(tree, prev + 1) + d
-                if r < 0 or r >= m - t:
-                    return 1, n_sym, pos
-                j = _fen_select(tree, r)
-            else:
-                return 1, n_sym, pos
-            inv[t] = j
-        placed[j] = True
-        _fen_add(tree, j, -1)
-        prev = j
-    return 0, n_sym, pos
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -653,55 +552,6 @@ def _edge_table(F: np.ndarray, n_univ: int):
     return ukeys.astype(np.int64), eptr, face.astype(np.int64)
 
 
-@numba.njit(cache=True)
-def _face_neighbours_kernel(Fc, nd, n_vert):
-    m = Fc.shape[0]
-    # faces of every vertex, ascending (counting sort over the non-degenerate faces)
-    deg = np.zeros(n_vert + 1, dtype=np.int64)
-    for f in range(m):
-        if nd[f]:
-            for k in range(3):
-                deg[Fc[f, k] + 1] += 1
-    for v in range(n_vert):
-        deg[v + 1] += deg[v]
-    vf = np.empty(deg[n_vert], dtype=np.int64)
-    fill = deg[:n_vert].copy()
-    for f in range(m):
-        if nd[f]:
-            for k in range(3):
-                v = Fc[f, k]
-                vf[fill[v]] = f
-                fill[v] += 1
-    cnt = np.zeros(m + 1, dtype=np.int64)
-    out = np.empty(max(1, 3 * deg[n_vert]), dtype=np.int64)
-    n_out = 0
-    for f in range(m):
-        if nd[f]:
-            for k in range(3):
-                a = Fc[f, k]
-                b = Fc[f, (k + 1) % 3]
-                x, y = (a, b) if deg[a + 1] - deg[a] <= deg[b + 1] - deg[b] else (b, a)
-                for q in range(deg[x], deg[x + 1]):
-                    g = vf[q]
-                    if g != f and (Fc[g, 0] == y or Fc[g, 1] == y or Fc[g, 2] == y):
-                        if n_out == out.size:
-                            grown = np.empty(2 * out.size, dtype=np.int64)
-                            grown[:n_out] = out[:n_out]
-                            out = grown
-                        out[n_out] = g
-                        n_out += 1
-        cnt[f + 1] = n_out
-    return cnt, out[:n_out], deg, vf
-
-
-def _face_neighbours(Fc: np.ndarray):
-    """Faces sharing an edge with each face (CSR: by edge of the face, then face index), and the
-    non-degenerate faces around every vertex (CSR, ascending)."""
-    nd = (Fc[:, 0] != Fc[:, 1]) & (Fc[:, 1] != Fc[:, 2]) & (Fc[:, 0] != Fc[:, 2])
-    n_vert = int(Fc.max()) + 1 if Fc.shape[0] else 1
-    return _face_neighbours_kernel(np.ascontiguousarray(Fc, dtype=np.int64), nd, n_vert)
-
-
 def _bitbuf(nbits_max: int) -> np.ndarray:
     return np.zeros(nbits_max // 8 + 8, dtype=np.uint8)
 
@@ -714,7 +564,12 @@ MARKER_ADAPTIVE = 0x41
 #: first byte of the adaptive code of faces already in :func:`canonical` order: stages 2-3 are
 #: implied (docs/decisions.md#codec-conn-canonical)
 MARKER_CANONICAL = 0x42
-MARKERS = (MARKER, MARKER_ADAPTIVE, MARKER_CANONICAL)
+#: first byte of the code of faces in :func:`canonical` order whose stage-1 symbols are range
+#: coded in traversal order under contexts of the decoded neighbourhood, the walks before the
+#: interior neighbours among the candidates (docs/decisions.md#codec-conn-inline)
+MARKER_INLINE = 0x43
+MARKERS = (MARKER, MARKER_ADAPTIVE, MARKER_CANONICAL, MARKER_INLINE)
+_NO_RC = np.zeros(0, dtype=np.uint8)
 
 
 def _layout(marker: int) -> tuple[int, tuple[int, ...]]:
@@ -730,18 +585,12 @@ def _traverse(F: np.ndarray):
     m = F.shape[0]
     n_univ = int(F.max()) + 1
     ekeys, eptr, efaces = _edge_table(F, n_univ)
-    syms = np.zeros((4, 3 * m + 3), dtype=np.int32)  # gate, orient, seed, far border
-    wsym = np.zeros(m + 1, dtype=np.int32)  # third vertices of all contexts, in order
-    wctx = np.zeros(m + 1, dtype=np.int16)
-    lens = np.zeros(4 + NV_CTX, dtype=np.int64)
+    syms, wsym, wctx, lens, Fc, order, L, z = _stage1_arrays(m, NV_CTX)
     bits = _bitbuf(64 * (3 * m + 3))
-    Fc = np.zeros((m, 3), dtype=np.int64)
-    order = np.zeros(m, dtype=np.int64)
-    L = np.zeros(3 * m + 3, dtype=np.int64)
-    z = np.zeros(1, dtype=np.int64)
     st, nv, pos = _topology(
-        True, m, F, ekeys, eptr, efaces, n_univ, syms, wsym, wctx, z, lens, bits, 0, Fc, order, L
-    )
+        True, m, F, ekeys, eptr, efaces, n_univ, syms, wsym, wctx, z, lens, bits, 0, Fc, order, L,
+        _NO_RC,
+    )  # fmt: skip
     if st != 0:  # pragma: no cover - the encoder's own state machine cannot fail
         raise RuntimeError("connectivity traversal failed")
     nw = int(lens[4])
@@ -773,10 +622,16 @@ def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def encode(F: np.ndarray) -> bytes:
-    """Traversal code of ``F`` (int64, (m, 3), m >= 1); see the module docstring. The smaller of
-    the adaptive and the static format."""
+    """Traversal code of ``F`` (int64, (m, 3), m >= 1); see the module docstring: the smallest
+    of the formats that can hold ``F`` (:data:`MARKER_INLINE` and :data:`MARKER_CANONICAL` only
+    for faces in :func:`canonical` order; the first of equal sizes)."""
     F = np.ascontiguousarray(F, dtype=np.int64)
     m = F.shape[0]
+    out = []
+    if _maybe_canonical(F):
+        code = _encode_inline(F)
+        if code is not None:
+            out.append(code)
     n_univ, topo, bitsA, posA, Fc, order, L = _traverse(F)
     nv = L.size
     vb = np.zeros(nv, dtype=np.int64)
@@ -791,7 +646,6 @@ def encode(F: np.ndarray) -> bytes:
     st, n_fb, posC = _face_order(True, m, Fc, nptr, nbrs, vptr, vf, inv, fc, fb, bitsC, 0, 0)
     rest = [vb, fc, fb[:n_fb], _rotation_symbols(F[order], L[Fc])]
     n_topo = 4 + NV_CTX
-    out = []
     if nv == n_univ and (L == np.arange(nv)).all() and (order == np.arange(m)).all():
         if not rest[3].any():  # every face starts at its smallest index
             head = bytes([MARKER_CANONICAL]) + varint(nv) + canonical_sizes(topo[MARKER_ADAPTIVE])
@@ -820,6 +674,65 @@ def encode(F: np.ndarray) -> bytes:
     return min(out, key=len)
 
 
+def _stage1_arrays(m: int, n_ctx: int):
+    """Stage-1 work arrays of :func:`_topology`: syms, wsym, wctx, lens, canonical faces,
+    order, labels and a placeholder."""
+    return (
+        np.zeros((4, 3 * m + 3), dtype=np.int32),  # gate, orient, seed, far border
+        np.zeros(m + 1, dtype=np.int32),  # third vertices of all contexts, in order
+        np.zeros(m + 1, dtype=np.int16),
+        np.zeros(4 + n_ctx, dtype=np.int64),
+        np.zeros((m, 3), dtype=np.int64),
+        np.zeros(m, dtype=np.int64),
+        np.zeros(3 * m + 3, dtype=np.int64),
+        np.zeros(1, dtype=np.int64),
+    )
+
+
+def _maybe_canonical(F: np.ndarray) -> bool:
+    """Necessary conditions of :func:`canonical` order: every face starts at its smallest index
+    and the vertices appear in order."""
+    if not ((F[:, 0] <= F[:, 1]) & (F[:, 0] <= F[:, 2])).all():
+        return False
+    first = np.maximum.accumulate(F.max(axis=1))
+    return bool(F.min() == 0 and (np.diff(first) <= 3).all() and first[0] <= 2)
+
+
+def _encode_inline(F: np.ndarray) -> bytes | None:
+    """:data:`MARKER_INLINE` code of ``F``, or None when its faces are not in canonical order."""
+    m = F.shape[0]
+    n_univ = int(F.max()) + 1
+    ekeys, eptr, efaces = _edge_table(F, n_univ)
+    syms, wsym, wctx, lens, Fc, order, L, z = _stage1_arrays(m, NV_CTX)
+    rbuf = np.zeros(24 * m + 1024, dtype=np.uint8)
+    st, nv, nb = _topology(
+        True, m, F, ekeys, eptr, efaces, n_univ, syms, wsym, wctx, z, lens, _NO_RC, 0, Fc, order, L,
+        rbuf,
+    )  # fmt: skip
+    if st != 0 or nb > rbuf.size:  # pragma: no cover - at most 24 bytes per face are written
+        raise RuntimeError("connectivity range coder overflow")
+    if nv != n_univ or (L[:nv] != np.arange(nv)).any() or (order != np.arange(m)).any():
+        return None
+    if (F != Fc[np.arange(m)[:, None], (np.argmin(Fc, axis=1)[:, None] + np.arange(3)) % 3]).any():
+        return None
+    return bytes([MARKER_INLINE]) + rbuf[:nb].tobytes()
+
+
+def _decode_inline(blob: bytes, n_vertices: int, m: int) -> np.ndarray:
+    """Faces of a :data:`MARKER_INLINE` code (after its first byte)."""
+    rbuf = np.frombuffer(blob, dtype=np.uint8).copy()
+    syms, wsym, wctx, lens, Fc, _, _, z = _stage1_arrays(1, NV_CTX)
+    Fc = np.zeros((m, 3), dtype=np.int64)
+    woff = np.zeros(NV_CTX + 1, dtype=np.int64)
+    dummyF = np.zeros((1, 3), dtype=np.int64)
+    st, nv, _ = _topology(
+        False, m, dummyF, z, z, z, 1, syms, wsym, wctx, woff, lens, _NO_RC, 0, Fc, z, z, rbuf
+    )
+    if st != 0 or rbuf.size == 0 or not 1 <= nv <= n_vertices:
+        raise InvalidInputError(".sgc connectivity is malformed (topology stream).")
+    return Fc
+
+
 def _rotation_symbols(Ff: np.ndarray, G: np.ndarray) -> np.ndarray:
     """Rotation r with ``Ff == roll(G, -r)``, coded relative to the smallest label first."""
     r = np.full(Ff.shape[0], -1, dtype=np.int64)
@@ -838,6 +751,19 @@ def decode(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
     if marker not in MARKERS:
         raise InvalidInputError(".sgc connectivity is malformed (unknown scheme).")
     m = int(n_faces)
+    if marker == MARKER_INLINE:
+        Fc = _decode_inline(r.rest(), n_vertices, m)
+    else:
+        Fc = _decode_streams(r, marker, n_vertices, m)
+        if marker != MARKER_CANONICAL:
+            return Fc
+    idx = (np.argmin(Fc, axis=1)[:, None] + np.arange(3)[None, :]) % 3
+    return np.take_along_axis(Fc, idx, axis=1)
+
+
+def _decode_streams(r: Reader, marker: int, n_vertices: int, m: int) -> np.ndarray:
+    """Faces of a code with streams (:data:`MARKER`, :data:`MARKER_ADAPTIVE`: the file's
+    faces; :data:`MARKER_CANONICAL`: the canonical faces before their rotation)."""
     n_univ = r.varint()
     nv = n_univ if marker == MARKER_CANONICAL else r.varint()
     if not (1 <= n_univ <= n_vertices and 1 <= nv <= n_univ and nv <= 3 * m):
@@ -860,13 +786,12 @@ def decode(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
     (bA, nA), (bB, nB), (bC, nC) = bits
     w16 = np.zeros(1, dtype=np.int16)
     st, nv2, _ = _topology(
-        False, m, dummyF, z, z, z, n_univ, syms, wsym, w16, woff, lens, bA, nA, Fc, z, z
+        False, m, dummyF, z, z, z, n_univ, syms, wsym, w16, woff, lens, bA, nA, Fc, z, z, _NO_RC
     )
     if st != 0 or nv2 != nv:
         raise InvalidInputError(".sgc connectivity is malformed (topology stream).")
     if marker == MARKER_CANONICAL:
-        idx = (np.argmin(Fc, axis=1)[:, None] + np.arange(3)[None, :]) % 3
-        return np.take_along_axis(Fc, idx, axis=1)
+        return Fc
     L = np.zeros(nv, dtype=np.int64)
     st, _ = _ranks(False, nv, L, n_univ, streams[n_topo], bB, 0, nB)
     if st != 0:

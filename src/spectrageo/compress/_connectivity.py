@@ -2,7 +2,7 @@
 
 The encoder writes two schemes and keeps the smaller; the first byte tells them apart:
 
-- the traversal code of :mod:`._conn_traverse` (first byte ``0x40``, ``0x41`` or ``0x42``);
+- the traversal code of :mod:`._conn_traverse` (first byte ``0x40``-``0x43``);
 - the delta code (first byte 1-8, the index width): each face ``(a, b, c)`` becomes ``a`` minus
   the previous face's first corner, ``b - a`` and ``c - a`` (zigzag), split into byte planes and
   compressed with zstd; it wins on tiny meshes and some files ordered by one sweep.

@@ -134,8 +134,24 @@ def bit_counted(enc, st, buf, probs, cnts, i, b, pb):
     return b
 
 
+@numba.njit(cache=True)
+def bit_mixed(enc, st, buf, probs, cnts, i, j, k, b):
+    """:func:`bit_counted` under the mean of the probabilities ``probs[i]``, ``probs[j]`` and
+    ``probs[k]`` (of :data:`PB_SYM` bits); all three are updated."""
+    p = (probs[i] + probs[j] + probs[k]) // 3
+    b = _bit_at(enc, st, buf, p, b, PB_SYM)
+    for x in (i, j, k):
+        d = min(cnts[x] + RATE0, RATE_MAX)
+        cnts[x] = min(cnts[x] + 1, RATE_MAX)
+        q = probs[x]
+        probs[x] = q + ((1 << PB_SYM) - q) // d if b == 0 else q - q // d
+    return b
+
+
 @numba.njit(cache=True, inline="always")
-def _sym_bit(enc, st, buf, probs, cnts, i, b):
+def _sym_bit(enc, st, buf, probs, cnts, i, j, k, b):
+    if j >= 0:
+        return bit_mixed(enc, st, buf, probs, cnts, i, j, k, b)
     if cnts.size:
         return bit_counted(enc, st, buf, probs, cnts, i, b, PB_SYM)
     return bit(enc, st, buf, probs, i, b, PB_SYM)
@@ -161,24 +177,28 @@ def direct(enc, st, buf, b):
 
 
 @numba.njit(cache=True)
-def code_symbol(enc, st, buf, probs, cnts, base, s, alpha):
+def code_symbol(enc, st, buf, probs, cnts, base, s, alpha, base2=-1, base3=-1):
     """Symbol ``s`` of ``range(alpha)`` with the adaptive model at ``probs[base:base +
     SYM_STRIDE]``: truncated unary over the first :data:`UNARY` values, then the Elias-gamma
     code of the rest (adaptive length, equiprobable mantissa). ``cnts``: update counts of
-    :func:`bit_counted`, or empty for :func:`bit`. Returns the symbol (decoder: may be
-    ``>= alpha`` on damaged data)."""
+    :func:`bit_counted`, or empty for :func:`bit`; with ``base2, base3 >= 0`` every binary
+    decision is coded under the mean of three counted models (:func:`bit_mixed`). Returns the
+    symbol (decoder: may be ``>= alpha`` on damaged data)."""
     top = min(alpha - 1, UNARY)
     for k in range(top):
-        if _sym_bit(enc, st, buf, probs, cnts, base + k, 1 if s == k else 0) == 1:
+        j2, j3 = (base2 + k, base3 + k) if base2 >= 0 else (-1, -1)
+        if _sym_bit(enc, st, buf, probs, cnts, base + k, j2, j3, 1 if s == k else 0) == 1:
             return np.int64(k)
     if top == alpha - 1:
         return np.int64(top)
     z = s - top + 1 if enc else 0
     nb = bitlen(z)
     length = 1
-    while length < 64 and _sym_bit(
-        enc, st, buf, probs, cnts, base + UNARY + length, 1 if length < nb else 0
-    ):
+    while length < 64:
+        o = UNARY + length
+        j2, j3 = (base2 + o, base3 + o) if base2 >= 0 else (-1, -1)
+        if not _sym_bit(enc, st, buf, probs, cnts, base + o, j2, j3, 1 if length < nb else 0):
+            break
         length += 1
     m = np.int64(1)
     for j in range(length - 2, -1, -1):

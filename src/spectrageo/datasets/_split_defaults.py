@@ -195,6 +195,13 @@ _DEFAULTS = [
        "0.5-0.7 bits per vertex saved on the tuning meshes"),
     _d(_C + "NV_CTX", 6, "tuning", "compress", "benchmarks/codec_predictive.py",
        "fandisk, partLp, the two elephants; docs/decisions.md#codec-conn-adaptive"),
+    _d(_C + "THIRD_BUCKETS", ((2, 7), (2, 5), (3, 6)), "tuning", "compress",
+       "benchmarks/codec_conn_rates.py",
+       "fandisk, partLp, the two elephants and decimations of the first two; "
+       "docs/decisions.md#codec-conn-inline"),
+    _d(_C + "GATE_BUCKETS", ((0, 2), (1, 4)), "tuning", "compress",
+       "benchmarks/codec_conn_rates.py",
+       "the holed elephant's border gates; docs/decisions.md#codec-conn-inline"),
     _d("spectrageo.compress._rangecoder.RATE0", 2, "tuning", "compress",
        "benchmarks/codec_predictive.py",
        "2 and 3 tried on fandisk, partLp, the two elephants; docs/decisions.md#codec-conn-canonical"),
