@@ -272,6 +272,23 @@ def _io_far(encode, st, rbuf, probs, cnts, syms, cur, lens, bits, pos, nbits, d)
     return (z >> 1 if z % 2 == 0 else -((z + 1) >> 1)), pos, True
 
 
+@numba.njit(cache=True, inline="always")
+def _seed_start(F, f, cid):
+    """Corner of seed face ``f`` coded first: its numbered vertex of smallest id, else corner 0.
+
+    The canonical face then starts at its smallest index, so :func:`canonical`'s faces
+    re-traverse to themselves (docs/decisions.md#codec-conn-fixed-point).
+    """
+    r0 = 0
+    best = -1
+    for k in range(3):
+        y = cid[F[f, k]]
+        if y != -1 and (best == -1 or y < best):
+            best = y
+            r0 = k
+    return r0
+
+
 @numba.njit(cache=True)
 def _topology(
     encode,
@@ -346,7 +363,9 @@ def _topology(
                 while done[fpos]:
                     fpos += 1
                 f = fpos
-                for k in range(3):
+                r0 = _seed_start(F, f, cid)
+                for j in range(3):
+                    k = (r0 + j) % 3
                     x = F[f, k]
                     old = cid[x] != -1
                     _io_bit(
@@ -358,7 +377,7 @@ def _topology(
                         cid[x] = nv
                         L[nv] = x
                         nv += 1
-                    c[k] = cid[x]
+                    c[j] = cid[x]
                 done[f] = True
                 order[t] = f
             else:
@@ -609,7 +628,8 @@ def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """``(perm, G)``: the traversal's vertex order (unused vertices last) and faces ``G`` in it.
 
     ``G`` lists the faces in traversal order, each rotated to start at its smallest index
-    (orientation kept), so that :func:`encode` spends almost nothing on the two orders.
+    (orientation kept), so that :func:`encode` spends almost nothing on the two orders. ``G``
+    is a fixed point: ``canonical(G, n)`` is ``(arange(n), G)``, so ``G`` codes inline.
     """
     F = np.ascontiguousarray(F, dtype=np.int64)
     _, _, _, _, Fc, _, L = _traverse(F)
