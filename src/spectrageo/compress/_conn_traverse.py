@@ -642,16 +642,15 @@ def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def encode(F: np.ndarray) -> bytes:
-    """Traversal code of ``F`` (int64, (m, 3), m >= 1); see the module docstring: the smallest
-    of the formats that can hold ``F`` (:data:`MARKER_INLINE` and :data:`MARKER_CANONICAL` only
-    for faces in :func:`canonical` order; the first of equal sizes)."""
+    """Traversal code of ``F`` (int64, (m, 3), m >= 1); see the module docstring. Faces in
+    :func:`canonical` order: :data:`MARKER_INLINE`; others: the smaller of the adaptive and the
+    static format."""
     F = np.ascontiguousarray(F, dtype=np.int64)
     m = F.shape[0]
-    out = []
     if _maybe_canonical(F):
         code = _encode_inline(F)
         if code is not None:
-            out.append(code)
+            return code
     n_univ, topo, bitsA, posA, Fc, order, L = _traverse(F)
     nv = L.size
     vb = np.zeros(nv, dtype=np.int64)
@@ -666,6 +665,7 @@ def encode(F: np.ndarray) -> bytes:
     st, n_fb, posC = _face_order(True, m, Fc, nptr, nbrs, vptr, vf, inv, fc, fb, bitsC, 0, 0)
     rest = [vb, fc, fb[:n_fb], _rotation_symbols(F[order], L[Fc])]
     n_topo = 4 + NV_CTX
+    out = []
     if nv == n_univ and (L == np.arange(nv)).all() and (order == np.arange(m)).all():
         if not rest[3].any():  # every face starts at its smallest index
             head = bytes([MARKER_CANONICAL]) + varint(nv) + canonical_sizes(topo[MARKER_ADAPTIVE])
