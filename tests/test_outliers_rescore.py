@@ -85,7 +85,8 @@ def test_second_pass_with_a_grid_and_a_given_threshold():
 
 def test_no_second_pass_on_a_cloud_of_uneven_spacing():
     """Two planes, one sampled 3x more sparsely (a frame without its range model): the kept
-    points' spacing spread exceeds RESCORE_SPREAD, so the first pass stands."""
+    points' spacing spread exceeds RESCORE_SPREAD, so the second pass removes only locally sparse
+    points (RESCORE_LOCAL): a few more outliers, no point of either plane."""
     from spectrageo.outliers.static import RESCORE_SPREAD
 
     rng = np.random.default_rng(3)
@@ -96,9 +97,10 @@ def test_no_second_pass_on_a_cloud_of_uneven_spacing():
     P = np.concatenate([near, far]) + rng.uniform(-0.1, 0.1, (near.shape[0] + far.shape[0], 3))
     Q, lab = noise.add_outliers(P, fraction=0.3, kind="far", rng=4)
     r = detect_outliers(Q)
-    assert r.info["rescore_spread"] > RESCORE_SPREAD and "rescore" not in r.info
+    assert r.info["rescore_spread"] > RESCORE_SPREAD and r.info["rescore"]["local"]
     off = detect_outliers(Q, options=RPCAOptions(rescore_share=None))
-    np.testing.assert_array_equal(r.keep, off.keep)
+    np.testing.assert_array_equal(r.keep[~lab], off.keep[~lab])
+    assert not (r.keep & ~off.keep).any() and np.count_nonzero(off.keep & ~r.keep) >= 1
 
 
 @pytest.mark.parametrize("bad", [0, -0.1, 1.5, float("nan"), "a", True])

@@ -166,7 +166,7 @@ def test_cases_are_unique_and_valid():
     keys = [(c.task, c.file, c.name, c.seed, c.corruption) for c in S.CASES]
     assert len(keys) == len(set(keys))
     assert {c.root for c in S.cases("denoise", "test")} == {"test"}
-    assert all(c.root == "shared" for c in S.CASES if c.split != "test")
+    assert all(c.root in ("shared", "repo") for c in S.CASES if c.split != "test")
 
 
 def test_lookups():

@@ -90,6 +90,10 @@ _DEFAULTS = [
     _d(_O + "static.RESCORE_SPREAD", 2.08, "tuning", "outliers", _EO,
        "kept-point spacing spread Q90/Q50: second pass helped at <= 2.003 (milk_cartoon 30 %), "
        "harmed the table scene without a viewpoint at 2.156-2.185 (10 % halo 0.714 -> 0.624)"),
+    _d(_O + "static.RESCORE_LOCAL", 2.0, "tuning", "outliers",
+       "benchmarks/outliers_lidar_local_rescore.py",
+       "smallest of 1-2.5 with no tuning case lower (table scene 1.5: -0.002); 40 % injected "
+       "+0.03-0.04; docs/decisions.md#outliers-lidar-local-rescore"),
     _d(_O + "static.DEFAULT_THRESHOLD_RULE", "valley", "tuning", "outliers", _EO,
        "mean F1 0.890 against 0.887 (density) on the tuning split"),
     _d(_O + "static.VALLEY_BIN", 0.05, "tuning", "outliers", _EO,

@@ -39,9 +39,10 @@ class Case:
         Defaults (qualified names as in :data:`DEFAULTS`, or a named rule) whose design or value
         looked at this case although it is not tuning data; the case is not held out for them.
     note : str
-    root : {"shared", "test"}
-        The folder ``file`` is relative to: the shared data folder, or the sealed test data
-        folder (``$SPECTRAGEO_TEST_DATA``, fetched by ``benchmarks/test_split/fetch.py``).
+    root : {"shared", "test", "repo"}
+        The folder ``file`` is relative to: the shared data folder, the sealed test data
+        folder (``$SPECTRAGEO_TEST_DATA``, fetched by ``benchmarks/test_split/fetch.py``), or the
+        repository's ``benchmarks/data`` (small files shipped with the source).
     """
 
     task: str
@@ -57,8 +58,8 @@ class Case:
     root: str = "shared"
 
     def __post_init__(self) -> None:
-        if self.root not in ("shared", "test"):
-            raise ValueError(f"`root` must be 'shared' or 'test'; got {self.root!r}.")
+        if self.root not in ("shared", "test", "repo"):
+            raise ValueError(f"`root` must be 'shared', 'test' or 'repo'; got {self.root!r}.")
         if self.split not in SPLITS:
             raise ValueError(f"`split` must be one of {SPLITS}; got {self.split!r}.")
         if self.group not in GROUPS:

@@ -71,8 +71,9 @@ class RPCAOptions:
         (:mod:`._support`).
     rescore_share : float, optional
         :func:`remove_outliers` scores the kept points again (a second pass) when the first
-        removed at least this share of the cloud and their spacing is homogeneous
-        (``static.RESCORE_SPREAD``); None: off.
+        removed at least this share of the cloud (all its outliers removed when their spacing is
+        homogeneous, ``static.RESCORE_SPREAD``, else the locally sparse ones,
+        ``static.RESCORE_LOCAL``); None: off.
     grid : OrganizedGrid, optional
         Image grid of an organized depth frame: :func:`remove_outliers` removes its flying pixels
         and keeps its image-supported points (:mod:`._organized`); the viewpoint defaults to the

@@ -51,6 +51,10 @@ SPARSE_GATE = 0.25
 #: Largest ``Q_0.9 / Q_0.5`` of the kept points' ``k``-th neighbour distances at which the second
 #: pass runs; chosen on the tuning split (docs/decisions.md#outliers-rescore).
 RESCORE_SPREAD = 2.08
+#: Above :data:`RESCORE_SPREAD`, the second pass removes only its outliers whose ``k``-th
+#: neighbour distance is at least this many times the median of their neighbours'; chosen on the
+#: tuning split (docs/decisions.md#outliers-lidar-local-rescore).
+RESCORE_LOCAL = 2.0
 
 
 @dataclass(frozen=True)
@@ -177,19 +181,38 @@ def _rpca_pass(X, k, options, threshold, rule, smoothed, workers, device, info: 
     return keep, r, tau
 
 
-def _rescore_due(options: RPCAOptions, r, keep: np.ndarray, k: int, info: dict) -> bool:
-    """Whether the first pass removed at least ``options.rescore_share`` of the cloud, kept more
-    than ``k`` points and their (range-normalised) ``k``-th neighbour distances ``d`` are
-    homogeneous: ``Q_0.9(d) <= RESCORE_SPREAD Q_0.5(d)`` (scores in global spacings compare)."""
+def _rescore_due(options: RPCAOptions, r, keep: np.ndarray, k: int, info: dict) -> str | None:
+    """The second pass due: None unless the first pass removed at least
+    ``options.rescore_share`` of the cloud and kept more than ``k`` points; ``"all"`` when their
+    (range-normalised) ``k``-th neighbour distances ``d`` are homogeneous,
+    ``Q_0.9(d) <= RESCORE_SPREAD Q_0.5(d)`` (scores in global spacings compare), else
+    ``"local"`` (:func:`_locally_sparse`)."""
     n_kept = int(np.count_nonzero(keep))
     share = 1.0 - n_kept / max(keep.size, 1)
     if options.rescore_share is None or share < options.rescore_share or n_kept <= k:
-        return False
+        return None
     if r.kth_distance is None:  # k-d tiles: no distances to judge the spread by
-        return False
+        return None
     q50, q90 = np.quantile(r.kth_distance[keep], [0.5, 0.9])
     info["rescore_spread"] = float(q90 / q50) if q50 > 0 else float("inf")
-    return bool(q90 <= RESCORE_SPREAD * q50)
+    return "all" if q90 <= RESCORE_SPREAD * q50 else "local"
+
+
+def _locally_sparse(r) -> np.ndarray:
+    """``d_i >= RESCORE_LOCAL median_{j in N_i} d_j``, ``d`` the ``k``-th neighbour distances and
+    ``N_i`` the ``k`` neighbours of a pass (all False without its lists)."""
+    d = r.kth_distance
+    if r.knn is None or d is None:
+        return np.zeros(r.scores.size, dtype=bool)
+    order, idx = r.knn
+    ds = d[order]  # sorted positions, as the lists
+    return d >= RESCORE_LOCAL * _inverse(order, np.median(ds[idx], axis=1))
+
+
+def _inverse(order: np.ndarray, v: np.ndarray) -> np.ndarray:
+    out = np.empty_like(v)
+    out[order] = v
+    return out
 
 
 def remove_outliers(
@@ -216,9 +239,10 @@ def remove_outliers(
     surface region (``options.sparse_regions``: :func:`._support.sparse_surface`); with
     ``options.grid`` (an organized depth frame) the flying pixels are removed and the
     image-supported points kept (:func:`._organized.grid_labels`). When the stages before the
-    grid remove at least ``options.rescore_share`` of the cloud and the kept points' spacing is
-    homogeneous (:data:`RESCORE_SPREAD`), the kept points are scored again the same way and the
-    second pass's outliers removed too (``scores`` and ``threshold`` stay the first pass's;
+    grid remove at least ``options.rescore_share`` of the cloud, the kept points are scored again
+    the same way and the second pass's outliers removed too: all of them when the kept points'
+    spacing is homogeneous (:data:`RESCORE_SPREAD`), else those locally sparse
+    (:data:`RESCORE_LOCAL`; ``scores`` and ``threshold`` stay the first pass's;
     ``info["rescore"]``). ``threshold=None`` uses
     ``threshold_rule`` (``"valley"``: :func:`valley_threshold`; ``"density"``, ``"otsu"``:
     :func:`auto_threshold`) with the floor :data:`RPCA_MIN_TAU` = 0.5 spacings (chosen on the tuning
@@ -320,15 +344,24 @@ def _outliers(
         rule = None if threshold is not None else threshold_rule
         keep_f, r, tau = _rpca_pass(X, k, options, threshold, rule, smoothed, workers, device, info)
         s = r.scores
-        if _rescore_due(options, r, keep_f, k, info):
-            # a second pass on the kept points (docs/decisions.md#outliers-rescore)
+        due = _rescore_due(options, r, keep_f, k, info)
+        if due is not None:
+            # a second pass on the kept points (docs/decisions.md#outliers-rescore); of uneven
+            # spacing, its locally sparse outliers only
+            # (docs/decisions.md#outliers-lidar-local-rescore)
             sub = np.flatnonzero(keep_f)
             again = replace(options, grid=None, viewpoint=options.sensor_origin)
-            keep2, _, tau2 = _rpca_pass(
+            keep2, r2, tau2 = _rpca_pass(
                 X[sub], k, again, threshold, rule, False, workers, device, {}
             )
+            if due == "local":
+                keep2 |= ~_locally_sparse(r2)
             keep_f[sub[~keep2]] = False
-            info["rescore"] = {"threshold": tau2, "n_removed": int(sub.size - keep2.sum())}
+            info["rescore"] = {
+                "threshold": tau2,
+                "n_removed": int(sub.size - keep2.sum()),
+                "local": due == "local",
+            }
         if options.grid is not None:  # the grid stage (docs/decisions.md#outliers-organized-grid)
             pix = options.grid.pixels(X.shape[0] if finite is None else finite.size)
             pix = pix if finite is None else pix[finite]
