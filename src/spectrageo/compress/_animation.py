@@ -466,8 +466,10 @@ def read_header(c: _container.Container) -> StreamState:
         raise InvalidInputError(".sga stream header lacks its connectivity or anchors.")
     F = _connectivity.decode_faces(c.chunks[0][1], c.n_vertices, c.n_faces)
     if c.method == "pca-pred":  # no anchors, no solve: the traversal plan instead
-        from ._pca_pred import make_plan
+        from ._pca_pred import CODER, make_plan
 
+        if p.n_iter != CODER:
+            raise InvalidInputError(f".sga pca-pred coder version {p.n_iter} is not read here.")
         pl = make_plan(F, c.n_vertices)
         e = np.zeros(0, np.int64)
         o = np.asarray(c.origin)

@@ -9,24 +9,27 @@ a block of ``T`` frames, one row ``y_v`` (3T,) per vertex (x, then y, then z ove
 covariance (principal components, by decreasing variance), ``q_vj`` integers. The coefficients
 are least-squares projections on the dequantised basis, rounded on one grid of step ``s``; a
 component is kept while its error removed pays for its bits (``lambda = ln2/6 s^2``, as in
-``pca-q``). The integers are coded losslessly vertex by vertex in a breadth-first order:
+``pca-q``). The integers are coded losslessly vertex by vertex in the static predictive
+coder's order (most decoded faces first, :func:`._predictive_kernel.traversal_order`):
 
-1. base prediction ``p_vj``: the floor-mean of the parallelograms ``q_a + q_b - q_c`` of the
-   vertex's decoded faces, or of its decoded 1-ring (one flag per component, the encoder's
-   choice), else 0;
-2. the base residual ``r_vj = q_vj - p_vj`` is predicted from the vertex's own decoded
-   ``r_v0 .. r_v(j-1)`` (the first :data:`PREG`) by a ridge regression fitted on the decoded
-   two rings (locally the residual trajectories of a rigidly moving patch span three
+1. base prediction ``p_vj`` (a rational): the mean of the parallelograms ``q_a + q_b - q_c``
+   of the vertex's decoded faces, or of its decoded 1-ring (one flag per component, the
+   encoder's choice), else 0;
+2. the base residual ``r_vj = q_vj - p_vj`` is predicted (``x_vj``) from the vertex's own
+   decoded ``r_v0 .. r_v(j-1)`` (the first :data:`PREG`) by a ridge regression fitted on the
+   decoded two rings (locally the residual trajectories of a rigidly moving patch span three
    dimensions, so few components predict the rest), used for a component while its running
    cost is the lower one (both ends keep it);
-3. the remainder goes through the adaptive binary range coder of :mod:`._rangecoder`, in
-   contexts of the component, the decoded 1-ring's residual bit lengths and the vertex's two
-   previous ones.
+3. ``q_vj - round(p_vj + x_vj)`` goes through the adaptive binary range coder of
+   :mod:`._rangecoder`, in contexts of the component, the decoded 1-ring's residual bit
+   lengths and the vertex's two previous ones; its sign in contexts of the component and the
+   rounding remainder (the side the real prediction leans to).
 
 The encoder may round a coefficient to its other nearest integer when that saves more than
 :data:`RDO_LAMBDA` squared steps per bit. The decoder's floating-point steps (the regression,
 one product :func:`._dense_fixed.matmul`) are numba loops in a written order without BLAS or
-``fastmath``: the same bits on every machine. See docs/decisions.md#anim-pca-pred.
+``fastmath``: the same bits on every machine. See docs/decisions.md#anim-pca-pred,
+docs/decisions.md#anim-pred2-traversal and docs/decisions.md#anim-pred2-rational.
 """
 
 from __future__ import annotations
@@ -42,10 +45,11 @@ from ._entropy import decode_groups, encode_groups
 from ._predictive_kernel import (
     _ONE,
     _STRIDE,
-    _code_int,
+    _code_signed,
     _mean_of,
     _parallelograms,
     _vertex_faces,
+    traversal_order,
 )
 from ._rangecoder import bitlen as _bitlen
 from ._rangecoder import finish, start
@@ -79,28 +83,18 @@ _NB = 6
 #: buckets of the bit lengths of the vertex's two previous components
 _NP = 5
 _NCTX = _JB * _NB * _NP
+#: sign contexts per component: classes of the prediction's rounding remainder in [-1/2, 1/2)
+_NF = 5
 
 
 # ----------------------------------------------------------------------------- traversal
 def make_plan(F: np.ndarray, n: int) -> tuple:
-    """``(F, order, ptr, vf, rings, n1)``: the breadth-first vertex order (scipy's, over the edge
-    graph with a virtual root joined to the smallest vertex of every connected component: all
-    integer, the same everywhere), the vertex-face incidence, up to ``MAXR`` vertices of the two
-    rings decoded before each vertex (n, MAXR; -1 where there are fewer), the decoded 1-ring
-    first, and the 1-ring's count (n,)."""
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import breadth_first_order, connected_components
-
+    """``(F, order, ptr, vf, rings, n1)``: the vertex order of the static predictive coder
+    (:func:`._predictive_kernel.traversal_order`: most decoded faces first), the vertex-face
+    incidence, up to ``MAXR`` vertices of the two rings decoded before each vertex (n, MAXR;
+    -1 where there are fewer), the decoded 1-ring first, and the 1-ring's count (n,)."""
     F = np.ascontiguousarray(F, dtype=np.int64)
-    E = np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]
-    G = sp.csr_matrix((np.ones(len(E), np.int8), (E[:, 0], E[:, 1])), shape=(n + 1, n + 1))
-    _k, lab = connected_components(G[:n, :n], directed=False)
-    _u, first = np.unique(lab, return_index=True)
-    R = sp.csr_matrix((np.ones(first.size, np.int8), (np.full(first.size, n), first)), G.shape)
-    G = ((G + G.T + R + R.T) > 0).astype(np.int8).tocsr()
-    G.sort_indices()
-    order = breadth_first_order(G, n, directed=False, return_predecessors=False)[1:]
-    order = np.ascontiguousarray(order, dtype=np.int64)
+    order = traversal_order(F, n)
     ptr, vf = _vertex_faces(F, n)
     rings, n1 = _rings(ptr, vf, F, order)
     return F, order, ptr, vf, rings, n1
@@ -150,11 +144,12 @@ def _jctx(j):
 
 
 @numba.njit(cache=True)
-def _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, out):
-    """Predictions ``out`` (k,) of the vertex ``v`` from the decoded ``Q`` (n, 3 ceil(k / 3)):
-    the floor-mean of the parallelograms (:func:`._predictive_kernel._parallelograms`, three
-    components at a time) where its flag is 0, else (or without one) the floor-mean of the
-    decoded 1-ring's ``nn`` vertices, else 0; returns the parallelogram count."""
+def _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, out, fr):
+    """Predictions ``out + fr`` (k,) of the vertex ``v`` from the decoded ``Q`` (n, 3 ceil(k / 3)):
+    the mean of the parallelograms (:func:`._predictive_kernel._parallelograms`, three
+    components at a time) where its flag is 0, else (or without one) the mean of the decoded
+    1-ring's ``nn`` vertices, else 0; ``out`` the floor (int64), ``fr`` the remainder over the
+    count, in [0, 1); returns the parallelogram count."""
     k = out.size
     cnt = _parallelograms(F, ptr, vf, Q[:, 0:3], vis, v, P)
     for b in range(0, k, 3):
@@ -165,13 +160,19 @@ def _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, out):
         for j in range(b, min(b + 3, k)):
             if cnt > 0 and flags[j] == 0:
                 out[j] = p3[j - b]
+                s = np.int64(0)
+                for i in range(cnt):
+                    s += P[i, j - b]
+                fr[j] = (s - cnt * out[j]) / cnt
             elif nn > 0:
                 s = np.int64(0)
                 for i in range(nn):
                     s += Q[Rg[v, i], j]
                 out[j] = s // nn
+                fr[j] = (s - nn * out[j]) / nn
             else:
                 out[j] = 0
+                fr[j] = 0.0
     return cnt
 
 
@@ -194,9 +195,10 @@ def choose_flags(order, ptr, vf, F, Rg, n1, Q, k):
     p3 = np.zeros(3, np.int64)
     out = np.zeros(k, np.int64)
     par = np.zeros(k, np.int64)
+    fr = np.zeros(k)
     for v in order:
         nn = min(n1[v], MAXN)
-        if _base(F, ptr, vf, vis, Rg, nn, v, Q, par, P, p3, out) > 0:
+        if _base(F, ptr, vf, vis, Rg, nn, v, Q, par, P, p3, out, fr) > 0:
             for j in range(k):
                 s = np.int64(0)
                 for i in range(nn):
@@ -235,7 +237,7 @@ def _local_factor(Rg, Rb, v, qm, X, L):
 @numba.njit(cache=True)
 def _local_predict(Rg, Rb, v, j, q, m, X, L, w, y):
     """Ridge regression of the ring's base residual of component ``j`` on its first ``q``
-    components, applied to the vertex's own (decoded) first ``q``: the nearest integer."""
+    components, applied to the vertex's own (decoded) first ``q`` (a float)."""
     for r in range(m):
         y[r] = float(Rb[Rg[v, r], j])
     for i in range(q):
@@ -253,26 +255,30 @@ def _local_predict(Rg, Rb, v, j, q, m, X, L, w, y):
     x = 0.0
     for i in range(q):
         x += w[i] * float(Rb[v, i])
-    return np.int64(math.floor(x + 0.5))
+    return x
 
 
 @numba.njit(cache=True)
 def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
-    """Encode ``Q`` (n, k) int64 (in an (n, 3 ceil(k / 3)) array) into ``buf`` (returns the byte count, which may exceed the
-    buffer) or decode ``buf`` into ``Q`` (returns the bytes read, -1 when the data ran out).
+    """Encode ``Q`` (n, k) int64 (in an (n, 3 ceil(k / 3)) array) into ``buf`` (returns the
+    byte count, which may exceed the buffer) or decode ``buf`` into ``Q`` (returns the bytes
+    read, -1 when the data ran out).
 
-    The base residual ``Q - p`` (``p``: :func:`_base`) of a component is further predicted
-    by :func:`_local_regression` where it has been cheaper so far for that component (a running
-    cost both ends keep). With ``lam > 0`` the encoder first re-quantises every ``X`` (n, k, in
-    steps) to the one of its two nearest integers minimising ``(X - q)^2 + lam (2 bitlen|e| + 1)``,
-    ``e`` the coded residual, and writes it to ``Q``."""
+    The real base residual ``r = Q - p`` (``p``: :func:`_base`, with its remainder) of a
+    component is further predicted by :func:`_local_predict` (``x``) where that has been
+    cheaper so far for that component (a running cost both ends keep); the coded residual is
+    ``e = Q - round(p + x)``, its sign in the context of the component and of the rounding
+    remainder ``p + x - round(p + x)`` (:data:`_NF` classes). With ``lam > 0`` the encoder
+    first re-quantises every ``X`` (n, k, in steps) to the one of its two nearest integers
+    minimising ``(X - q)^2 + lam (2 bitlen|e| + 1)`` and writes it to ``Q``."""
     n = Q.shape[0]
     k = flags.size
-    probs = np.full(_NCTX * _STRIDE, _ONE >> 1, np.int64)
+    probs = np.full(_NCTX * _STRIDE + _JB * _NF, _ONE >> 1, np.int64)
+    fr = np.zeros(k)
     st = np.zeros(6, np.int64)
     start(enc, st, buf)
     ek = np.zeros((n, k), np.int64)
-    Rb = np.zeros((n, k), np.int64)
+    Rb = np.zeros((n, k))
     acc = np.zeros((2, k), np.int64)
     rdo = enc and lam > 0
     qm = min(PREG, k)
@@ -286,17 +292,24 @@ def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
     base = np.zeros(k, np.int64)
     for v in order:
         nn = min(n1[v], MAXN)
-        _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, base)
+        _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, base, fr)
         m = _local_factor(Rg, Rb, v, qm, Xr, L)
         pz = 0
         for j in range(k):
             p = base[j]
-            pr = np.int64(0)
+            xr = 0.0
             reg = j > 0 and m >= MINR
             if reg:
-                pr = _local_predict(Rg, Rb, v, j, min(j, qm), m, Xr, L, w, yr)
+                xr = _local_predict(Rg, Rb, v, j, min(j, qm), m, Xr, L, w, yr)
             use = reg and acc[1, j] < acc[0, j]
-            pt = p + pr if use else p
+            r0 = fr[j]
+            p0 = p + np.int64(math.floor(r0 + 0.5))
+            r1 = fr[j] + xr
+            p1 = p + np.int64(math.floor(r1 + 0.5))
+            pt = p1 if use else p0
+            f = (r1 if use else r0) - (pt - p)
+            fc = min(max(np.int64(math.floor((f + 0.5) * _NF)), 0), _NF - 1)
+            sgn = _NCTX * _STRIDE + _jctx(j) * _NF + fc
             mag = 0
             for i in range(nn):
                 mag += ek[Rg[v, i], j]
@@ -311,13 +324,13 @@ def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
                 c1 = (q0 + 1 - x) ** 2 + lam * (2 * _bitlen(-e1 if e1 < 0 else e1) + 1)
                 Q[v, j] = q0 if c0 <= c1 else q0 + 1
             e = Q[v, j] - pt if enc else np.int64(0)
-            e = _code_int(enc, st, buf, probs, ctx * _STRIDE, e)
+            e = _code_signed(enc, st, buf, probs, ctx * _STRIDE, e, sgn)
             Q[v, j] = pt + e
-            rb = Q[v, j] - p
-            Rb[v, j] = rb
+            Rb[v, j] = (Q[v, j] - p) - fr[j]
             if reg:
-                e2 = rb - pr
-                acc[0, j] += 2 * _bitlen(-rb if rb < 0 else rb) + 1 - (acc[0, j] >> 6)
+                e2 = Q[v, j] - p1
+                eb = Q[v, j] - p0
+                acc[0, j] += 2 * _bitlen(-eb if eb < 0 else eb) + 1 - (acc[0, j] >> 6)
                 acc[1, j] += 2 * _bitlen(-e2 if e2 < 0 else e2) + 1 - (acc[1, j] >> 6)
             b = _bitlen(-e if e < 0 else e)
             ek[v, j] = b
@@ -464,11 +477,9 @@ class PcaPredEncoder:
                 k = j + 1
         return k
 
-    def quantise(self, s: float):
-        """``(qm, sm, qB, sb, Q, mean~, basis~, coefficient chunk)`` at step ``s`` (cached for
-        the last step)."""
-        if s in self._q:
-            return self._q[s]
+    def project(self, s: float) -> tuple:
+        """``(qm, sm, qB, sb, C)`` at step ``s``: the quantised mean (step ``sm``) and basis
+        (steps ``sb``) and the coefficients ``C`` (n, k) on the dequantised basis, in steps."""
         T, n = self.T, self.n
         k = self.keep(s)
         sm = float(np.float32(MEAN_RATIO * s))
@@ -483,8 +494,16 @@ class PcaPredEncoder:
             C = np.linalg.solve(Bq.T @ Bq, Bq.T @ Yr.T).T
         else:
             C = np.zeros((n, 0))
-        coef, Q = encode_coefficients(C / s, self.plan, RDO_LAMBDA)
-        self._q = {s: (qm, sm, qB, sb, Q, qm * sm, Bq, coef)}
+        return qm, sm, qB, sb, C / s
+
+    def quantise(self, s: float):
+        """``(qm, sm, qB, sb, Q, mean~, basis~, coefficient chunk)`` at step ``s`` (cached for
+        the last step)."""
+        if s in self._q:
+            return self._q[s]
+        qm, sm, qB, sb, C = self.project(s)
+        coef, Q = encode_coefficients(C, self.plan, RDO_LAMBDA)
+        self._q = {s: (qm, sm, qB, sb, Q, qm * sm, qB * sb, coef)}
         return self._q[s]
 
     def chunks(self, s: float) -> list:
@@ -514,6 +533,9 @@ def reconstruct(pl, n: int, chunks, nf: int, step: float) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- file
+#: coefficient coder version, in the stream header's ``n_iter`` field (1: the breadth-first
+#: order and floor predictions of the first development code, no longer read)
+CODER = 2
 #: default frames per block (one trajectory PCA each; its covariance is (3 block)^2)
 PRED_BLOCK = 512
 #: default coefficient step (fraction of the frames' bounding-box diagonal)
@@ -540,7 +562,7 @@ class PcaPredFileEncoder:
     def params(self, step: float):
         from ._sga_format import Params
 
-        return Params(self.method, self.T, self.blk, 0, float(step), 1.0, 1.0, 0, 1)
+        return Params(self.method, self.T, self.blk, 0, float(step), 1.0, 1.0, 0, CODER)
 
     def build(self, step: float) -> bytes:
         from ._sga_format import block_segment, header_segment, index_segment

@@ -486,30 +486,18 @@ def _visit2(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, prev, p, P, e3, W
 
 
 @numba.njit(cache=True)
-def run(enc, F, n, G, buf, L, H, X, rho, ver=1):
-    """Encode into ``buf`` (returns the byte count) or decode ``buf`` into ``G`` (n, 3) int64
-    (returns the bytes read, or -1 when the data ran out). The encoder sends for each coordinate
-    the integer in ``[L, H]`` closest to its prediction (``rho > 0``: the grid point within ``rho``
-    of ``X``, grid units, near it) and writes it to ``G``. ``ver``: the residual format (1: tag
-    6, :func:`_visit`; 2: tag 7, :func:`_visit2`)."""
-    T = (L, H, X, rho)
-    e3 = np.zeros(3, np.int64)
+def traversal_order(F, n):
+    """The vertex order (n,) both ends derive from the connectivity ``F`` (m, 3): the next vertex
+    is the one with the most faces whose two other corners come before it (a heap; ties first
+    come first served); a new component starts at the first face with an unvisited corner, then
+    the isolated vertices in index order."""
     m = F.shape[0]
     ptr, vf = _vertex_faces(F, n)
-    probs = np.full(_NPROB2, _ONE >> 1, np.int64)
-    # work arrays: gate face, normal, convexity signs, sign models, candidate residuals,
-    # magnitude buckets, and buckets of -1 (format 1's cost estimate)
-    z = np.zeros(3, np.int64)
-    W = (np.zeros(1, np.int64), z, np.zeros(n, np.int64), z.copy(), z.copy(), z.copy(), z - 1)
-    st = np.zeros(6, np.int64)
-    start(enc, st, buf)
     vis = np.zeros(n, np.bool_)
     gates = np.zeros(n, np.int64)
     seen = np.zeros(n, np.bool_)
-    ek = np.zeros(n, np.int64)
-    p = np.zeros(3, np.int64)
-    P = np.zeros((MAXP, 3), np.int64)
-    prev = -1
+    order = np.empty(n, np.int64)
+    i = 0
     seq = 0
     heap = [(np.int64(0), np.int64(0), np.int64(0))]
     heap.pop()
@@ -523,13 +511,10 @@ def run(enc, F, n, G, buf, L, H, X, rho, ver=1):
             neg, _sq, v = heapq.heappop(heap)
             if vis[v] or -neg != gates[v]:
                 continue
-            if ver == 1:
-                _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, -1, prev, p, P, e3, W)
-            else:
-                _visit2(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, prev, p, P, e3, W)
-            prev = v
-            # most decoded neighbourhood first: a vertex gains a gate with each face whose two
-            # other corners are decoded
+            vis[v] = True
+            order[i] = v
+            i += 1
+            # a vertex gains a gate with each face whose two other corners are visited
             for t in range(ptr[v], ptr[v + 1]):
                 g = vf[t]
                 for j in range(3):
@@ -544,8 +529,40 @@ def run(enc, F, n, G, buf, L, H, X, rho, ver=1):
                     seen[w] = True
                     heapq.heappush(heap, (-gates[w], np.int64(seq), np.int64(w)))
                     seq += 1
-            if not enc and st[5] > buf.size + 8:
-                return -1
+    return order
+
+
+@numba.njit(cache=True)
+def run(enc, F, n, G, buf, L, H, X, rho, ver=1):
+    """Encode into ``buf`` (returns the byte count) or decode ``buf`` into ``G`` (n, 3) int64
+    (returns the bytes read, or -1 when the data ran out), the vertices in
+    :func:`traversal_order`. The encoder sends for each coordinate the integer in ``[L, H]``
+    closest to its prediction (``rho > 0``: the grid point within ``rho`` of ``X``, grid units,
+    near it) and writes it to ``G``. ``ver``: the residual format (1: tag 6, :func:`_visit`;
+    2: tag 7, :func:`_visit2`)."""
+    T = (L, H, X, rho)
+    e3 = np.zeros(3, np.int64)
+    ptr, vf = _vertex_faces(F, n)
+    probs = np.full(_NPROB2, _ONE >> 1, np.int64)
+    # work arrays: gate face, normal, convexity signs, sign models, candidate residuals,
+    # magnitude buckets, and buckets of -1 (format 1's cost estimate)
+    z = np.zeros(3, np.int64)
+    W = (np.zeros(1, np.int64), z, np.zeros(n, np.int64), z.copy(), z.copy(), z.copy(), z - 1)
+    st = np.zeros(6, np.int64)
+    start(enc, st, buf)
+    vis = np.zeros(n, np.bool_)
+    ek = np.zeros(n, np.int64)
+    p = np.zeros(3, np.int64)
+    P = np.zeros((MAXP, 3), np.int64)
+    prev = -1
+    for v in traversal_order(F, n):
+        if ver == 1:
+            _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, -1, prev, p, P, e3, W)
+        else:
+            _visit2(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, prev, p, P, e3, W)
+        prev = v
+        if not enc and st[5] > buf.size + 8:
+            return -1
     if enc:
         return finish(st, buf)
     return st[5] if st[5] <= buf.size + 4 else -1
