@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from spectrageo import noise
 from spectrageo.outliers import RPCAOptions, detect_outliers
 from spectrageo.outliers.static import RESCORE_SPREAD
+from test_outliers_rescore import _contaminate  # noqa: E402
 
 
 def _two_densities(seed: int = 3) -> np.ndarray:
@@ -23,20 +23,9 @@ def _two_densities(seed: int = 3) -> np.ndarray:
     return P + rng.uniform(-0.1, 0.1, P.shape)
 
 
-def _contaminated(P: np.ndarray, fraction: float, seed: int = 0):
-    N = np.tile([0.0, 0.0, 1.0], (P.shape[0], 1))
-    Qf, lf = noise.add_outliers(P, fraction=fraction / 2, kind="far", rng=seed)
-    Qn, ln = noise.add_outliers(
-        P, fraction=fraction / 2, kind="near", normals=N, distance=(5.0, 15.0), rng=seed + 1
-    )
-    Q = np.concatenate([P, Qf[lf], Qn[ln]])
-    lab = np.concatenate([np.zeros(P.shape[0], bool), np.ones(int(lf.sum() + ln.sum()), bool)])
-    return Q, lab
-
-
 def test_local_second_pass_on_uneven_spacing():
     P = _two_densities()
-    Q, lab = _contaminated(P, 0.3)
+    Q, lab = _contaminate(P, np.tile([0.0, 0.0, 1.0], (P.shape[0], 1)), 0.3)
     r = detect_outliers(Q)
     off = detect_outliers(Q, options=RPCAOptions(rescore_share=None))
     assert r.info["rescore_spread"] > RESCORE_SPREAD and r.info["rescore"]["local"]
