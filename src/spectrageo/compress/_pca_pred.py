@@ -29,7 +29,8 @@ The encoder may round a coefficient to its other nearest integer when that saves
 :data:`RDO_LAMBDA` squared steps per bit. The decoder's floating-point steps (the regression,
 one product :func:`._dense_fixed.matmul`) are numba loops in a written order without BLAS or
 ``fastmath``: the same bits on every machine. See docs/decisions.md#anim-pca-pred,
-docs/decisions.md#anim-pred2-traversal and docs/decisions.md#anim-pred2-rational.
+docs/decisions.md#anim-pred2-traversal, docs/decisions.md#anim-pred2-rational and
+docs/decisions.md#anim-speed-coder.
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ from ._predictive_kernel import (
     _STRIDE,
     _code_signed,
     _mean_of,
-    _parallelograms,
+    _parallelograms_at,
     _vertex_faces,
     traversal_order,
 )
@@ -151,11 +152,12 @@ def _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, out, fr):
     1-ring's ``nn`` vertices, else 0; ``out`` the floor (int64), ``fr`` the remainder over the
     count, in [0, 1); returns the parallelogram count."""
     k = out.size
-    cnt = _parallelograms(F, ptr, vf, Q[:, 0:3], vis, v, P)
+    nogate = np.zeros(0, np.int64)
+    cnt = _parallelograms_at(F, ptr, vf, Q[:, 0:3], vis, v, P, nogate)
     for b in range(0, k, 3):
         if cnt > 0:
             if b > 0:
-                _parallelograms(F, ptr, vf, Q[:, b : b + 3], vis, v, P)
+                _parallelograms_at(F, ptr, vf, Q[:, b : b + 3], vis, v, P, nogate)
             _mean_of(P, (1 << cnt) - 1, cnt, p3)
         for j in range(b, min(b + 3, k)):
             if cnt > 0 and flags[j] == 0:
@@ -259,6 +261,46 @@ def _local_predict(Rg, Rb, v, j, q, m, X, L, w, y):
 
 
 @numba.njit(cache=True)
+def _local_predict_rest(Rg, Rb, v, j0, q, m, X, L, Y, W, xs):
+    """:func:`_local_predict` of every component ``j >= j0`` on the first ``q`` into ``xs``
+    (``xs[j - j0]``), the same operations in the same order per component, the components side
+    by side (``Y`` (MAXR, k), ``W`` (q, k) scratch)."""
+    nj = Rb.shape[1] - j0
+    for r in range(m):
+        u = Rg[v, r]
+        for jj in range(nj):
+            Y[r, jj] = float(Rb[u, j0 + jj])
+    for i in range(q):
+        for jj in range(nj):
+            W[i, jj] = 0.0
+        for r in range(m):
+            c = X[r, i]
+            for jj in range(nj):
+                W[i, jj] += c * Y[r, jj]
+        for t in range(i):
+            c = L[i, t]
+            for jj in range(nj):
+                W[i, jj] -= c * W[t, jj]
+        d = L[i, i]
+        for jj in range(nj):
+            W[i, jj] = W[i, jj] / d
+    for i in range(q - 1, -1, -1):
+        for t in range(i + 1, q):
+            c = L[t, i]
+            for jj in range(nj):
+                W[i, jj] -= c * W[t, jj]
+        d = L[i, i]
+        for jj in range(nj):
+            W[i, jj] = W[i, jj] / d
+    for jj in range(nj):
+        xs[jj] = 0.0
+    for i in range(q):
+        c = float(Rb[v, i])
+        for jj in range(nj):
+            xs[jj] += W[i, jj] * c
+
+
+@numba.njit(cache=True)
 def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
     """Encode ``Q`` (n, k) int64 (in an (n, 3 ceil(k / 3)) array) into ``buf`` (returns the
     byte count, which may exceed the buffer) or decode ``buf`` into ``Q`` (returns the bytes
@@ -286,6 +328,9 @@ def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
     L = np.zeros((max(qm, 1), max(qm, 1)))
     w = np.zeros(max(qm, 1))
     yr = np.zeros(MAXR)
+    Yr = np.zeros((MAXR, k))
+    Wr = np.zeros((max(qm, 1), k))
+    xs = np.zeros(k)
     vis = np.zeros(n, np.bool_)
     P = np.zeros((MAXP, 3), np.int64)
     p3 = np.zeros(3, np.int64)
@@ -299,8 +344,12 @@ def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
             p = base[j]
             xr = 0.0
             reg = j > 0 and m >= MINR
-            if reg:
-                xr = _local_predict(Rg, Rb, v, j, min(j, qm), m, Xr, L, w, yr)
+            if reg and j < qm:
+                xr = _local_predict(Rg, Rb, v, j, j, m, Xr, L, w, yr)
+            elif reg:  # the same regression on the first qm for every later component
+                if j == qm:
+                    _local_predict_rest(Rg, Rb, v, qm, qm, m, Xr, L, Yr, Wr, xs)
+                xr = xs[j - qm]
             use = reg and acc[1, j] < acc[0, j]
             r0 = fr[j]
             p0 = p + np.int64(math.floor(r0 + 0.5))
@@ -423,6 +472,16 @@ def read_basis(buf: bytes, T: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ----------------------------------------------------------------------------- encoder
+def _counts(q: np.ndarray) -> np.ndarray:
+    """Occurrences of the distinct values of the integer-valued ``q``, by increasing value (those
+    of ``np.unique``; by ``np.bincount`` where the range is small)."""
+    lo, hi = float(q.min()), float(q.max())
+    if hi - lo > 4 * q.size + 1024:
+        return np.unique(q, return_counts=True)[1]
+    cnt = np.bincount((q - lo).astype(np.int64))
+    return cnt[cnt > 0]
+
+
 class PcaPredEncoder:
     """Analysis of one block ``X`` (T, n, 3) (normalised frames) shared by every step."""
 
@@ -471,7 +530,7 @@ class PcaPredEncoder:
             c = C[:, j]
             q = np.rint(c / s)
             gain = self.energy[j] - float(np.sum((c - s * q) ** 2))
-            _u, cnt = np.unique(q, return_counts=True)
+            cnt = _counts(q)
             bits = -float(np.sum(cnt * np.log2(cnt / q.size)))
             if gain > lam * (bits + col):
                 k = j + 1
