@@ -325,6 +325,10 @@ _DEFAULTS = [
        "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
     _d(_R + "_visibility.RAY_NEIGHBORS", 4, "tuning", "identify", _EI,
        "set before the tuning runs, not varied; docs/decisions.md#identify-visibility"),
+    _d(_R + "_visibility.GRAZE_COS", 0.2, "tuning", "identify", _EI,
+       "set before the run on tuning seeds 1-10 and 31-50 (seed 50 fandisk: the true pose "
+       "violated 0.067, on faces at median |cos| 0.06), not varied; "
+       "docs/decisions.md#identify2-grazing"),
     _d(_R + "_identify.SPLIT_DIAG", 1.3, "tuning", "identify", _EI,
        "mixed segments of seeds 4 and 10 are 1.55-1.84 diagonals, pure ones <= 1.04; set before "
        "the tuning runs, not varied; docs/decisions.md#identify-pieces"),

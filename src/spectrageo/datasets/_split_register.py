@@ -155,7 +155,7 @@ def _register_cases() -> list[Case]:
         _c("register-narrow", frag, "tuning", "scan", "perturbed 5-15 deg", 7, "open3d", frag_src)
     )
     lib = tuple(IDENTIFY_LIBRARY.values())
-    for seed in (1, 2, 3):
+    for seed in (*range(1, 11), *range(31, 51)):
         out.append(
             _c(
                 "identify",
@@ -166,8 +166,9 @@ def _register_cases() -> list[Case]:
                 seed,
                 f"scene {seed}",
                 lib,
-                note="seeds 1-6 chose the defaults (1-10 those of free space and the hypothesis "
-                "screen); 1-3 are reported",
+                note="seeds 1-6 chose the pose-search defaults, 1-10 free space, the hypothesis "
+                "screen and the pieces, 1-10 and 31-50 the rules of "
+                "docs/decisions.md#identify2-tuning-split",
             )
         )
     for seed in range(11, 19):
@@ -182,7 +183,8 @@ def _register_cases() -> list[Case]:
                 f"scene {seed}",
                 lib,
                 consulted_by=_IDENTIFY_CONSULTED,
-                note="run once before the last two changes, failures inspected",
+                note="failures inspected before the two rules of consulted_by; run once after each "
+                "later change",
             )
         )
     out.append(

@@ -11,13 +11,16 @@ Tables (:func:`format_markdown`): TP/TN/FP/FN, specificity, precision, recall, a
 F1 per model (Tables 6.8-6.9); the recognition rate per occlusion bin (Fig. 6.40; rotation below
 10 degrees, translation below 5 % of the diagonal); times; the milk and DBSCAN results.
 
-Split (:mod:`spectrageo.datasets.splits`, task ``identify``): the defaults that are not the
-thesis's were chosen on scenes 1-6, of which :data:`TUNING` (1-3) is reported; :data:`VALIDATION`
-is 11-18, consulted for two rules (docs/decisions.md#identify-validation-consulted).
+Split (:mod:`spectrageo.datasets.splits`, task ``identify``): :data:`TUNING` scenes 1-10 and
+31-50 chose the defaults that are not the thesis's; :data:`VALIDATION` is 11-18, consulted for
+two rules (docs/decisions.md#identify-validation-consulted). By default the tuning scenes
+:data:`REPORTED_TUNING` and every validation scene run; ``seeds`` of :func:`evaluate`, or the
+environment variable ``SPECTRAGEO_IDENTIFY_SEEDS`` (``1-10,31-50`` or ``all``), chooses others.
 """
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -37,9 +40,30 @@ def _seeds(split: str) -> tuple[int, ...]:
     return tuple(c.seed for c in _cases("identify", split) if c.file is None)
 
 
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """Seeds of a list of ranges such as ``"1-3,11-18"``.
+
+    Raises
+    ------
+    InvalidInputError
+        When ``text`` is not comma-separated integers or ``a-b`` ranges.
+    """
+    out: list[int] = []
+    for part in str(text).split(","):
+        a, _, b = part.strip().partition("-")
+        try:
+            lo, hi = int(a), int(b or a)
+        except ValueError:
+            raise InvalidInputError(f"seeds must read like '1-3,11-18'; got {text!r}.") from None
+        out += range(lo, hi + 1)
+    return tuple(out)
+
+
 #: the scene seeds of the split registry's ``identify`` task (:mod:`spectrageo.datasets.splits`)
 TUNING = {"seeds": _seeds("tuning")}
 VALIDATION = {"seeds": _seeds("validation")}
+#: the tuning scenes of a default run (all 30 take about 30 times one scene's 20-60 s)
+REPORTED_TUNING = (1, 2, 3)
 OCCLUSION_BINS = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
 ROT_OK_DEG = 10.0
 TRANS_OK = 0.05
@@ -65,8 +89,21 @@ def load_library(data: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     return lib
 
 
-def _scenes(lib, split: str, seeds, progress) -> list[dict]:
+def pose_errors(match, scene) -> dict:
+    """``occlusion``, ``rot_err_deg``, ``trans_err`` (model diagonals) and ``recognized`` of the
+    :class:`~spectrageo.register.Match` of a model present in a generated ``scene``."""
     from ..metrics.registration import rotation_error_deg, translation_error
+
+    j = scene.names.index(match.model)
+    T, Tg = match.transformation, scene.poses[j]
+    re = rotation_error_deg(T[:3, :3], Tg[:3, :3])
+    # translation of the model's centre (the library models are centred)
+    te = translation_error(T[:3, 3], Tg[:3, 3])
+    return {"occlusion": float(scene.occlusion[j]), "rot_err_deg": re, "trans_err": te,
+            "recognized": bool(match.found and re <= ROT_OK_DEG and te <= TRANS_OK)}  # fmt: skip
+
+
+def _scenes(lib, split: str, seeds, progress) -> list[dict]:
     from ..register import identify, make_scene
 
     rows = []
@@ -83,13 +120,7 @@ def _scenes(lib, split: str, seeds, progress) -> list[dict]:
                    "present": present, "found": m.found, "h": m.dissimilarity,
                    "n_points": int(len(sc.points)), "seconds": sec, "method": "identify"}  # fmt: skip
             if present:
-                j = sc.names.index(m.model)
-                T, Tg = m.transformation, sc.poses[j]
-                re = rotation_error_deg(T[:3, :3], Tg[:3, :3])
-                # translation of the model's centre (the library models are centred)
-                te = translation_error(T[:3, 3], Tg[:3, 3])
-                row.update(occlusion=float(sc.occlusion[j]), rot_err_deg=re, trans_err=te,
-                           recognized=bool(m.found and re <= ROT_OK_DEG and te <= TRANS_OK))  # fmt: skip
+                row.update(pose_errors(m, sc))
             rows.append(row)
     return rows
 
@@ -185,11 +216,15 @@ def evaluate(
     n_validation: int | None = None,
     parts: tuple[str, ...] = ("scene", "milk", "dbscan"),
     progress=None,
+    seeds=None,
 ) -> list[dict]:
     """Run the identification benchmark; one row per (scene, model), milk case and DBSCAN run.
 
     ``methods`` may only name ``identify`` (the one method; peers do not identify models).
     ``n_validation`` limits the validation scenes (default: all of :data:`VALIDATION`).
+    ``seeds`` (a sequence, a string ``"1-10,31-50"`` or ``"all"``; default
+    ``$SPECTRAGEO_IDENTIFY_SEEDS``, else :data:`REPORTED_TUNING` and all of :data:`VALIDATION`)
+    keeps only those registered scenes; a seed the registry lacks raises InvalidInputError.
     """
     data = Path(data_dir)
     if not data.is_dir():
@@ -206,11 +241,23 @@ def evaluate(
         elif progress:
             progress(msg)
 
+    if seeds is None:
+        seeds = os.environ.get("SPECTRAGEO_IDENTIFY_SEEDS") or None
+    if seeds is None:
+        seeds = (*REPORTED_TUNING, *VALIDATION["seeds"])
+    sel = parse_seeds(seeds) if isinstance(seeds, str) and seeds != "all" else seeds
+    tseeds, vseeds = TUNING["seeds"], VALIDATION["seeds"]
+    if sel != "all":
+        unknown = sorted(set(sel) - set(tseeds) - set(vseeds))
+        if unknown:
+            raise InvalidInputError(f"scene seeds {unknown} are not in the split registry.")
+        tseeds = tuple(s for s in tseeds if s in sel)
+        vseeds = tuple(s for s in vseeds if s in sel)
     lib = load_library(data)
     rows: list[dict] = []
-    vseeds = VALIDATION["seeds"][: n_validation if n_validation is not None else None]
+    vseeds = vseeds[: n_validation if n_validation is not None else None]
     if "scene" in parts and lib:
-        rows += _scenes(lib, "tuning", TUNING["seeds"], _p)
+        rows += _scenes(lib, "tuning", tseeds, _p)
         rows += _scenes(lib, "validation", vseeds, _p)
     if "milk" in parts:
         rows += _milk(data)
@@ -361,5 +408,6 @@ def _plot(rows: list[dict], png: Path) -> Path | None:
     return save_png(fig, png)
 
 
-__all__ = ["COLUMNS", "LIBRARY", "TUNING", "VALIDATION", "evaluate", "format_csv",
-           "format_markdown", "load_library", "recognition_by_occlusion", "write_tables"]  # fmt: skip
+__all__ = ["COLUMNS", "LIBRARY", "REPORTED_TUNING", "TUNING", "VALIDATION", "evaluate", "format_csv",
+           "format_markdown", "load_library", "parse_seeds", "recognition_by_occlusion",
+           "write_tables"]  # fmt: skip

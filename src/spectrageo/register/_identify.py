@@ -400,7 +400,7 @@ def _search_segment(
     def run(T0):
         T = _refine(model, seg, T0, o)
         h = dissimilarity(model, seg, T, voxel, o)
-        v = 0.0 if rays is None else rays.violations(model.P, T, VIS_TOL)
+        v = 0.0 if rays is None else rays.violations(model.P, T, VIS_TOL, model.N)
         out.append((h, v, T))
         return h < 0.75 * zeta and v <= VIS_MAX  # a clear match: no need for the other poses
 

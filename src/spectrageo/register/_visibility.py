@@ -16,6 +16,10 @@ from ._common import WORKERS, apply_transform
 RAY_STEPS = 1.0
 #: neighbouring rays looked at; the nearest of their points counts (robust at silhouettes)
 RAY_NEIGHBORS = 4
+#: model points whose surface meets their ray at |cos| below this (seen nearly edge-on) are not
+#: counted: such a surface covers almost no pixel, so its absence from the scan is no evidence
+#: (docs/decisions.md#identify2-grazing)
+GRAZE_COS = 0.2
 
 
 class SceneRays:
@@ -40,16 +44,25 @@ class SceneRays:
         self.tree = cKDTree(D[ok] / r[ok, None])
         self.step = float(step)
 
-    def violations(self, P: np.ndarray, T: np.ndarray, tol_steps: float) -> float:
+    def violations(
+        self, P: np.ndarray, T: np.ndarray, tol_steps: float, normals: np.ndarray | None = None
+    ) -> float:
         """Fraction of the moved model points ``T P`` (m, 3) with scene rays that violate free space.
 
-        Returns 0.0 when no model point has a scene point on its ray.
+        With (unoriented) model ``normals`` (m, 3), points whose surface meets the ray at
+        ``|cos| < GRAZE_COS`` are left out. Returns 0.0 when no model point has a scene point on
+        its ray.
         """
         X = apply_transform(T, P)
         D = X - self.e
         rp = np.linalg.norm(D, axis=1)
         good = rp > 0
+        if normals is not None:
+            c = np.abs(np.einsum("ij,ij->i", normals @ T[:3, :3].T, D))
+            good &= c >= GRAZE_COS * rp
         D, rp = D[good], rp[good]
+        if rp.size == 0:
+            return 0.0
         ang = RAY_STEPS * self.step / rp
         d, j = self.tree.query(D / rp[:, None], k=RAY_NEIGHBORS,
                                distance_upper_bound=float(ang.max()), workers=WORKERS)  # fmt: skip
