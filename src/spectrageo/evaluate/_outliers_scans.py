@@ -145,7 +145,8 @@ def _methods(Q: np.ndarray, lab: np.ndarray, viewpoint, o3d_ok: bool, grid=None)
 
 
 def evaluate_scan_types(data_dir, *, splits=("tuning", "validation"), seed: int = 0) -> list:
-    """Rows of the scan-type benchmark (module docstring) on the cases of ``splits``."""
+    """Rows of the scan-type benchmark (module docstring) on the cases of ``splits``; none when
+    ``data_dir`` holds none of its shared-data scans (the repository's files only extend it)."""
     from scipy.spatial import cKDTree
 
     from .. import io
@@ -154,6 +155,9 @@ def evaluate_scan_types(data_dir, *, splits=("tuning", "validation"), seed: int 
     from ._outliers_common import _have_open3d, _row
 
     data = Path(data_dir)
+    shared = [rel for _n, rel, _s in SCAN_TYPE_CASES if rel not in OUTLIER_SCAN_TYPES_IN_REPO]
+    if shared and not any((data / rel).exists() for rel in shared):
+        return []
     o3d_ok = _have_open3d()
     rows: list[dict] = []
     for name, rel, split in SCAN_TYPE_CASES:
