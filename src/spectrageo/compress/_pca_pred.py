@@ -48,9 +48,9 @@ from ._predictive_kernel import (
     _STRIDE,
     _code_signed,
     _mean_of,
+    _order,
     _parallelograms_at,
     _vertex_faces,
-    traversal_order,
 )
 from ._rangecoder import bitlen as _bitlen
 from ._rangecoder import finish, start
@@ -95,8 +95,8 @@ def make_plan(F: np.ndarray, n: int) -> tuple:
     incidence, up to ``MAXR`` vertices of the two rings decoded before each vertex (n, MAXR;
     -1 where there are fewer), the decoded 1-ring first, and the 1-ring's count (n,)."""
     F = np.ascontiguousarray(F, dtype=np.int64)
-    order = traversal_order(F, n)
     ptr, vf = _vertex_faces(F, n)
+    order = _order(F, n, ptr, vf)
     rings, n1 = _rings(ptr, vf, F, order)
     return F, order, ptr, vf, rings, n1
 

@@ -491,8 +491,14 @@ def traversal_order(F, n):
     is the one with the most faces whose two other corners come before it (a heap; ties first
     come first served); a new component starts at the first face with an unvisited corner, then
     the isolated vertices in index order."""
-    m = F.shape[0]
     ptr, vf = _vertex_faces(F, n)
+    return _order(F, n, ptr, vf)
+
+
+@numba.njit(cache=True)
+def _order(F, n, ptr, vf):
+    """:func:`traversal_order` with the vertex-face incidence ``ptr``, ``vf`` given."""
+    m = F.shape[0]
     vis = np.zeros(n, np.bool_)
     gates = np.zeros(n, np.int64)
     seen = np.zeros(n, np.bool_)
@@ -555,7 +561,7 @@ def run(enc, F, n, G, buf, L, H, X, rho, ver=1):
     p = np.zeros(3, np.int64)
     P = np.zeros((MAXP, 3), np.int64)
     prev = -1
-    for v in traversal_order(F, n):
+    for v in _order(F, n, ptr, vf):
         if ver == 1:
             _visit(enc, st, buf, probs, F, ptr, vf, G, T, vis, ek, v, -1, prev, p, P, e3, W)
         else:
