@@ -23,14 +23,13 @@ def test_base_prediction_is_the_exact_mean():
     vis[order[: n // 2]] = True
     v = order[n // 2]
     nn = min(n1[v], _pca_pred.MAXN)
-    P = np.zeros((_pca_pred.MAXP, 3), np.int64)
+    abc = np.zeros((_pca_pred.MAXP, 3), np.int64)
     for flag in (0, 1):
         out = np.zeros(3, np.int64)
         fr = np.zeros(3)
         flags = np.full(3, flag, np.int64)
-        cnt = _pca_pred._base(
-            F, ptr, vf, vis, Rg, nn, v, Q, flags, P, np.zeros(3, np.int64), out, fr
-        )
+        cnt = _pca_pred._base(F, ptr, vf, vis, Rg, nn, v, Q, flags, abc, out, fr)
+        P = Q[abc[:, 0]] + Q[abc[:, 1]] - Q[abc[:, 2]]
         assert cnt > 0 and nn > 0
         exact = P[:cnt].mean(axis=0) if flag == 0 else Q[Rg[v, :nn]].mean(axis=0)
         assert np.all((fr >= 0) & (fr < 1))

@@ -20,17 +20,19 @@ coder's order (most decoded faces first, :func:`._predictive_kernel.traversal_or
    decoded two rings (locally the residual trajectories of a rigidly moving patch span three
    dimensions, so few components predict the rest), used for a component while its running
    cost is the lower one (both ends keep it);
-3. ``q_vj - round(p_vj + x_vj)`` goes through the adaptive binary range coder of
-   :mod:`._rangecoder`, in contexts of the component, the decoded 1-ring's residual bit
-   lengths and the vertex's two previous ones; its sign in contexts of the component and the
-   rounding remainder (the side the real prediction leans to).
+3. ``q_vj - round(p_vj + x_vj)`` goes through the binary range coder of :mod:`._rangecoder`,
+   each binary decision under the mean of three adaptive models (:func:`_contexts`: the
+   component with the decoded 1-ring's residual bit lengths and the vertex's two previous
+   ones; with the vertex's bit lengths so far against the decoded vertices' and the two
+   rings'; with the spread of the values the base prediction averages); its sign in contexts
+   of the component and the rounding remainder (the side the real prediction leans to).
 
 The encoder may round a coefficient to its other nearest integer when that saves more than
 :data:`RDO_LAMBDA` squared steps per bit. The decoder's floating-point steps (the regression,
 one product :func:`._dense_fixed.matmul`) are numba loops in a written order without BLAS or
 ``fastmath``: the same bits on every machine. See docs/decisions.md#anim-pca-pred,
-docs/decisions.md#anim-pred2-traversal, docs/decisions.md#anim-pred2-rational and
-docs/decisions.md#anim-speed-coder.
+docs/decisions.md#anim-pred2-traversal, docs/decisions.md#anim-pred2-rational,
+docs/decisions.md#anim-speed-coder and docs/decisions.md#anim-pred3-contexts.
 """
 
 from __future__ import annotations
@@ -44,16 +46,14 @@ from .._errors import InvalidInputError
 from ._container import Reader, varint
 from ._entropy import decode_groups, encode_groups
 from ._predictive_kernel import (
-    _ONE,
-    _STRIDE,
-    _code_signed,
-    _mean_of,
+    KMAX,
     _order,
-    _parallelograms_at,
+    _parallelogram_corners,
     _vertex_faces,
 )
+from ._rangecoder import RATE0, RATE_MAX, _bit_at, finish, start
 from ._rangecoder import bitlen as _bitlen
-from ._rangecoder import finish, start
+from ._rangecoder import direct as _direct
 
 TAG_BASIS = 3
 TAG_COEFF = 4
@@ -68,7 +68,8 @@ MAXN = 8
 #: most decoded vertices of the two rings in a vertex's local regression
 MAXR = 24
 #: previous components regressed on (their base residuals) in the local regression
-PREG = 12
+#: (docs/decisions.md#anim-pred3-contexts)
+PREG = 32
 #: ridge of the local regression (squared integer residuals)
 RIDGE = 20.0
 #: fewest ring vertices for a local regression
@@ -84,6 +85,19 @@ _NB = 6
 #: buckets of the bit lengths of the vertex's two previous components
 _NP = 5
 _NCTX = _JB * _NB * _NP
+#: models per magnitude context: zero flag, unary bit lengths, top mantissa bits
+_STRIDE = 1 + KMAX + KMAX
+#: buckets a bit of the vertex's mean residual bit length above the decoded vertices' (the
+#: second context's activity classes)
+_ASCALE = 2.0
+_NCTX2 = _NCTX + _JB * _NB * _NB
+#: classes of the spread of the base prediction's values (the third context)
+_NS = 8
+_NCTX3 = _NCTX2 + _JB * _NS * _NB
+#: probability bits of the residual models
+PBM = 16
+#: weight of the second model (the vertex's activity) in the mean of the three
+_W2 = 2
 #: sign contexts per component: classes of the prediction's rounding remainder in [-1/2, 1/2)
 _NF = 5
 
@@ -145,36 +159,34 @@ def _jctx(j):
 
 
 @numba.njit(cache=True)
-def _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, out, fr):
-    """Predictions ``out + fr`` (k,) of the vertex ``v`` from the decoded ``Q`` (n, 3 ceil(k / 3)):
-    the mean of the parallelograms (:func:`._predictive_kernel._parallelograms`, three
-    components at a time) where its flag is 0, else (or without one) the mean of the decoded
+def _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, abc, out, fr):
+    """Predictions ``out + fr`` (k,) of the vertex ``v`` from the decoded ``Q`` (n, >= k): the
+    mean of the parallelograms ``a + b - c`` (:func:`._predictive_kernel._parallelogram_corners`,
+    found once per vertex) where its flag is 0, else (or without one) the mean of the decoded
     1-ring's ``nn`` vertices, else 0; ``out`` the floor (int64), ``fr`` the remainder over the
     count, in [0, 1); returns the parallelogram count."""
     k = out.size
-    nogate = np.zeros(0, np.int64)
-    cnt = _parallelograms_at(F, ptr, vf, Q[:, 0:3], vis, v, P, nogate)
-    for b in range(0, k, 3):
-        if cnt > 0:
-            if b > 0:
-                _parallelograms_at(F, ptr, vf, Q[:, b : b + 3], vis, v, P, nogate)
-            _mean_of(P, (1 << cnt) - 1, cnt, p3)
-        for j in range(b, min(b + 3, k)):
-            if cnt > 0 and flags[j] == 0:
-                out[j] = p3[j - b]
-                s = np.int64(0)
-                for i in range(cnt):
-                    s += P[i, j - b]
-                fr[j] = (s - cnt * out[j]) / cnt
-            elif nn > 0:
-                s = np.int64(0)
-                for i in range(nn):
-                    s += Q[Rg[v, i], j]
-                out[j] = s // nn
-                fr[j] = (s - nn * out[j]) / nn
-            else:
-                out[j] = 0
-                fr[j] = 0.0
+    cnt = _parallelogram_corners(F, ptr, vf, vis, v, abc, abc[0, :0])
+    sp = np.zeros(k, np.int64)
+    sr = np.zeros(k, np.int64)
+    for i in range(cnt):
+        a, b, c = abc[i, 0], abc[i, 1], abc[i, 2]
+        for j in range(k):
+            sp[j] += Q[a, j] + Q[b, j] - Q[c, j]
+    for i in range(nn):
+        u = Rg[v, i]
+        for j in range(k):
+            sr[j] += Q[u, j]
+    for j in range(k):
+        if cnt > 0 and flags[j] == 0:
+            out[j] = sp[j] // cnt
+            fr[j] = (sp[j] - cnt * out[j]) / cnt
+        elif nn > 0:
+            out[j] = sr[j] // nn
+            fr[j] = (sr[j] - nn * out[j]) / nn
+        else:
+            out[j] = 0
+            fr[j] = 0.0
     return cnt
 
 
@@ -193,24 +205,114 @@ def choose_flags(order, ptr, vf, F, Rg, n1, Q, k):
     n = Q.shape[0]
     cost = np.zeros((2, k), np.int64)
     vis = np.zeros(n, np.bool_)
-    P = np.zeros((MAXP, 3), np.int64)
-    p3 = np.zeros(3, np.int64)
+    abc = np.zeros((MAXP, 3), np.int64)
     out = np.zeros(k, np.int64)
     par = np.zeros(k, np.int64)
     fr = np.zeros(k)
+    s = np.zeros(k, np.int64)
     for v in order:
         nn = min(n1[v], MAXN)
-        if _base(F, ptr, vf, vis, Rg, nn, v, Q, par, P, p3, out, fr) > 0:
+        if _base(F, ptr, vf, vis, Rg, nn, v, Q, par, abc, out, fr) > 0:
+            s[:] = 0
+            for i in range(nn):
+                u = Rg[v, i]
+                for j in range(k):
+                    s[j] += Q[u, j]
             for j in range(k):
-                s = np.int64(0)
-                for i in range(nn):
-                    s += Q[Rg[v, i], j]
                 e = Q[v, j] - out[j]
                 cost[0, j] += 2 * _bitlen(-e if e < 0 else e) + 1
-                e = Q[v, j] - s // nn
+                e = Q[v, j] - s[j] // nn
                 cost[1, j] += 2 * _bitlen(-e if e < 0 else e) + 1
         vis[v] = True
     return (cost[1] < cost[0]).astype(np.int64)
+
+
+@numba.njit(cache=True, inline="always")
+def _mbit(enc, st, buf, probs, cnts, i, j, l, b):
+    """Bit ``b`` under the mean of the adaptive probabilities ``probs[i]``, ``probs[j]`` and
+    ``probs[l]`` (those >= 0), each updated ``1 / min(n + RATE0, RATE_MAX)`` of the way to the
+    bit at its ``n``-th use (``cnts``)."""
+    p = probs[i]
+    c = 1
+    if j >= 0:
+        p += _W2 * probs[j]
+        c += _W2
+    if l >= 0:
+        p += probs[l]
+        c += 1
+    b = _bit_at(enc, st, buf, p // c, b, PBM)
+    for x in (i, j, l):
+        if x >= 0:
+            d = min(cnts[x] + RATE0, RATE_MAX)
+            cnts[x] = min(cnts[x] + 1, RATE_MAX)
+            q = probs[x]
+            probs[x] = q + ((1 << PBM) - q) // d if b == 0 else q - q // d
+    return b
+
+
+@numba.njit(cache=True)
+def _code_res(enc, st, buf, probs, cnts, bases, value, sign):
+    """Residual ``value`` (encoder) or the decoded one: a zero flag, the sign (model ``sign``),
+    the bit length in unary and the top mantissa bit under the mean of the models at the three
+    ``bases`` (:func:`_mbit`), the other bits direct."""
+    b0, b1, b2 = bases[0], bases[1], bases[2]
+    if _mbit(enc, st, buf, probs, cnts, b0, b1, b2, 1 if value == 0 else 0):
+        return np.int64(0)
+    neg = _mbit(enc, st, buf, probs, cnts, sign, -1, -1, 1 if value < 0 else 0)
+    a = -value if value < 0 else value
+    n_bits = _bitlen(a) if enc else 0
+    k = 1
+    while k < KMAX:
+        if _mbit(enc, st, buf, probs, cnts, b0 + k, b1 + k, b2 + k, 1 if k < n_bits else 0) == 0:
+            break
+        k += 1
+    m = np.int64(1)
+    for j in range(k - 2, -1, -1):
+        b = (a >> j) & 1 if enc else 0
+        if j == k - 2:
+            o = KMAX + k
+            b = _mbit(enc, st, buf, probs, cnts, b0 + o, b1 + o, b2 + o, b)
+        else:
+            b = _direct(enc, st, buf, b)
+        m = (m << 1) | b
+    return -m if neg else m
+
+
+@numba.njit(cache=True)
+def _contexts(j, nn, mr, m1, m2, pz, ab, spr, bases):
+    """Model offsets ``bases`` (3,) of component ``j``'s residual at a vertex, each with the
+    component's class (:func:`_jctx`): (1) the decoded 1-ring's (``nn`` vertices, bit lengths
+    summing to ``m1``) mean residual bit length and the vertex's two previous ones (``pz``);
+    (2) the class ``ab`` of the vertex's bit lengths so far above the decoded vertices' mean
+    (0: none yet) and the decoded two rings' (``mr``, sum ``m2``) mean; (3) the spread ``spr``
+    of the values the base prediction averages and the 1-ring's mean."""
+    jc = _jctx(j)
+    b1 = 0 if nn == 0 else min(1 + (m1 + nn // 2) // nn, _NB - 1)
+    b2 = 0 if mr == 0 else min(1 + (m2 + mr // 2) // mr, _NB - 1)
+    bases[0] = ((jc * _NB + b1) * _NP + pz) * _STRIDE
+    bases[1] = (_NCTX + (jc * _NB + ab) * _NB + b2) * _STRIDE
+    bases[2] = (_NCTX2 + (jc * _NS + min(spr, _NS - 1)) * _NB + b1) * _STRIDE
+
+
+@numba.njit(cache=True)
+def _spread(Q, abc, cnt, Rg, v, nn, flag, j):
+    """Bit length of the range of the values :func:`_base` averages for component ``j`` (0
+    with fewer than two)."""
+    lo = np.int64(0)
+    hi = np.int64(0)
+    if cnt > 1 and flag == 0:
+        for i in range(cnt):
+            x = Q[abc[i, 0], j] + Q[abc[i, 1], j] - Q[abc[i, 2], j]
+            lo = x if i == 0 or x < lo else lo
+            hi = x if i == 0 or x > hi else hi
+    elif nn > 1 and (cnt == 0 or flag != 0):
+        for i in range(nn):
+            x = Q[Rg[v, i], j]
+            lo = x if i == 0 or x < lo else lo
+            hi = x if i == 0 or x > hi else hi
+    else:
+        return 0
+    return 1 + _bitlen(hi - lo)
 
 
 @numba.njit(cache=True)
@@ -237,15 +339,12 @@ def _local_factor(Rg, Rb, v, qm, X, L):
 
 
 @numba.njit(cache=True)
-def _local_predict(Rg, Rb, v, j, q, m, X, L, w, y):
-    """Ridge regression of the ring's base residual of component ``j`` on its first ``q``
-    components, applied to the vertex's own (decoded) first ``q`` (a float)."""
-    for r in range(m):
-        y[r] = float(Rb[Rg[v, r], j])
+def _ring_weights(Rb, v, q, m, X, L, w, u):
+    """Weights ``u`` (m,) of the ring's rows with ``u . y`` the ridge regression's prediction of
+    any ring column ``y`` from the vertex's own first ``q`` base residuals:
+    ``u = X_q (L_q L_q^T)^{-1} r_v`` (two triangular solves, ``w`` (q,) scratch)."""
     for i in range(q):
-        a = 0.0
-        for r in range(m):
-            a += X[r, i] * y[r]
+        a = float(Rb[v, i])
         for t in range(i):
             a -= L[i, t] * w[t]
         w[i] = a / L[i, i]
@@ -254,50 +353,39 @@ def _local_predict(Rg, Rb, v, j, q, m, X, L, w, y):
         for t in range(i + 1, q):
             a -= L[t, i] * w[t]
         w[i] = a / L[i, i]
+    for r in range(m):
+        a = 0.0
+        for i in range(q):
+            a += X[r, i] * w[i]
+        u[r] = a
+
+
+@numba.njit(cache=True)
+def _local_predict(Rg, Rb, v, j, q, m, X, L, w, y):
+    """Ridge regression of the ring's base residual of component ``j`` on its first ``q``
+    components, applied to the vertex's own (decoded) first ``q`` (a float)."""
+    _ring_weights(Rb, v, q, m, X, L, w, y)
     x = 0.0
-    for i in range(q):
-        x += w[i] * float(Rb[v, i])
+    for r in range(m):
+        x += y[r] * float(Rb[Rg[v, r], j])
     return x
 
 
 @numba.njit(cache=True)
 def _local_predict_rest(Rg, Rb, v, j0, q, m, X, L, Y, W, xs):
     """:func:`_local_predict` of every component ``j >= j0`` on the first ``q`` into ``xs``
-    (``xs[j - j0]``), the same operations in the same order per component, the components side
-    by side (``Y`` (MAXR, k), ``W`` (q, k) scratch)."""
+    (``xs[j - j0]``), the same operations in the same order per component, the ring weights
+    computed once (``Y`` (MAXR, >= 1), ``W`` (q, >= 1) scratch: their first columns)."""
     nj = Rb.shape[1] - j0
-    for r in range(m):
-        u = Rg[v, r]
-        for jj in range(nj):
-            Y[r, jj] = float(Rb[u, j0 + jj])
-    for i in range(q):
-        for jj in range(nj):
-            W[i, jj] = 0.0
-        for r in range(m):
-            c = X[r, i]
-            for jj in range(nj):
-                W[i, jj] += c * Y[r, jj]
-        for t in range(i):
-            c = L[i, t]
-            for jj in range(nj):
-                W[i, jj] -= c * W[t, jj]
-        d = L[i, i]
-        for jj in range(nj):
-            W[i, jj] = W[i, jj] / d
-    for i in range(q - 1, -1, -1):
-        for t in range(i + 1, q):
-            c = L[t, i]
-            for jj in range(nj):
-                W[i, jj] -= c * W[t, jj]
-        d = L[i, i]
-        for jj in range(nj):
-            W[i, jj] = W[i, jj] / d
+    u = Y[:, 0]
+    _ring_weights(Rb, v, q, m, X, L, W[:, 0], u)
     for jj in range(nj):
         xs[jj] = 0.0
-    for i in range(q):
-        c = float(Rb[v, i])
+    for r in range(m):
+        c = u[r]
+        g = Rg[v, r]
         for jj in range(nj):
-            xs[jj] += W[i, jj] * c
+            xs[jj] += c * float(Rb[g, j0 + jj])
 
 
 @numba.njit(cache=True)
@@ -315,7 +403,13 @@ def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
     minimising ``(X - q)^2 + lam (2 bitlen|e| + 1)`` and writes it to ``Q``."""
     n = Q.shape[0]
     k = flags.size
-    probs = np.full(_NCTX * _STRIDE + _JB * _NF, _ONE >> 1, np.int64)
+    probs = np.full(_NCTX3 * _STRIDE + _JB * _NF, 1 << (PBM - 1), np.int64)
+    bases = np.zeros(3, np.int64)
+    cnts = np.zeros(probs.size, np.int64)
+    colsum = np.zeros(k, np.int64)
+    m1 = np.zeros(k, np.int64)
+    m2 = np.zeros(k, np.int64)
+    nvis = 0
     fr = np.zeros(k)
     st = np.zeros(6, np.int64)
     start(enc, st, buf)
@@ -328,17 +422,32 @@ def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
     L = np.zeros((max(qm, 1), max(qm, 1)))
     w = np.zeros(max(qm, 1))
     yr = np.zeros(MAXR)
-    Yr = np.zeros((MAXR, k))
-    Wr = np.zeros((max(qm, 1), k))
+    Yr = np.zeros((MAXR, 1))
+    Wr = np.zeros((max(qm, 1), 1))
     xs = np.zeros(k)
     vis = np.zeros(n, np.bool_)
-    P = np.zeros((MAXP, 3), np.int64)
-    p3 = np.zeros(3, np.int64)
+    abc = np.zeros((MAXP, 3), np.int64)
     base = np.zeros(k, np.int64)
     for v in order:
         nn = min(n1[v], MAXN)
-        _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, P, p3, base, fr)
+        cnt = _base(F, ptr, vf, vis, Rg, nn, v, Q, flags, abc, base, fr)
         m = _local_factor(Rg, Rb, v, qm, Xr, L)
+        ws = 0
+        cs = 0
+        mr = 0
+        while mr < MAXR and Rg[v, mr] >= 0:
+            mr += 1
+        m1[:] = 0
+        for i in range(mr):  # the decoded rings' residual bit lengths, the 1-ring's first
+            if i == nn:
+                m2[:] = m1
+            u = Rg[v, i]
+            for j in range(k):
+                m1[j] += ek[u, j]
+        if mr == nn:
+            m2[:] = m1
+        else:
+            m1, m2 = m2, m1
         pz = 0
         for j in range(k):
             p = base[j]
@@ -358,12 +467,13 @@ def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
             pt = p1 if use else p0
             f = (r1 if use else r0) - (pt - p)
             fc = min(max(np.int64(math.floor((f + 0.5) * _NF)), 0), _NF - 1)
-            sgn = _NCTX * _STRIDE + _jctx(j) * _NF + fc
-            mag = 0
-            for i in range(nn):
-                mag += ek[Rg[v, i], j]
-            bucket = 0 if nn == 0 else min(1 + (mag + nn // 2) // nn, _NB - 1)
-            ctx = (_jctx(j) * _NB + bucket) * _NP + pz
+            sgn = _NCTX3 * _STRIDE + _jctx(j) * _NF + fc
+            spr = _spread(Q, abc, cnt, Rg, v, nn, flags[j], j)
+            ab = 0
+            if j > 0 and nvis > 0:
+                act = np.int64(math.floor(_ASCALE * (ws - cs / nvis) / j + 0.5))
+                ab = min(max(act + 3, 1), _NB - 1)
+            _contexts(j, nn, mr, m1[j], m2[j], pz, ab, spr, bases)
             if rdo:
                 x = X[v, j]
                 q0 = np.int64(np.floor(x))
@@ -373,7 +483,7 @@ def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
                 c1 = (q0 + 1 - x) ** 2 + lam * (2 * _bitlen(-e1 if e1 < 0 else e1) + 1)
                 Q[v, j] = q0 if c0 <= c1 else q0 + 1
             e = Q[v, j] - pt if enc else np.int64(0)
-            e = _code_signed(enc, st, buf, probs, ctx * _STRIDE, e, sgn)
+            e = _code_res(enc, st, buf, probs, cnts, bases, e, sgn)
             Q[v, j] = pt + e
             Rb[v, j] = (Q[v, j] - p) - fr[j]
             if reg:
@@ -383,9 +493,14 @@ def code(enc, F, order, ptr, vf, Rg, n1, flags, Q, X, lam, buf):
                 acc[1, j] += 2 * _bitlen(-e2 if e2 < 0 else e2) + 1 - (acc[1, j] >> 6)
             b = _bitlen(-e if e < 0 else e)
             ek[v, j] = b
+            ws += b
+            cs += colsum[j]
             b2 = b + (ek[v, j - 1] if j > 0 else b)
             pz = min((b2 + 1) // 2, _NP - 1)
         vis[v] = True
+        nvis += 1
+        for j in range(k):
+            colsum[j] += ek[v, j]
         if not enc and st[5] > buf.size + 8:
             return -1
     if enc:
@@ -593,8 +708,9 @@ def reconstruct(pl, n: int, chunks, nf: int, step: float) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- file
 #: coefficient coder version, in the stream header's ``n_iter`` field (1: the breadth-first
-#: order and floor predictions of the first development code, no longer read)
-CODER = 2
+#: order and floor predictions of the first development code; 2: one magnitude context per
+#: residual bit, the regression on the first 12 components; neither read any more)
+CODER = 3
 #: default frames per block (one trajectory PCA each; its covariance is (3 block)^2)
 PRED_BLOCK = 512
 #: default coefficient step (fraction of the frames' bounding-box diagonal)

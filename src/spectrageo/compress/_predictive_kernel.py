@@ -115,6 +115,20 @@ def _parallelograms(F, ptr, vf, G, vis, v, P):
 def _parallelograms_at(F, ptr, vf, G, vis, v, P, gate):
     """:func:`_parallelograms`; ``gate[0]`` (when ``gate`` is not empty) gets the face of the
     first parallelogram's opposite corner."""
+    k = _parallelogram_corners(F, ptr, vf, vis, v, P, gate)
+    for i in range(k):  # row i holds its corners until it is replaced by their parallelogram
+        a, b, c = P[i, 0], P[i, 1], P[i, 2]
+        for d in range(3):
+            P[i, d] = G[a, d] + G[b, d] - G[c, d]
+    return k
+
+
+@numba.njit(cache=True)
+def _parallelogram_corners(F, ptr, vf, vis, v, abc, gate):
+    """Corners ``(a, b, c)`` of the parallelograms ``a + b - c`` of ``v`` (decoded edge
+    ``(a, b)``, decoded opposite ``c``) into the rows of ``abc``; returns their count (at most
+    ``abc.shape[0]``); ``gate[0]`` (when ``gate`` is not empty) gets the first one's opposite
+    face."""
     k = 0
     for t in range(ptr[v], ptr[v + 1]):
         g = vf[t]
@@ -144,11 +158,12 @@ def _parallelograms_at(F, ptr, vf, G, vis, v, P, gate):
             if hasb and c >= 0 and c != v and vis[c]:
                 if k == 0 and gate.size:
                     gate[0] = h
-                for d in range(3):
-                    P[k, d] = G[a, d] + G[b, d] - G[c, d]
+                abc[k, 0] = a
+                abc[k, 1] = b
+                abc[k, 2] = c
                 k += 1
                 break
-        if k == P.shape[0]:
+        if k == abc.shape[0]:
             break
     return k
 
