@@ -94,6 +94,17 @@ _DEFAULTS = [
        "benchmarks/outliers_lidar_local_rescore.py",
        "smallest of 1-2.5 with no tuning case lower (table scene 1.5: -0.002); 40 % injected "
        "+0.03-0.04; docs/decisions.md#outliers-lidar-local-rescore"),
+    _d(_O + "static.HARM_SHARE", 0.03, "tuning", "outliers-scantypes",
+       "benchmarks/outliers3_harm.py",
+       "score-removed share: clean tuning scans 0.003-0.023, contaminated tuning cases >= 0.030 "
+       "(pattern blobs 5 %) / 0.042 (scan-type bands); docs/decisions.md#outliers3-harm"),
+    _d(_O + "static.HARM_SCORE", 2.0, "tuning", "outliers-scantypes",
+       "benchmarks/outliers3_harm.py", "removed clean LiDAR vegetation scores 1.0-1.8 tau"),
+    _d(_O + "static.HARM_SPACING", 1.5, "tuning", "outliers-scantypes",
+       "benchmarks/outliers3_harm.py", "2.0 lowered chin / 4_6_crop at 2 % injected"),
+    _d(_O + "static.HARM_SPREAD", 8.0, "tuning", "outliers-scantypes",
+       "benchmarks/outliers3_harm.py",
+       "largest of 3-8 / inf with no 1-2 % injected tuning case lower (inf: 4_6_crop -0.009)"),
     _d(_O + "static.DEFAULT_THRESHOLD_RULE", "valley", "tuning", "outliers", _EO,
        "mean F1 0.890 against 0.887 (density) on the tuning split"),
     _d(_O + "static.VALLEY_BIN", 0.05, "tuning", "outliers", _EO,

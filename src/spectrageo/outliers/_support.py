@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SUPPORT_BETA", "SUPPORT_FLAT", "SUPPORT_GROUP", "sparse_surface"]
+__all__ = ["SUPPORT_BETA", "SUPPORT_FLAT", "SUPPORT_GROUP", "sparse_surface", "within_spread"]
 
 #: Largest plane residual of a candidate, in its own mean kNN distances (``beta``).
 SUPPORT_BETA = 0.2
@@ -91,15 +91,38 @@ def sparse_surface(
     return keep
 
 
-def _candidates(X: np.ndarray, rows: np.ndarray, nb: np.ndarray, beta: float, flat: float):
-    """The surface candidates (module notes) among the points ``X[rows]`` with neighbours
-    ``X[nb]`` ((m, k) indices)."""
+def _plane_stats(X: np.ndarray, rows: np.ndarray, nb: np.ndarray):
+    """``(off, w, d)`` of the points ``X[rows]`` with neighbours ``X[nb]`` ((m, k) indices): the
+    offset from the neighbours' PCA plane, the covariance eigenvalues (m, 3), ascending, and
+    the mean distance to the neighbours."""
     Y = X[nb]  # (m, k, 3)
     mu = Y.mean(axis=1)
     C = np.einsum("mka,mkb->mab", Y - mu[:, None], Y - mu[:, None]) / nb.shape[1]
     w, V = np.linalg.eigh(C)
-    tr = w.sum(axis=1)
-    normal = V[:, :, 0]
-    off = np.abs(np.einsum("ma,ma->m", X[rows] - mu, normal))
+    off = np.abs(np.einsum("ma,ma->m", X[rows] - mu, V[:, :, 0]))
     d = np.linalg.norm(Y - X[rows][:, None], axis=2).mean(axis=1)
+    return off, w, d
+
+
+def _candidates(X: np.ndarray, rows: np.ndarray, nb: np.ndarray, beta: float, flat: float):
+    """The surface candidates (module notes) among the points ``X[rows]`` with neighbours
+    ``X[nb]`` ((m, k) indices)."""
+    off, w, d = _plane_stats(X, rows, nb)
+    tr = w.sum(axis=1)
     return (off <= beta * d) & (w[:, 0] <= flat * np.where(tr > 0, tr, 1.0)) & (tr > 0)
+
+
+def within_spread(X: np.ndarray, rows: np.ndarray, knn: tuple, factor: float) -> np.ndarray:
+    """Boolean mask over ``rows``: the point lies within ``factor`` standard deviations of its
+    ``k`` neighbours' PCA plane, ``|n_i^T (v_i - mean(N_i))| <= factor sqrt(l_1)``.
+
+    ``X`` (n, 3) points, ``rows`` (m,) indices, ``knn``: ``(order, idx)`` of
+    :class:`~._rpca_types.PatchRPCAResult`.
+    """
+    if rows.size == 0:
+        return np.zeros(0, dtype=bool)
+    order, idx = knn
+    inv = np.empty(X.shape[0], dtype=np.int64)
+    inv[order] = np.arange(X.shape[0])
+    off, w, _ = _plane_stats(X, rows, order[idx[inv[rows]]])
+    return off <= factor * np.sqrt(np.maximum(w[:, 0], 0.0))

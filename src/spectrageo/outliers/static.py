@@ -20,7 +20,7 @@ from .._validation import (
 from ..geometry import PointCloud
 from ._common import SortedCloud, check_k, knn_grid, numba_threads
 from ._organized import grid_labels
-from ._support import sparse_surface
+from ._support import sparse_surface, within_spread
 from ._thresholds import (  # noqa: F401 - the VALLEY_* constants are re-exported
     DEFAULT_THRESHOLD_RULE,
     RPCA_MIN_TAU,
@@ -55,6 +55,15 @@ RESCORE_SPREAD = 2.08
 #: neighbour distance is at least this many times the median of their neighbours'; chosen on the
 #: tuning split (docs/decisions.md#outliers-lidar-local-rescore).
 RESCORE_LOCAL = 2.0
+#: Do no harm on a nearly clean cloud (scores remove under ``HARM_SHARE`` of it): a point removed
+#: by its score alone is kept when ``score < HARM_SCORE * tau``, its ``k``-th neighbour distance is
+#: at most ``HARM_SPACING`` times the median and it lies within ``HARM_SPREAD`` standard
+#: deviations of its neighbours' plane; chosen on the tuning split
+#: (docs/decisions.md#outliers3-harm).
+HARM_SHARE = 0.03
+HARM_SCORE = 2.0
+HARM_SPACING = 1.5
+HARM_SPREAD = 8.0
 
 
 @dataclass(frozen=True)
@@ -155,9 +164,29 @@ def _sparse_points(r, s: np.ndarray, tau: float, factor: float | None) -> np.nda
     return (d > factor * float(np.median(d))) & (s >= SPARSE_GATE * tau)
 
 
-def _rpca_pass(X, k, options, threshold, rule, smoothed, workers, device, info: dict):
+def _harmless(X: np.ndarray, r, s: np.ndarray, tau: float) -> np.ndarray:
+    """On a cloud whose scores remove under ``HARM_SHARE`` of it: ``tau <= s < HARM_SCORE tau``,
+    ``d_k <= HARM_SPACING median(d_k)`` (``d_k`` the range-normalised ``k``-th neighbour
+    distance) and within ``HARM_SPREAD`` standard deviations of the neighbours' plane
+    (:func:`._support.within_spread`): a moderate score inside the local spread of a region that
+    is not sparse (docs/decisions.md#outliers3-harm); none without ``kth_distance`` or the
+    neighbour lists."""
+    d = r.kth_distance
+    out = np.zeros(s.size, dtype=bool)
+    if d is None or r.knn is None or d.size == 0 or HARM_SCORE <= 1.0:
+        return out
+    high = s >= tau
+    if np.count_nonzero(high) >= HARM_SHARE * s.size:
+        return out
+    rows = np.flatnonzero(high & (s < HARM_SCORE * tau) & (d <= HARM_SPACING * float(np.median(d))))
+    out[rows] = within_spread(X, rows, r.knn, HARM_SPREAD)
+    return out
+
+
+def _rpca_pass(X, k, options, threshold, rule, smoothed, workers, device, info: dict, first=True):
     """One scoring pass of ``method="rpca"`` on ``X`` without the grid stage: ``(keep, result of
-    rpca_scores, tau)``; ``rule`` None uses ``threshold``. Counts go to ``info``."""
+    rpca_scores, tau)``; ``rule`` None uses ``threshold``; the do-no-harm rule (:func:`_harmless`)
+    in the ``first`` pass only. Counts go to ``info``."""
     r = rpca_scores(X, k, options, smoothed=smoothed, workers=workers, device=device)
     s = r.scores
     blob = r.clusters if r.clusters is not None else np.zeros(s.size, dtype=bool)
@@ -169,7 +198,8 @@ def _rpca_pass(X, k, options, threshold, rule, smoothed, workers, device, info: 
     else:
         tau = auto_threshold(s, minimum=RPCA_MIN_TAU, rule=rule)
     sparse = _sparse_points(r, s, tau, options.sparse_factor)
-    keep = (s < tau) & ~blob & ~sparse
+    harmless = _harmless(X, r, s, tau) if first else np.zeros(s.size, dtype=bool)
+    keep = ((s < tau) | harmless) & ~blob & ~sparse
     # large sparse surface regions are kept (docs/decisions.md#outliers-sparse-regions);
     # clouds scored on k-d tiles skip it, as the sparse stage
     if options.sparse_regions and r.kth_distance is not None and not keep.all():
@@ -177,6 +207,7 @@ def _rpca_pass(X, k, options, threshold, rule, smoothed, workers, device, info: 
         info["n_sparse_region_kept"] = int(np.count_nonzero(surface))
         keep |= surface
     info["n_cluster_outliers"] = int(np.count_nonzero(blob))
+    info["n_harmless_kept"] = int(np.count_nonzero(harmless))
     info["n_sparse_outliers"] = int(np.count_nonzero(sparse & ~blob & (s < tau)))
     return keep, r, tau
 
@@ -238,7 +269,9 @@ def remove_outliers(
     ``options.sparse_factor`` (:func:`_sparse_points`), unless they lie in a large sparse
     surface region (``options.sparse_regions``: :func:`._support.sparse_surface`); with
     ``options.grid`` (an organized depth frame) the flying pixels are removed and the
-    image-supported points kept (:func:`._organized.grid_labels`). When the stages before the
+    image-supported points kept (:func:`._organized.grid_labels`). On a nearly clean cloud
+    (:data:`HARM_SHARE`) moderate scores inside their neighbours' spread are kept
+    (:func:`_harmless`). When the stages before the
     grid remove at least ``options.rescore_share`` of the cloud, the kept points are scored again
     the same way and the second pass's outliers removed too: all of them when the kept points'
     spacing is homogeneous (:data:`RESCORE_SPREAD`), else those locally sparse
@@ -352,7 +385,7 @@ def _outliers(
             sub = np.flatnonzero(keep_f)
             again = replace(options, grid=None, viewpoint=options.sensor_origin)
             keep2, r2, tau2 = _rpca_pass(
-                X[sub], k, again, threshold, rule, False, workers, device, {}
+                X[sub], k, again, threshold, rule, False, workers, device, {}, first=False
             )
             if due == "local":
                 keep2 |= ~_locally_sparse(r2)
