@@ -622,6 +622,7 @@ class PcaPredEncoder:
         self._C = np.zeros((n, 0))
         self.plan = make_plan(F, n)
         self._q: dict = {}
+        self._p: dict = {}
 
     def cols(self, k: int) -> np.ndarray:
         """Coefficients (n, k) of the first ``k`` components on the exact basis (computed as
@@ -653,7 +654,13 @@ class PcaPredEncoder:
 
     def project(self, s: float) -> tuple:
         """``(qm, sm, qB, sb, C)`` at step ``s``: the quantised mean (step ``sm``) and basis
-        (steps ``sb``) and the coefficients ``C`` (n, k) on the dequantised basis, in steps."""
+        (steps ``sb``) and the coefficients ``C`` (n, k) on the dequantised basis, in steps
+        (cached for the last step)."""
+        if s not in self._p:
+            self._p = {s: self._project(s)}
+        return self._p[s]
+
+    def _project(self, s: float) -> tuple:
         T, n = self.T, self.n
         k = self.keep(s)
         sm = float(np.float32(MEAN_RATIO * s))
@@ -771,11 +778,16 @@ class PcaPredFileEncoder:
             out.append(Y.reshape(enc.n, 3, enc.T).transpose(2, 0, 1))
         return np.concatenate(out) * self.scale + self.origin
 
-    def sq_error(self, step: float) -> float:
-        """Squared Frobenius error of :meth:`frames` against the coded frames."""
+    def sq_error(self, step: float, rounded: bool = False) -> float:
+        """Squared Frobenius error of :meth:`frames` against the coded frames; ``rounded``: of
+        the coefficients rounded to the nearest step instead of the coder's choices (no coding)."""
         e2 = 0.0
         for _t0, enc in self.parts:
-            Q, mean, B = enc.quantise(step)[4:7]
+            if rounded:
+                qm, sm, qB, sb, C = enc.project(step)
+                Q, mean, B = np.rint(C), qm * sm, qB * sb
+            else:
+                Q, mean, B = enc.quantise(step)[4:7]
             D = (Q * step) @ B.T
             D -= enc.Yc
             D += mean - enc.mu

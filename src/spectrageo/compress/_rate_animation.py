@@ -306,7 +306,14 @@ def rate_search(enc, frames: np.ndarray, bpvf, error) -> tuple[float, bytes]:
 
 QUANTISED = ("pca-q", "pca-qs", "pca-qp", "blocks")
 
-__all__ = ["QUANTISED", "Trials", "block_bits", "pred_rate_search", "rate_search"]
+__all__ = [
+    "QUANTISED",
+    "Trials",
+    "block_bits",
+    "pred_error_search",
+    "pred_rate_search",
+    "rate_search",
+]
 
 
 #: initial slope d log bpvf / d log s of the ``pca-pred`` size search
@@ -314,15 +321,85 @@ SLOPE_PRED_BPVF = -0.45
 #: decoded KG error over the closed form's at the same step (``pca-pred``: dropped components,
 #: basis quantisation, the encoder's rounding choices)
 PRED_ERROR_GUESS = 1.22
+#: decoded KG error over that of the coefficients rounded to the nearest step (``pca-pred``: the
+#: coder's rate-distortion rounding), before the first coded trial measures it
+PRED_RDO_RATIO = 1.085
+#: coded trials of a ``pca-pred`` ``error=`` search guided by the rounded coefficients' error,
+#: before the search on coded trials alone (at most :data:`MAX_TRIALS` more)
+PRED_CODED_TRIALS = 2
+#: aim of the steps on the rounded coefficients' error (times the ratio), and their number
+PRED_ROUNDED_AIM = 0.02
+PRED_ROUNDED_STEPS = 2
+#: aim of the coded trials (each a decoded file's error, not a model)
+PRED_ERROR_AIM = 0.04
+
+
+def _pred_first_step(enc, den: float, error: float) -> float:
+    """The log step where the closed form, a coefficient ``c`` costing ``min(c^2, s^2 / 12)``
+    (every 7th vertex, sorted) plus the dropped energy, times :data:`PRED_ERROR_GUESS`, gives the
+    KG ``error``."""
+    parts = [(p, p.Yc[::7] @ p.V[:, : p.significant()]) for _t, p in enc.parts]
+    C2 = np.sort(np.concatenate([(c * c).ravel() for _p, c in parts]))
+    cum = np.r_[0.0, np.cumsum(C2)]
+    tail = sum(float(p.energy[c.shape[1] :].sum()) for p, c in parts)
+    goal = ((error / PRED_ERROR_GUESS * den / (100.0 * enc.scale)) ** 2 - tail) / 7
+    a, b = math.log(STEP_MIN), math.log(STEP_MAX)
+    for _i in range(40):
+        m = 0.5 * (a + b)
+        d = math.exp(2 * m) / 12.0
+        i = int(np.searchsorted(C2, d))
+        e2 = float(cum[i]) + (C2.size - i) * d
+        a, b = (m, b) if e2 < goal else (a, m)
+    return 0.5 * (a + b)
+
+
+def pred_error_search(enc, frames: np.ndarray, error: float) -> tuple[float, dict]:
+    """``(step, trials)``: the ``pca-pred`` step whose decoded file has the KG ``error`` within
+    :data:`PRED_ERROR_AIM` (at worst :data:`~._rate.RATE_TOLERANCE`), and the number of trials
+    (``coded``: quantised and coded, at most ``PRED_CODED_TRIALS + MAX_TRIALS``; ``rounded``).
+
+    A coded trial's error is ``r`` times the error ``g(s)`` of the coefficients rounded to the
+    nearest step (projection only, no coder), ``r`` = :data:`PRED_RDO_RATIO` until a coded trial
+    measures it: each coded trial is at the step where ``r g(s)`` meets the target (at most
+    :data:`PRED_ROUNDED_STEPS` steps ``log s += log(target / (r g(s)))`` from
+    :func:`_pred_first_step`); then, if none met it, the secant search on coded trials alone.
+    See docs/decisions.md#anim-speed3-rounded-guide.
+    """
+    den = float(np.linalg.norm(frames - frames.mean(axis=1, keepdims=True)))
+    n = {"coded": 0, "rounded": 0}
+    rounded: dict[float, float] = {}
+
+    def kg(s):
+        n["coded"] += 1
+        return 100.0 * math.sqrt(enc.sq_error(s)) / den
+
+    def kg_rounded(s):
+        if s not in rounded:
+            n["rounded"] += 1
+            rounded[s] = 100.0 * math.sqrt(enc.sq_error(s, rounded=True)) / den
+        return rounded[s]
+
+    lo, hi = math.log(STEP_MIN), math.log(STEP_MAX)
+    x = _pred_first_step(enc, den, error)
+    ratio = PRED_RDO_RATIO
+    for _ in range(PRED_CODED_TRIALS):
+        for _i in range(PRED_ROUNDED_STEPS):  # fixed-point steps at slope 1 on r g(s)
+            y = ratio * kg_rounded(math.exp(x))
+            if abs(y / error - 1.0) <= PRED_ROUNDED_AIM:
+                break
+            x = min(max(x + math.log(error / y), lo), hi)
+        v = kg(math.exp(x))
+        if abs(v / error - 1.0) <= PRED_ERROR_AIM:
+            return math.exp(x), n
+        ratio = v / kg_rounded(math.exp(x))
+    return _search(kg, error, x, SLOPE_ERROR, "error", aim=PRED_ERROR_AIM), n
 
 
 def pred_rate_search(enc, frames: np.ndarray, step, bpvf, error) -> tuple[float, bytes]:
     """``(step, file)`` of a ``pca-pred`` encoder (:class:`._pca_pred.PcaPredFileEncoder`): the
     fixed ``step`` (default :data:`._pca_pred.PRED_STEP`), or the step meeting ``bpvf`` (whole
-    file, each trial coded: the coder is a small part of the analysis) or the KG ``error`` (each
-    trial quantised and coded, its error that of the decoded frames; the first step
-    from the components' energies: a coefficient costs ``min(c^2, s^2 / 12)``, the total times
-    :data:`PRED_ERROR_GUESS`), within 5 %.
+    file, each trial coded: the coder is a small part of the analysis) or the KG ``error``
+    (:func:`pred_error_search`), within 5 %.
 
     Raises
     ------
@@ -338,26 +415,7 @@ def pred_rate_search(enc, frames: np.ndarray, step, bpvf, error) -> tuple[float,
     cache: dict[float, bytes] = {}
     with activity(f"compress: choosing the step for {'bpvf' if bpvf else 'error'}"):
         if error is not None:
-            den = float(np.linalg.norm(frames - frames.mean(axis=1, keepdims=True)))
-
-            def kg(s):
-                return 100.0 * math.sqrt(enc.sq_error(s)) / den
-
-            # a coefficient c costs min(c^2, s^2 / 12) (every 7th vertex, sorted: a closed form)
-            parts = [(p, p.Yc[::7] @ p.V[:, : p.significant()]) for _t, p in enc.parts]
-            C2 = np.sort(np.concatenate([(c * c).ravel() for _p, c in parts]))
-            cum = np.r_[0.0, np.cumsum(C2)]
-            tail = sum(float(p.energy[c.shape[1] :].sum()) for p, c in parts)
-            goal = ((float(error) / PRED_ERROR_GUESS * den / (100.0 * enc.scale)) ** 2 - tail) / 7
-            a, b = math.log(STEP_MIN), math.log(STEP_MAX)
-            for _i in range(40):  # the step of the closed-form error
-                m = 0.5 * (a + b)
-                d = math.exp(2 * m) / 12.0
-                i = int(np.searchsorted(C2, d))
-                e2 = float(cum[i]) + (C2.size - i) * d
-                a, b = (m, b) if e2 < goal else (a, m)
-            # each trial's error is the decoded file's (not a model): aim at 4 %, not 3 %
-            s = _search(kg, float(error), 0.5 * (a + b), SLOPE_ERROR, "error", aim=0.04)
+            s = pred_error_search(enc, frames, float(error))[0]
             return s, enc.build(s)
 
         def rate(s):

@@ -274,6 +274,12 @@ _DEFAULTS = [
     _d("spectrageo.compress._rate_animation.SLOPE_PRED_BPVF", -0.45, "tuning",
        "compress-animation", "benchmarks/anim_pca_pred.py",
        "bpvf model slope of the pca-pred rate search, horse-gallop"),
+    _d("spectrageo.compress._rate_animation.PRED_RDO_RATIO", 1.085, "tuning",
+       "compress-animation", "benchmarks/anim_speed_pca_pred.py",
+       "horse-gallop; see docs/decisions.md#anim-speed3-rounded-guide"),
+    _d("spectrageo.compress._rate_animation.PRED_ROUNDED_AIM", 0.02, "tuning",
+       "compress-animation", "benchmarks/anim_speed_pca_pred.py",
+       "horse-gallop; see docs/decisions.md#anim-speed3-rounded-guide"),
     # ------------------------------------------------------------ completion
     _d(_X + "inpaint.method", "li", "tuning", "completion", _EX,
        "fandisk, seed 1: 2.5-3.5x more accurate than mc"),
