@@ -364,6 +364,17 @@ _DEFAULTS = [
     _d(_R + "_segment.split_creases.k", 10, "tuning", "identify", _EI,
        "the neighbours of the normals; set before the tuning runs, not varied; "
        "docs/decisions.md#identify-pieces"),
+    _d(_R + "_identify.CLUSTER_EXTRA", 3, "tuning", "identify", _EI,
+       "seed 35 fandisk: the right rotation cluster is the third after the refined poses; "
+       "tuning seeds 1-10, 31-50; docs/decisions.md#identify3-clusters"),
+    _d(_R + "_identify.CLUSTER_DEG", 45.0, "tuning", "identify", _EI,
+       "set before the tuning runs, not varied; docs/decisions.md#identify3-clusters"),
+    _d(_R + "_visibility.PLANE_NEAR", 2.0, "tuning", "identify", _EI,
+       "set before the tuning runs, not varied (seed 33: an absent dragon half inside the "
+       "table); tuning seeds 1-10, 31-50; docs/decisions.md#identify3-planes"),
+    _d(_R + "_identify.ZETA_BAND", 0.03, "tuning", "identify", _EI,
+       "midpoint of the right seed-4 pose (h 0.408) and the lowest wrong admissible pose (0.460), "
+       "rounded down; tuning seeds 1-10, 31-50; docs/decisions.md#identify3-band"),
 ]
 # fmt: on
 #: every tuned default with the data it was chosen on

@@ -5,9 +5,11 @@ Scene and models share one sampling step; planes are removed and adaptive DBSCAN
 features (Eq. 6.30-6.36) give correspondences, RANSAC and Tukey ICP a pose, and the dissimilarity
 ``h`` of the salient pairs (Eq. 6.37-6.38) decides ``found`` (``h < zeta``). With a sensor
 ``viewpoint``, a pose must also respect free space (``_visibility``), half turns of a rejected
-pose are tried, and segments wider than a model also give hypotheses from their pieces cut along
-concave creases. Departures from the thesis: docs/decisions.md#identify-pipeline,
-#identify-visibility, #identify-screening and #identify-pieces.
+pose and more rotation clusters are tried, a pose must not enter the removed planes, and segments
+wider than a model also give hypotheses from their pieces cut along concave creases; ``found``
+then needs ``h < zeta + ZETA_BAND``. Departures from the thesis: docs/decisions.md#identify-pipeline,
+#identify-visibility, #identify-screening, #identify-pieces, #identify3-clusters, #identify3-planes
+and #identify3-band.
 """
 
 from __future__ import annotations
@@ -51,6 +53,12 @@ CREASE = 0.2
 #: RANSAC hypotheses drawn and poses refined on a piece
 PIECE_HYPOTHESES = 5000
 PIECE_REFINE = 1
+#: with a viewpoint, a rejected segment also refines the best hypothesis of this many more
+#: rotation clusters (hypotheses whose rotations differ by more than ``CLUSTER_DEG`` degrees)
+CLUSTER_EXTRA = 3
+CLUSTER_DEG = 45.0
+#: with a viewpoint (free space and planes checked), ``found`` needs ``h < zeta + ZETA_BAND``
+ZETA_BAND = 0.03
 
 DEFAULTS: dict[str, Any] = {
     "zeta": 0.4,  # Table 6.7
@@ -274,9 +282,11 @@ def _kabsch_batch(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 
 def _ransac_poses(
-    model: _Cloud, seg: _Cloud, voxel: float, o: dict, g
+    model: _Cloud, seg: _Cloud, voxel: float, o: dict, g, heads: list | None = None
 ) -> list[tuple[float, np.ndarray]]:
-    """Candidate model->segment poses from descriptor correspondences, best first."""
+    """Candidate model->segment poses from descriptor correspondences, best first. ``heads``
+    (a list) receives up to ``CLUSTER_EXTRA`` rotation clusters not represented among those
+    returned, each as its poses, best first."""
     qi = np.flatnonzero(seg.keep)
     if qi.size < 10:
         qi = np.arange(seg.P.shape[0])
@@ -357,6 +367,29 @@ def _ransac_poses(
         out.append((float(score[h]), T))
         if len(out) >= o["n_refine"]:
             break
+    if heads is not None:
+        heads.extend(_cluster_heads(order, R, t, score, [T[:3, :3] for _, T in out]))
+    return out
+
+
+def _cluster_heads(order, R, t, score, reps: list) -> list[list[np.ndarray]]:
+    """Rotation clusters of the hypotheses in ``order`` not represented by ``reps``: a hypothesis
+    turned more than ``CLUSTER_DEG`` from ``reps`` and every earlier head starts a cluster, the
+    others join the first head within the angle; the first ``CLUSTER_EXTRA`` clusters, each as
+    its member poses in ``order`` (docs/decisions.md#identify3-clusters)."""
+    lim = 1.0 + 2.0 * np.cos(np.radians(CLUSTER_DEG))  # trace(Ra^T Rb) above: within the angle
+    heads = [(U, None) for U in reps]
+    out: list[list[np.ndarray]] = []
+    for h in order:
+        k = next((c for c, (U, _) in enumerate(heads) if np.einsum("ij,ij->", U, R[h]) > lim), -1)
+        if k < 0:
+            if len(out) >= CLUSTER_EXTRA:
+                continue
+            out.append([])
+            heads.append((R[h], len(out) - 1))
+            k = len(heads) - 1
+        if heads[k][1] is not None:
+            out[heads[k][1]].append(make_transform(R[h], t[h]))
     return out
 
 
@@ -391,9 +424,10 @@ def _flips(model: _Cloud, T: np.ndarray) -> list[np.ndarray]:
 def _search_segment(
     model, seg, voxel, o, g, rays, hyp=None
 ) -> list[tuple[float, float, np.ndarray]]:
-    """Refined poses of ``model`` on ``seg`` as ``(h, violation, T)``; flips of the best pose
-    are tried when no pose is clearly accepted (docs/decisions.md#identify-visibility). The
-    hypotheses come from ``hyp`` (a piece of ``seg``) when given."""
+    """Refined poses of ``model`` on ``seg`` as ``(h, violation, T)``; flips of the best pose,
+    then the least violating pose of more rotation clusters, are tried when no pose is accepted
+    (docs/decisions.md#identify-visibility, #identify3-clusters). The hypotheses come from
+    ``hyp`` (a piece of ``seg``) when given."""
     out: list[tuple[float, float, np.ndarray]] = []
     zeta = o["zeta"]
 
@@ -409,7 +443,8 @@ def _search_segment(
         for _score, T0 in _ransac_poses(model, hyp, voxel, po, g):
             run(T0)
         return out
-    for _score, T0 in _ransac_poses(model, seg, voxel, o, g):
+    heads: list = []
+    for _score, T0 in _ransac_poses(model, seg, voxel, o, g, heads if rays is not None else None):
         if run(T0):
             return out
     if rays is None or not out or any(h < zeta and v <= VIS_MAX for h, v, _ in out):
@@ -421,6 +456,14 @@ def _search_segment(
     # half turn about one of its principal axes
     for Tf in _flips(model, T0):
         if run(Tf):
+            return out
+    if any(h < zeta and v <= VIS_MAX for h, v, _ in out):
+        return out
+    # the best hypotheses of other rotation clusters (the re-ranking may rank the right one low)
+    sub = slice(None, None, 8)
+    for members in heads:
+        vs = [rays.violations(model.P[sub], Tc, VIS_TOL, model.N[sub]) for Tc in members]
+        if run(members[int(np.argmin(vs))]):
             break
     return out
 
@@ -469,6 +512,12 @@ def dissimilarity(model: _Cloud, seg: _Cloud, T: np.ndarray, voxel: float, o: di
     return float(dall[:kp].mean())
 
 
+def _accept_below(o: dict) -> float:
+    """The ``h`` below which an admissible pose is found: ``zeta``, plus ``ZETA_BAND`` with a
+    viewpoint (docs/decisions.md#identify3-band)."""
+    return o["zeta"] + (0.0 if o["viewpoint"] is None else ZETA_BAND)
+
+
 def _pieces(S, segs, o, voxel, diag) -> list[tuple[int, _Cloud]]:
     """Model-sized pieces of the segments wider than ``SPLIT_DIAG`` model diagonals, cut along
     concave creases (an object touching clutter; docs/decisions.md#identify-pieces)."""
@@ -505,8 +554,9 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
     **options
         Overrides of :data:`DEFAULTS` (``zeta``, ``k_a``, ``k_d``, ``k_s``, ``k_p``, ``tau``, ...);
         unknown names raise InvalidInputError. ``viewpoint`` (3,): the sensor position; a found
-        pose then leaves at most :data:`VIS_MAX` of the model in observed free space, and
-        segments wider than :data:`SPLIT_DIAG` model diagonals are also searched in pieces.
+        pose then leaves at most :data:`VIS_MAX` of the model in observed free space (``h`` may
+        reach ``zeta`` + :data:`ZETA_BAND`), and segments wider than :data:`SPLIT_DIAG` model
+        diagonals are also searched in pieces.
 
     Returns
     -------
@@ -550,8 +600,9 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
     # --- segmentation on the down-sampled scene
     Sd, vlab = voxel_downsample(S, voxel)
     keep = np.ones(Sd.shape[0], dtype=bool)
+    planes: list = []
     if o["remove_planes"] and Sd.shape[0] >= 100:
-        keep, _ = remove_planes(Sd, threshold=1.0 * voxel, rng=[int(seed), 0])
+        keep, planes = remove_planes(Sd, threshold=1.0 * voxel, rng=[int(seed), 0])
     labels_d = np.full(Sd.shape[0], -1, dtype=np.int64)
     ki = np.flatnonzero(keep)
     if ki.size > o["k_a"] + 1:
@@ -569,7 +620,11 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
     if o["viewpoint"] is not None:
         jobs += _pieces(S, segs, o, voxel, float(np.median(diags)))
     # --- every model against every segment
-    rays = None if o["viewpoint"] is None else SceneRays(Sd, o["viewpoint"], voxel)
+    rays = None
+    if o["viewpoint"] is not None:
+        # the removed planes with their points: a pose must not enter them
+        pl = [(nc, Sd[~keep][np.abs(Sd[~keep] @ nc[:3] - nc[3]) <= voxel]) for nc in planes]
+        rays = SceneRays(Sd, o["viewpoint"], voxel, pl)
     cands, admissible = [], []
     for mi_, P in enumerate(mpts):
         mc = _prepare(P, voxel, o)
@@ -595,7 +650,8 @@ def identify(scene, models, *, rng=0, **options) -> list[Match]:
         cands.append((mi_, *best, mc))
         admissible.append(not best_key[0])
     # --- decisions, conflicts resolved by h
-    found = [np.isfinite(c[1]) and c[1] < o["zeta"] and a for c, a in zip(cands, admissible)]
+    zeta = _accept_below(o)
+    found = [np.isfinite(c[1]) and c[1] < zeta and a for c, a in zip(cands, admissible)]
     explained = []
     for _mi, h, T, idx, mc in cands:
         if not np.isfinite(h) or mc is None:
