@@ -236,14 +236,17 @@ def _prepared(target: Any, S: np.ndarray, robust: bool, method: str, max_points:
     return target
 
 
-def _reliable(Sd: np.ndarray, index: TargetIndex, res: RegistrationResult, info: dict) -> bool:
+def _reliable(
+    Sd: np.ndarray, index: TargetIndex, res: RegistrationResult, info: dict, near: float
+) -> bool:
     """Whether the final pose is pinned down: the inliers constrain every rigid motion
     (:func:`constraint` at least ``MIN_CONSTRAINT``) and concentrate near zero residual (the
     share of the inliers within a third of ``inlier_distance``, one spacing, at least
-    ``MIN_TIGHT_SHARE``); docs/decisions.md#register-reliable."""
+    ``MIN_TIGHT_SHARE``; ``near``: the share of ``Sd`` within a third of ``inlier_distance``,
+    already scored); docs/decisions.md#register-reliable."""
     d = res.inlier_distance
     c = constraint(Sd, index, res.transformation, d)
-    tight = _score(Sd, index, res.transformation, d / 3.0)[0] / max(res.fitness, 1e-300)
+    tight = near / max(res.fitness, 1e-300)
     info.update(icp_converged=bool(res.converged), constraint=c, tight_share=tight)
     info["reliable"] = bool(c >= MIN_CONSTRAINT and tight >= MIN_TIGHT_SHARE)
     return info["reliable"]
@@ -324,7 +327,7 @@ def register(
             stacklevel=2,
         )
     info.update(res.info)
-    reliable = _reliable(Sd, pt.index, res, info)
+    reliable = _reliable(Sd, pt.index, res, info, best[0])
     info["time_s"] = time.perf_counter() - t0
     return RegistrationResult(
         transformation=res.transformation,

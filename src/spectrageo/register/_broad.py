@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from .._errors import InvalidInputError
 from .._validation import check_positive
-from ._common import WORKERS, bbox_diagonal, make_transform, voxel_downsample
+from ._common import WORKERS, bbox_diagonal, make_transform, voxel_downsample, workers_for
 from ._narrow import TargetIndex, icp
 
 #: kernel threshold phi of Section 6.2.2 (contributions below phi are neglected)
@@ -57,7 +57,7 @@ def shape_properties_rows(P: np.ndarray, tree: cKDTree, ks, rows: np.ndarray):
     P0 = P[rows]
     desc = []
     frame = None
-    for k in ks:
+    for to_last, k in enumerate(ks, 1 - len(ks)):
         k = int(min(k, n))
         Q = P[idx[:, :k]] - P0[:, None, :]
         Qc = Q - Q.mean(axis=1, keepdims=True)
@@ -77,10 +77,12 @@ def shape_properties_rows(P: np.ndarray, tree: cKDTree, ks, rows: np.ndarray):
         flip = a + c < 0  # canonical normal: non-negative mean curvature
         a = np.where(flip, -a, a)
         c = np.where(flip, -c, c)
-        nrm = np.where(flip[:, None], -nrm, nrm)
-        v = np.where(flip[:, None], -v, v)
         diff = np.sqrt((a - c) ** 2 + b * b)
         desc += [a + c + diff, a + c - diff]
+        if to_last:  # only the last scale's frame is returned
+            continue
+        nrm = np.where(flip[:, None], -nrm, nrm)
+        v = np.where(flip[:, None], -v, v)
         th = 0.5 * np.arctan2(b, a - c)
         e1 = np.cos(th)[:, None] * u + np.sin(th)[:, None] * v
         e2 = np.cross(nrm, e1)
@@ -91,7 +93,7 @@ def shape_properties_rows(P: np.ndarray, tree: cKDTree, ks, rows: np.ndarray):
 def triangle_embedding_basis(P: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndarray]:
     """Centroid ``c`` and Cholesky factor ``L`` of the source triangles' second moments."""
     n = P.shape[0]
-    _, idx = tree.query(P, k=min(3, n), workers=WORKERS)
+    _, idx = tree.query(P, k=min(3, n), workers=workers_for(n))
     idx = np.asarray(idx).reshape(n, -1)
     if idx.shape[1] < 3:
         c = P.mean(0)
@@ -253,7 +255,7 @@ def broad_phase_points(
     pool = np.flatnonzero(curv >= np.quantile(curv, 0.4))
     pick = np.sort(rng.choice(pool, size=min(int(n_samples), pool.size), replace=False))
     km = int(min(n_matches, Tv.shape[0]))
-    _, nb = bt.desc_tree.query(ds[pick], k=km, workers=WORKERS)
+    _, nb = bt.desc_tree.query(ds[pick], k=km, workers=workers_for(pick.size))
     nb = np.asarray(nb).reshape(pick.size, km)
     si = np.repeat(pick, km)
     ti = nb.ravel()

@@ -85,10 +85,16 @@ def _plane_step(P: np.ndarray, Q: np.ndarray, N: np.ndarray, w: np.ndarray, scal
     """Linearised weighted point-to-plane increment, or None when singular."""
     c = (w[:, None] * P).sum(0) / w.sum()
     Pc = (P - c) / scale
-    J = np.c_[np.cross(Pc, N), N]
+    J = np.empty((P.shape[0], 6))
+    J[:, 3:] = N
+    # rows [Pc x N, N]: np.cross's component formulas without its set-up cost, the same bits
+    # (docs/decisions.md#reg-speed3-overhead)
+    for a, (i, k) in enumerate(((1, 2), (2, 0), (0, 1))):
+        np.subtract(Pc[:, i] * N[:, k], Pc[:, k] * N[:, i], out=J[:, a])
     r = np.einsum("ij,ij->i", (P - Q) / scale, N)
-    A = (J * w[:, None]).T @ J
-    b = -(J * w[:, None]).T @ r
+    Jw = J * w[:, None]
+    A = Jw.T @ J
+    b = -Jw.T @ r
     ev = np.linalg.eigvalsh(A)
     if ev[0] <= 1e-9 * max(ev[-1], 1e-300):
         return None
@@ -201,7 +207,7 @@ def icp(
         if inl.size >= 6:
             robust = TUKEY_C * 1.4826 * float(np.median(inl))
             new_gamma = max(gamma_min, min(robust, SHRINK * gamma))
-        ang = np.arccos(np.clip((np.trace(inc[:3, :3]) - 1) / 2, -1.0, 1.0))
+        ang = np.arccos(min(max((np.trace(inc[:3, :3]) - 1) / 2, -1.0), 1.0))
         step = max(ang * scale, float(np.linalg.norm(inc[:3, 3])))
         gamma_stable = new_gamma > 0.99 * gamma
         gamma = new_gamma
