@@ -328,8 +328,9 @@ def remove_outliers_tiled(
     the first scoring pass of :func:`~spectrageo.outliers.remove_outliers` (threshold rule and
     cluster flags) when ``tile >= block_size`` (docs/decisions.md#outliers-tiles); smaller tiles
     approximate it. The stages that need a whole-cloud neighbourhood are not applied: sparse
-    points and sparse surface regions, the organized grid, and the second pass at high
-    contamination (docs/decisions.md#outliers-rescore).
+    points and sparse surface regions, the organized grid, the do-no-harm rule of a nearly clean
+    cloud (docs/decisions.md#outliers3-harm) and the second pass at high contamination
+    (docs/decisions.md#outliers-rescore).
 
     Parameters
     ----------
