@@ -20,12 +20,14 @@ _CROPS_CONSULTED = (_R + "_broad.RIVAL_SHARE", _R + "_broad.RIVAL_DEG")
 REGISTER_DEFAULTS: tuple[Default, ...] = (
     _d(_R + "_broad.DENSITY_NEIGHBORS", 32, "tuning", "register", _ER,
        "same 27/28 tuning pairs as 64, less time; docs/decisions.md#register-speed"),
-    _d(_R + "_broad.VERIFY_SHORT", 5, "tuning", "register", _ER,
-       "same tuning successes as 20 iterations on every peak; docs/decisions.md#register-speed"),
+    _d(_R + "_broad.VERIFY_SHORT", 3, "tuning", "register", _ER,
+       "same verified pose (within 0.001 deg) and rivals as 5 on the 18 tuning pairs, 2 loses "
+       "a rival; docs/decisions.md#reg-speed4-verify"),
     _d(_R + "_broad.VERIFY_KEEP", 3, "tuning", "register", _ER,
        "same tuning successes as 20 iterations on every peak; docs/decisions.md#register-speed"),
-    _d(_R + "_api.MAX_POINTS", 10000, "tuning", "register", _ER,
-       "same tuning successes and errors within 0.1 deg of 20000; docs/decisions.md#register-speed"),
+    _d(_R + "_api.MAX_POINTS", 8000, "tuning", "register", _ER,
+       "18/18 tuning pairs, every one converged, poses within 0.06 deg of 10000; 6000 and 5000 "
+       "leave 1-2 unconverged; docs/decisions.md#reg-speed4-verify"),
     _d(_R + "_api.TARGET_POINTS", 2.0, "tuning", "register", _ER,
        "with MAX_POINTS; docs/decisions.md#register-speed"),
     _d(_R + "_broad.RIVAL_SHARE", 0.9, "tuning", "register", _ER,
@@ -33,6 +35,9 @@ REGISTER_DEFAULTS: tuple[Default, ...] = (
        "docs/decisions.md#register-rivals"),
     _d(_R + "_broad.RIVAL_DEG", 10.0, "tuning", "register", _ER,
        "a pose of its own beyond the ICP basin; docs/decisions.md#register-rivals"),
+    _d(_R + "_api.RIVAL_ITER", 25, "tuning", "register", _ER,
+       "converged tuning starts need at most 25 iterations; the same chosen pose as the full "
+       "runs on the tuning pairs with rivals; docs/decisions.md#reg-speed4-verify"),
     _d(_R + "_api.MIN_CONSTRAINT", 1e-3, "tuning", "register", _ER,
        "tuning pairs >= 2.9e-3, tuning no-overlap crops 3.6e-4-8e-3; "
        "docs/decisions.md#register-reliable"),

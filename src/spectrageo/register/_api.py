@@ -25,20 +25,25 @@ from ._common import (
     points_of,
     thin,
 )
-from ._narrow import TargetIndex, _score, check_icp_options, constraint, run_narrow
-from ._robust import boundary_mask, exact_neighbors, outlier_result
+from ._narrow import TargetIndex, _within, check_icp_options, constraint, run_narrow
+from ._robust import boundary_mask
+from ._robust_fast import outlier_keep
 
 #: :func:`register` keeps at most TARGET_POINTS * max_points target points for the narrow phase
 #: (docs/decisions.md#register-speed)
 TARGET_POINTS = 2.0
-#: default source size of :func:`register`'s narrow phase (docs/decisions.md#register-speed)
-MAX_POINTS = 10000
+#: default source size of :func:`register`'s narrow phase (docs/decisions.md#register-speed,
+#: docs/decisions.md#reg-speed4-verify)
+MAX_POINTS = 8000
 #: larger inputs are first thinned to a random subset of this size (every later step samples
 #: far fewer points)
 MAX_INPUT_POINTS = 1_000_000
 #: a registration is reported ``converged`` only with at least these (docs/decisions.md#register-reliable)
 MIN_CONSTRAINT = 1e-3
 MIN_TIGHT_SHARE = 0.6
+#: with rival poses, every start is first refined for at most this many iterations; the full
+#: ``max_iter`` only when the leading one has not converged by then (docs/decisions.md#reg-speed4-verify)
+RIVAL_ITER = 25
 
 
 def narrow_phase(
@@ -120,9 +125,8 @@ def robustify(
     keep = np.ones(P.shape[0], dtype=bool)
     nbrs = None  # the RPCA's exact kNN, reused by the boundary test
     if remove_outliers and P.shape[0] > k_outliers + 1:
-        res = outlier_result(P, int(k_outliers))
-        keep &= res.scores <= outlier_threshold
-        nbrs = exact_neighbors(res)
+        ok, nbrs = outlier_keep(P, int(k_outliers), float(outlier_threshold))
+        keep &= ok
     if remove_boundary and P.shape[0] > k_boundary + 1:
         keep &= ~boundary_mask(P, int(k_boundary), nbrs)
     if keep.sum() < 3:  # never leave less than a registrable cloud
@@ -237,15 +241,21 @@ def _prepared(target: Any, S: np.ndarray, robust: bool, method: str, max_points:
 
 
 def _reliable(
-    Sd: np.ndarray, index: TargetIndex, res: RegistrationResult, info: dict, near: float
+    Sd: np.ndarray,
+    index: TargetIndex,
+    res: RegistrationResult,
+    info: dict,
+    near: float,
+    query: tuple | None = None,
 ) -> bool:
     """Whether the final pose is pinned down: the inliers constrain every rigid motion
     (:func:`constraint` at least ``MIN_CONSTRAINT``) and concentrate near zero residual (the
     share of the inliers within a third of ``inlier_distance``, one spacing, at least
     ``MIN_TIGHT_SHARE``; ``near``: the share of ``Sd`` within a third of ``inlier_distance``,
-    already scored); docs/decisions.md#register-reliable."""
+    already scored; ``query``: the final pose's nearest-target query within
+    ``inlier_distance``, when known); docs/decisions.md#register-reliable."""
     d = res.inlier_distance
-    c = constraint(Sd, index, res.transformation, d)
+    c = constraint(Sd, index, res.transformation, d, query)
     tight = near / max(res.fitness, 1e-300)
     info.update(icp_converged=bool(res.converged), constraint=c, tight_share=tight)
     info["reliable"] = bool(c >= MIN_CONSTRAINT and tight >= MIN_TIGHT_SHARE)
@@ -270,7 +280,11 @@ def register(
     ``target`` may be a :class:`PreparedTarget` (:func:`prepare_target`), reused across calls.
     ``rng`` seeds the broad phase; ``robust`` applies :func:`robustify`; ``max_iter``, ``tol``,
     ``method``, ``max_points`` go to :func:`narrow_phase` and ``broad_options`` to
-    :func:`broad_phase`. ``converged`` is the narrow phase's convergence and the pose being
+    :func:`broad_phase`. The broad phase's pose and its rivals (other verified poses nearly as
+    fit) are refined, each first for at most ``RIVAL_ITER`` iterations (all ``max_iter`` for
+    every unconverged one when the leader has not converged by then); the largest share of
+    source points within a third of the inlier distance wins, then the fitness.
+    ``converged`` is the narrow phase's convergence and the pose being
     pinned down (no sliding along a plane, line or sphere, inliers near zero residual; else the
     pose is a guess, e.g. without overlap). Returns a :class:`RegistrationResult` whose ``info``
     holds ``time_s``, ``broad_time_s``, ``n_candidates``, ``n_kept_source``, ``n_kept_target``,
@@ -311,15 +325,31 @@ def register(
     # the broad phase's best and its close rivals (other poses nearly as fit at the voxel scale,
     # e.g. a room turned by 180 degrees) are refined; the share of source points within one
     # spacing (a third of the inlier distance) decides, then the fitness
-    res, best = None, (-1.0, -1.0)
     rivals = info.pop("rivals", [])
     info["n_rivals"] = len(rivals)
-    for T_start in [T0, *rivals]:
-        r = run_narrow(Sd, pt.points, T_start, max_iter=max_iter, tol=tol, method=method,
-                       gamma=gamma0, max_points=max_points, index=pt.index, warn=False)  # fmt: skip
-        key = (_score(Sd, pt.index, r.transformation, r.inlier_distance / 3.0)[0], r.fitness)
-        if res is None or key > best:
-            res, best = r, key
+    starts = [T0, *rivals]
+
+    def refine(T_start: np.ndarray, iters: int) -> RegistrationResult:
+        return run_narrow(Sd, pt.points, T_start, max_iter=iters, tol=tol, method=method,
+                          gamma=gamma0, max_points=max_points, index=pt.index, warn=False,
+                          keep_query=True)  # fmt: skip
+
+    def key(r: RegistrationResult) -> tuple[float, float]:
+        d = r.info["final_query"][1]
+        return float(_within(d, r.inlier_distance / 3.0).mean()), r.fitness
+
+    # with rivals every start is first given RIVAL_ITER iterations (a run converged by then is
+    # the full run); only when the leader has not converged, every unconverged start gets all
+    cap = min(max_iter, RIVAL_ITER) if rivals else max_iter
+    runs = [refine(T, cap) for T in starts]
+    keys = [key(r) for r in runs]
+    k = max(range(len(runs)), key=keys.__getitem__)
+    if cap < max_iter and not runs[k].converged:
+        runs = [r if r.converged else refine(T, max_iter) for r, T in zip(runs, starts)]
+        keys = [key(r) for r in runs]
+        k = max(range(len(runs)), key=keys.__getitem__)
+    res, best = runs[k], keys[k]
+    query = res.info.pop("final_query")
     if not res.converged:
         warnings.warn(
             f"narrow phase stopped at max_iter={max_iter} before meeting tol={tol:g}.",
@@ -327,7 +357,7 @@ def register(
             stacklevel=2,
         )
     info.update(res.info)
-    reliable = _reliable(Sd, pt.index, res, info, best[0])
+    reliable = _reliable(Sd, pt.index, res, info, best[0], query)
     info["time_s"] = time.perf_counter() - t0
     return RegistrationResult(
         transformation=res.transformation,

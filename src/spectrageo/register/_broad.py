@@ -27,8 +27,8 @@ SCALES = (16, 40)
 #: broad-phase voxel: the larger bounding-box diagonal over this (docs/decisions.md#register-defaults)
 VOXEL_DIVISOR = 45.0
 #: verification: every peak gets VERIFY_SHORT ICP iterations, the VERIFY_KEEP best the rest
-#: (docs/decisions.md#register-speed)
-VERIFY_SHORT = 5
+#: (docs/decisions.md#register-speed, docs/decisions.md#reg-speed4-verify)
+VERIFY_SHORT = 3
 VERIFY_KEEP = 3
 #: neighbours summed in the density of a candidate (docs/decisions.md#register-speed)
 DENSITY_NEIGHBORS = 32
@@ -182,23 +182,37 @@ def default_voxel(S: np.ndarray, Tg: np.ndarray) -> float:
 
 def _verify(Sv, index, R, t, peaks, r, s, verify_iter):
     """Short ICP runs from every peak, the ``VERIFY_KEEP`` best (fitness, then rmse) continued;
-    ``(T, fitness, rank)`` of the best."""
+    ``(T, fitness, rank, rivals)`` of the best.
+
+    Of the ``VERIFY_KEEP`` best short runs, one that ended at the same pose as a fitter one
+    (:func:`_apart` false) is not continued; likewise a rival at the same pose as a fitter rival
+    is left out (docs/decisions.md#reg-speed4-verify).
+    """
 
     def run(T0, iters, gamma0):
         return icp(Sv, index, T0, max_iter=int(iters), tol=1e-4, method="point_to_plane",
                    gamma0=gamma0, gamma_min=s, inlier_distance=1.5 * s)  # fmt: skip
 
+    def order(ks):
+        return sorted(ks, key=lambda k: (-res[k].fitness, res[k].inlier_rmse, k))
+
     first = min(VERIFY_SHORT, verify_iter)
     res = [run(make_transform(R[i], t[i]), first, r) for i in peaks]
-    ranked = sorted(range(len(res)), key=lambda k: (-res[k].fitness, res[k].inlier_rmse, k))
+    ranked = order(range(len(res)))
     if verify_iter > first:
+        kept: list[int] = []
         for k in ranked[:VERIFY_KEEP]:
+            if all(_apart(res[k].transformation, res[j].transformation, s) for j in kept):
+                kept.append(k)
+        for k in kept:
             res[k] = run(res[k].transformation, verify_iter - first, res[k].info["gamma"])
-        ranked = sorted(
-            ranked[:VERIFY_KEEP], key=lambda k: (-res[k].fitness, res[k].inlier_rmse, k)
-        )
+        ranked = order(kept)
     k = ranked[0]
-    rivals = [res[j].transformation for j in ranked[1:VERIFY_KEEP] if _rival(res[j], res[k], s)]
+    rivals: list[np.ndarray] = []
+    for j in ranked[1:VERIFY_KEEP]:
+        T = res[j].transformation
+        if _rival(res[j], res[k], s) and all(_apart(T, U, s) for U in rivals):
+            rivals.append(T)
     return res[k].transformation, res[k].fitness, k, rivals
 
 
@@ -207,7 +221,13 @@ def _rival(a, best, s: float) -> bool:
     another pose (more than ``RIVAL_DEG`` degrees or 3 voxels away)."""
     if a.fitness < RIVAL_SHARE * best.fitness:
         return False
-    D = a.transformation @ np.linalg.inv(best.transformation)
+    return _apart(a.transformation, best.transformation, s)
+
+
+def _apart(A: np.ndarray, B: np.ndarray, s: float) -> bool:
+    """Whether the (4, 4) poses ``A`` and ``B`` differ by more than ``RIVAL_DEG`` degrees or
+    their relative translation ``A B^-1`` by more than 3 voxels ``s``."""
+    D = A @ np.linalg.inv(B)
     ang = np.degrees(np.arccos(np.clip((np.trace(D[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
     return bool(ang > RIVAL_DEG or np.linalg.norm(D[:3, 3]) > 3.0 * s)
 

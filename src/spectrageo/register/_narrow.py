@@ -53,7 +53,10 @@ class TargetIndex:
         """Unit normals (unoriented) of the target points ``j``."""
         if self._normals is None:
             raise RuntimeError("this TargetIndex was built without normals")
-        new = np.unique(j[~self._known[j]])
+        # the sorted distinct unknown rows (np.unique's answer) by a mask instead of a sort
+        mask = np.zeros(self._known.shape[0], dtype=bool)
+        mask[j[~self._known[j]]] = True
+        new = np.flatnonzero(mask)
         if new.size:
             self._normals[new] = knn_normals_at(
                 self.points, self.points[new], self.normal_k, self.tree
@@ -116,21 +119,40 @@ def _query(
 
 
 def _score(P: np.ndarray, index: TargetIndex, T: np.ndarray, dist: float) -> tuple[float, float]:
+    """``(fitness, rmse)``: share of ``T P`` within ``dist`` of the target, their RMS distance."""
     d, _ = index.tree.query(
         apply_transform(T, P), k=1, distance_upper_bound=dist, workers=workers_for(P.shape[0])
     )
-    ok = np.isfinite(d)
+    return _fit_rmse(d, np.isfinite(d))
+
+
+def _fit_rmse(d: np.ndarray, ok: np.ndarray) -> tuple[float, float]:
     fit = float(ok.mean())
     rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("inf")
     return fit, rmse
 
 
-def constraint(P: np.ndarray, index: TargetIndex, T: np.ndarray, dist: float) -> float:
+def _within(d: np.ndarray, dist: float) -> np.ndarray:
+    """Rows of nearest distances ``d`` (from a query bounded by ``dist`` or more) that a query
+    bounded by ``dist`` finds: ``d < dist``, compared on squares as the KD-tree does."""
+    return d * d < dist * dist
+
+
+def constraint(
+    P: np.ndarray, index: TargetIndex, T: np.ndarray, dist: float, query: tuple | None = None
+) -> float:
     """Smallest over largest eigenvalue of the point-to-plane information matrix ``J^T J`` of
     the inliers within ``dist`` (rows ``[(p - c) x n / l, n]``, ``l`` the source diagonal): near
-    0 when a motion slides the source along the target (plane, line, sphere, no overlap)."""
-    X = apply_transform(T, P)
-    d, j = index.tree.query(X, k=1, distance_upper_bound=dist, workers=workers_for(P.shape[0]))
+    0 when a motion slides the source along the target (plane, line, sphere, no overlap).
+
+    ``query``: ``(X, d, j)``, the moved source ``T P`` and its nearest target distances and rows
+    within ``dist`` (as :func:`icp` returns with ``keep_query``), used instead of searching.
+    """
+    if query is not None:
+        X, d, j = query
+    else:
+        X = apply_transform(T, P)
+        d, j = index.tree.query(X, k=1, distance_upper_bound=dist, workers=workers_for(P.shape[0]))
     ok = np.isfinite(d)
     if ok.sum() < 6:
         return 0.0
@@ -157,8 +179,14 @@ def icp(
     gamma_min: float,
     inlier_distance: float,
     coarse: bool = False,
+    keep_query: bool = False,
 ) -> RegistrationResult:
-    """Tukey-weighted ICP on prepared data (see :func:`narrow_phase`)."""
+    """Tukey-weighted ICP on prepared data (see :func:`narrow_phase`).
+
+    ``keep_query``: also return, as ``info["final_query"]``, the moved full source ``X`` (n, 3)
+    and its nearest target distances ``d`` (n,) and rows ``j`` (n,) within ``inlier_distance``
+    (``inf`` and 0 beyond), the query that scored the final pose.
+    """
     t0 = time.perf_counter()
     scale = max(bbox_diagonal(S), 1e-300)
     T = T0.copy()
@@ -178,7 +206,7 @@ def icp(
         gamma = float(gamma0)
     gamma = max(gamma, gamma_min)
     d, j = _query(index, P, gamma, COARSE_EPS if coarse else 0.0)
-    converged = False
+    converged = last = False
     it = 0
     while it < max_iter:
         it += 1
@@ -200,7 +228,11 @@ def icp(
         if coarse and gamma <= COARSE_UNTIL * gamma_min:
             S, coarse = S_full, False
         P = apply_transform(T, S)
-        d, j = _query(index, P, gamma, COARSE_EPS if coarse else 0.0)
+        # the last allowed iteration also bounds its query by the inlier distance, so that the
+        # final pose is scored from it (the rows within gamma are the same either way)
+        last = it == max_iter and not coarse
+        d, j = _query(index, P, max(gamma, inlier_distance) if last else gamma,
+                      COARSE_EPS if coarse else 0.0)  # fmt: skip
         # robust scale of the current inliers; gamma only shrinks (annealing towards the noise)
         inl = d[d < gamma]
         new_gamma = gamma
@@ -214,7 +246,17 @@ def icp(
         if step < tol * scale and gamma_stable and not coarse:
             converged = True
             break
-    fit, rmse = _score(S_full, index, T, inlier_distance)
+    if last:
+        X = P  # scored from the last query (its bound reached inlier_distance)
+        ok = _within(d, inlier_distance)
+    else:
+        X = apply_transform(T, S_full)
+        d, j = _query(index, X, inlier_distance)
+        ok = np.isfinite(d)
+    fit, rmse = _fit_rmse(d, ok)
+    info = {"gamma": gamma, "time_s": time.perf_counter() - t0, "n_source": S_full.shape[0]}
+    if keep_query:
+        info["final_query"] = (X, np.where(ok, d, np.inf), np.where(ok, j, 0))
     return RegistrationResult(
         transformation=T,
         fitness=fit,
@@ -222,7 +264,7 @@ def icp(
         n_iter=it,
         converged=converged,
         inlier_distance=inlier_distance,
-        info={"gamma": gamma, "time_s": time.perf_counter() - t0, "n_source": S_full.shape[0]},
+        info=info,
     )
 
 
@@ -246,7 +288,10 @@ def run_narrow(
     index: TargetIndex | None = None,
     warn: bool = True,
     coarse: bool = True,
+    keep_query: bool = False,
 ) -> RegistrationResult:
+    """:func:`icp` on validated arrays: ``S`` down-sampled to ``max_points``, the target index
+    built unless given, the scale floor two spacings and the inlier distance three."""
     check_icp_options(max_iter, tol, method)
     check_positive(max_points, "max_points", integer=True)
     if gamma is not None:
@@ -272,6 +317,7 @@ def run_narrow(
         gamma_min=2.0 * h,
         inlier_distance=dist,
         coarse=bool(coarse),
+        keep_query=keep_query,
     )
     if warn and not res.converged:
         warnings.warn(

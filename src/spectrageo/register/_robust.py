@@ -18,7 +18,7 @@ def boundary_mask(P: np.ndarray, k: int, neighbors: np.ndarray | None = None) ->
     """
     n = P.shape[0]
     if neighbors is not None and neighbors.shape == (n, k):
-        d = np.sqrt(np.square(P[neighbors] - P[:, None, :]).sum(axis=2))
+        d = _neighbor_distances(P, neighbors)
     else:
         kk = int(min(k + 1, n))
         d, _ = cKDTree(P).query(P, k=kk, workers=WORKERS)
@@ -26,6 +26,23 @@ def boundary_mask(P: np.ndarray, k: int, neighbors: np.ndarray | None = None) ->
     d_psi = d.mean(axis=1) if d.shape[1] else np.zeros(n)
     d_bar = float(d_psi.mean())
     return d_psi >= 2.0 * d_bar
+
+
+def _neighbor_distances(P: np.ndarray, neighbors: np.ndarray) -> np.ndarray:
+    """``|P[neighbors[i, j]] - P[i]|`` (n, k), one coordinate at a time (gathers of contiguous
+    columns, no (n, k, 3) temporary); the squares are summed in the order x, y, z, as
+    ``np.square(P[neighbors] - P[:, None]).sum(axis=2)`` sums them, so the values are the same."""
+    s = None
+    for j in range(3):
+        c = np.ascontiguousarray(P[:, j])
+        dc = c[neighbors]
+        dc -= c[:, None]
+        dc *= dc
+        if s is None:
+            s = dc
+        else:
+            s += dc
+    return np.sqrt(s, out=s)
 
 
 def outlier_result(P: np.ndarray, k: int) -> Any:
