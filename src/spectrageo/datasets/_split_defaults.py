@@ -94,6 +94,20 @@ _DEFAULTS = [
        "benchmarks/outliers_lidar_local_rescore.py",
        "smallest of 1-2.5 with no tuning case lower (table scene 1.5: -0.002); 40 % injected "
        "+0.03-0.04; docs/decisions.md#outliers-lidar-local-rescore"),
+    _d(_O + "static.RESCORE_FOUND", 0.01, "tuning", "outliers-scantypes",
+       "benchmarks/outliers4_lidar.py",
+       "share of the cloud the third pass removes: 0.31-0.77 % on the 30 % laser, milk and "
+       "hexbin cases (clean tail), 1.85-2.25 % where it raises F1 (cloud_bin_0, milk_cartoon "
+       "30 %); docs/decisions.md#outliers4-rescore-passes"),
+    _d(_O + "static.RESCORE_LIFT", 1.2, "tuning", "outliers-sequence-patterns",
+       "benchmarks/outliers4_lidar.py",
+       "median score / threshold of a tried pass's removals: 1.03-1.11 for the clean tail of the "
+       "horse-gallop robot frames, 1.29-1.67 where a third pass raises F1 (scan-type tuning); "
+       "docs/decisions.md#outliers4-rescore-passes"),
+    _d(_O + "static.RESCORE_PASSES", 4, "tuning", "outliers-scantypes",
+       "benchmarks/outliers4_lidar.py",
+       "a bound on the cost: at most 3 passes on every scan-type and pattern tuning case; "
+       "docs/decisions.md#outliers4-rescore-passes"),
     _d(_O + "static.HARM_SHARE", 0.03, "tuning", "outliers-scantypes",
        "benchmarks/outliers3_harm.py",
        "score-removed share: clean tuning scans 0.003-0.023, contaminated tuning cases >= 0.030 "

@@ -73,7 +73,9 @@ class RPCAOptions:
         :func:`remove_outliers` scores the kept points again (a second pass) when the first
         removed at least this share of the cloud (all its outliers removed when their spacing is
         homogeneous, ``static.RESCORE_SPREAD``, else the locally sparse ones,
-        ``static.RESCORE_LOCAL``); None: off.
+        ``static.RESCORE_LOCAL``), and tries a further pass after any pass that removed
+        ``static.RESCORE_FOUND`` of the cloud, keeping its removals when they reach that share
+        and score well above its threshold (``static.RESCORE_LIFT``); None: off.
     grid : OrganizedGrid, optional
         Image grid of an organized depth frame: :func:`remove_outliers` removes its flying pixels
         and keeps its image-supported points (:mod:`._organized`); the viewpoint defaults to the

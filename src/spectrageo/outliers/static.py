@@ -55,6 +55,15 @@ RESCORE_SPREAD = 2.08
 #: neighbour distance is at least this many times the median of their neighbours'; chosen on the
 #: tuning split (docs/decisions.md#outliers-lidar-local-rescore).
 RESCORE_LOCAL = 2.0
+#: After a second pass that removed at least ``RESCORE_FOUND`` of the cloud a further pass is
+#: tried, whose removals stand only when they are at least ``RESCORE_FOUND`` of the cloud and
+#: their median score is at least ``RESCORE_LIFT`` times the pass's threshold (a population above
+#: it, not the tail of the clean scores), up to ``RESCORE_PASSES`` passes in all, the first
+#: included (:func:`_rescore`); chosen on the tuning split
+#: (docs/decisions.md#outliers4-rescore-passes).
+RESCORE_FOUND = 0.01
+RESCORE_LIFT = 1.2
+RESCORE_PASSES = 4
 #: Do no harm on a nearly clean cloud (scores remove under ``HARM_SHARE`` of it): a point removed
 #: by its score alone is kept when ``score < HARM_SCORE * tau``, its ``k``-th neighbour distance is
 #: at most ``HARM_SPACING`` times the median and it lies within ``HARM_SPREAD`` standard
@@ -229,6 +238,50 @@ def _rescore_due(options: RPCAOptions, r, keep: np.ndarray, k: int, info: dict) 
     return "all" if q90 <= RESCORE_SPREAD * q50 else "local"
 
 
+def _rescore(X, k, options, threshold, rule, workers, device, keep, mode, info) -> None:
+    """The passes after the first, on the kept points, ``keep`` updated in place: each scores
+    the points still kept (the stages of :func:`_rpca_pass` without the do-no-harm rule; with
+    ``mode == "local"`` only its locally sparse outliers, :func:`_locally_sparse`). The second
+    pass stands; after a pass that removed at least :data:`RESCORE_FOUND` of the cloud a further
+    pass is tried, which stands only when it removes at least that share and the median score
+    of its removed points is at least :data:`RESCORE_LIFT` times its threshold, up to
+    :data:`RESCORE_PASSES` passes in all. ``info["rescore"]``: the second pass's threshold, the
+    points removed after the first pass, the passes that stood (``n_passes``, the first
+    included); ``info["rescore_dropped"]``: the tried pass that was dropped (its count, ``lift``
+    = median score of its removed points over its threshold)."""
+    n, done, n_removed, tau2 = keep.size, 1, 0, None
+    while done < RESCORE_PASSES:
+        sub = np.flatnonzero(keep)
+        if sub.size <= k:
+            break
+        keep2, r2, tau = _rpca_pass(
+            X[sub], k, options, threshold, rule, False, workers, device, {}, first=False
+        )
+        if mode == "local":
+            keep2 |= ~_locally_sparse(r2)
+        found = int(sub.size - np.count_nonzero(keep2))
+        lift = float(np.median(r2.scores[~keep2])) / tau if found else 0.0
+        if done > 1 and (found < RESCORE_FOUND * n or lift < RESCORE_LIFT):
+            info["rescore_dropped"] = {
+                "threshold": tau,
+                "n_removed": found,
+                "lift": lift,
+                "pass": done + 1,
+            }
+            break
+        keep[sub[~keep2]] = False
+        done, n_removed = done + 1, n_removed + found
+        tau2 = tau if tau2 is None else tau2
+        if found < RESCORE_FOUND * n:
+            break
+    info["rescore"] = {
+        "threshold": tau2,
+        "n_removed": n_removed,
+        "local": mode == "local",
+        "n_passes": done,
+    }
+
+
 def _locally_sparse(r) -> np.ndarray:
     """``d_i >= RESCORE_LOCAL median_{j in N_i} d_j``, ``d`` the ``k``-th neighbour distances and
     ``N_i`` the ``k`` neighbours of a pass (all False without its lists)."""
@@ -276,7 +329,11 @@ def remove_outliers(
     the same way and the second pass's outliers removed too: all of them when the kept points'
     spacing is homogeneous (:data:`RESCORE_SPREAD`), else those locally sparse
     (:data:`RESCORE_LOCAL`; ``scores`` and ``threshold`` stay the first pass's;
-    ``info["rescore"]``). ``threshold=None`` uses
+    ``info["rescore"]``); after a pass that removed at least :data:`RESCORE_FOUND` of the
+    cloud a further pass is tried, which stands only when it removes that share with a median
+    score of at least :data:`RESCORE_LIFT` times its threshold (else
+    ``info["rescore_dropped"]``), up to :data:`RESCORE_PASSES` passes (:func:`_rescore`).
+    ``threshold=None`` uses
     ``threshold_rule`` (``"valley"``: :func:`valley_threshold`; ``"density"``, ``"otsu"``:
     :func:`auto_threshold`) with the floor :data:`RPCA_MIN_TAU` = 0.5 spacings (chosen on the tuning
     split; see docs/decisions.md#outlier-rpca-constants). ``method="sor"``: keep points whose mean
@@ -381,20 +438,10 @@ def _outliers(
         if due is not None:
             # a second pass on the kept points (docs/decisions.md#outliers-rescore); of uneven
             # spacing, its locally sparse outliers only
-            # (docs/decisions.md#outliers-lidar-local-rescore)
-            sub = np.flatnonzero(keep_f)
+            # (docs/decisions.md#outliers-lidar-local-rescore); further passes while they find
+            # a contamination's worth (docs/decisions.md#outliers4-rescore-passes)
             again = replace(options, grid=None, viewpoint=options.sensor_origin)
-            keep2, r2, tau2 = _rpca_pass(
-                X[sub], k, again, threshold, rule, False, workers, device, {}, first=False
-            )
-            if due == "local":
-                keep2 |= ~_locally_sparse(r2)
-            keep_f[sub[~keep2]] = False
-            info["rescore"] = {
-                "threshold": tau2,
-                "n_removed": int(sub.size - keep2.sum()),
-                "local": due == "local",
-            }
+            _rescore(X, k, again, threshold, rule, workers, device, keep_f, due, info)
         if options.grid is not None:  # the grid stage (docs/decisions.md#outliers-organized-grid)
             pix = options.grid.pixels(X.shape[0] if finite is None else finite.size)
             pix = pix if finite is None else pix[finite]
