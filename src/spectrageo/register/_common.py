@@ -115,29 +115,102 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     )
 
 
+def column_bounds(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-column minimum and maximum of ``P`` (n, d), exactly ``P.min(axis=0)`` and
+    ``P.max(axis=0)``, one contiguous pass per column (a reduction along axis 0 of an (n, 3)
+    array is much slower)."""
+    cols = range(P.shape[1])
+    return np.array([P[:, j].min() for j in cols]), np.array([P[:, j].max() for j in cols])
+
+
 def bbox_diagonal(P: np.ndarray) -> float:
-    return float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
+    """Length of the diagonal of the axis-aligned bounding box of ``P`` (n, 3)."""
+    lo, hi = column_bounds(P)
+    return float(np.linalg.norm(hi - lo))
 
 
-def voxel_downsample(P: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(Q, label)``: centroids of the occupied voxels by key and each point's voxel row."""
-    if voxel <= 0 or P.shape[0] == 0:
-        return P.copy(), np.arange(P.shape[0])
-    key = np.floor((P - P.min(axis=0)) / voxel).astype(np.int64)
-    span = key.max(axis=0) + 1
-    if float(span[0]) * float(span[1]) * float(span[2]) < 2.0**62:
-        # mixed-radix code: same (lexicographic) order as unique rows, 1-D sort is much faster
-        code = (key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2]
-        _, label = np.unique(code, return_inverse=True)
-    else:
-        _, label = np.unique(key, axis=0, return_inverse=True)
-    label = label.ravel()
+def _voxel_keys(D: np.ndarray, voxel: float) -> np.ndarray:
+    """Integer voxel coordinates ``floor(D / voxel)`` (n, 3) int64 of points ``D >= 0``."""
+    buf = np.divide(D, voxel)
+    np.floor(buf, out=buf)
+    return buf.astype(np.int64)
+
+
+def _voxel_code(key: np.ndarray) -> tuple[np.ndarray | None, int]:
+    """Mixed-radix code ``(k0 span1 + k1) span2 + k2`` (n,) int64 of voxel keys, ordered like
+    the rows of ``key`` lexicographically, and the number of codes; ``(None, 0)`` when the
+    code would not fit in 62 bits."""
+    span = column_bounds(key)[1] + 1
+    size = float(span[0]) * float(span[1]) * float(span[2])
+    if size >= 2.0**62:
+        return None, 0
+    return (key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2], int(size)
+
+
+def _dense(size: int, n: int) -> bool:
+    """Whether an occupancy table of ``size`` codes is cheaper than sorting ``n`` codes."""
+    return size <= max(4 * n, 65536)
+
+
+def _n_voxels(D: np.ndarray, voxel: float) -> int:
+    """Number of voxels of size ``voxel`` occupied by the points ``D >= 0`` (n, 3)."""
+    if voxel <= 0:
+        return D.shape[0]
+    key = _voxel_keys(D, voxel)
+    code, size = _voxel_code(key)
+    if code is None:
+        return int(np.unique(key, axis=0).shape[0])
+    if _dense(size, code.size):
+        occupied = np.zeros(size, dtype=bool)
+        occupied[code] = True
+        return int(np.count_nonzero(occupied))
+    sc = np.sort(code, kind="stable")
+    return int(np.count_nonzero(sc[1:] != sc[:-1])) + 1
+
+
+def _voxel_labels(key: np.ndarray) -> np.ndarray:
+    """Each row's rank among the distinct rows of ``key`` in lexicographic order (the inverse
+    of ``np.unique(key, axis=0)``), (n,) intp."""
+    code, size = _voxel_code(key)
+    if code is None:
+        return np.unique(key, axis=0, return_inverse=True)[1].ravel()
+    if _dense(size, code.size):
+        occupied = np.zeros(size, dtype=bool)
+        occupied[code] = True
+        rank = np.cumsum(occupied, dtype=np.intp)
+        return rank[code] - 1
+    order = np.argsort(code, kind="stable")
+    sc = code[order]
+    first = np.empty(sc.size, dtype=bool)
+    first[0] = True
+    np.not_equal(sc[1:], sc[:-1], out=first[1:])
+    label = np.empty(sc.size, dtype=np.intp)
+    label[order] = np.cumsum(first, dtype=np.intp) - 1
+    return label
+
+
+def _centroids(P: np.ndarray, label: np.ndarray) -> np.ndarray:
+    """Mean (m, 3) of the points ``P`` of every label ``0 .. m - 1``."""
     m = int(label.max()) + 1
     cnt = np.bincount(label, minlength=m).astype(np.float64)
     Q = np.empty((m, 3))
     for j in range(3):
         Q[:, j] = np.bincount(label, weights=P[:, j], minlength=m) / cnt
-    return Q, label
+    return Q
+
+
+def voxel_downsample(P: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """Voxel-grid down-sampling of ``P`` (n, 3).
+
+    The voxel of a point is ``floor((p - min P) / voxel)`` per coordinate; returns ``(Q, label)``
+    with ``Q`` (m, 3) the centroids of the occupied voxels in lexicographic order of their
+    integer coordinates and ``label`` (n,) the row of ``Q`` of each point. ``voxel <= 0`` or an
+    empty ``P`` returns a copy of ``P`` and ``arange(n)``.
+    """
+    if voxel <= 0 or P.shape[0] == 0:
+        return P.copy(), np.arange(P.shape[0])
+    label = _voxel_labels(_voxel_keys(P - column_bounds(P)[0], voxel))
+    return _centroids(P, label), label
 
 
 def thin(P: np.ndarray, limit: int) -> np.ndarray:
@@ -149,17 +222,28 @@ def thin(P: np.ndarray, limit: int) -> np.ndarray:
 
 
 def downsample_to(P: np.ndarray, max_points: int) -> np.ndarray:
-    """Voxel down-sampling grown until at most ``max_points`` remain."""
+    """Voxel down-sampling (:func:`voxel_downsample`) grown until at most ``max_points`` remain.
+
+    The first voxel is ``0.35 diag / sqrt(max_points)`` (area-like scaling of a surface sample,
+    ``m ~ (diag / voxel)^2``; ``diag`` the bounding-box diagonal); while ``m`` voxels are
+    occupied, ``m > max_points``, the voxel grows by ``1.15 sqrt(m / max_points)``. The
+    intermediate voxels are only counted; the centroids are formed once, at the last voxel.
+    ``P`` with at most ``max_points`` points is returned as is, and a copy of ``P`` when its
+    bounding box is a single point.
+    """
     if P.shape[0] <= max_points:
         return P
-    diag = bbox_diagonal(P)
-    # area-like scaling of a surface sample: m ~ (diag / voxel)^2
+    lo, hi = column_bounds(P)
+    diag = float(np.linalg.norm(hi - lo))
+    D = P - lo
     voxel = diag / np.sqrt(max_points) * 0.35
-    Q, _ = voxel_downsample(P, voxel)
-    while Q.shape[0] > max_points:
-        voxel *= 1.15 * np.sqrt(Q.shape[0] / max_points)
-        Q, _ = voxel_downsample(P, voxel)
-    return Q
+    m = _n_voxels(D, voxel)
+    while m > max_points and voxel > 0:
+        voxel *= 1.15 * np.sqrt(m / max_points)
+        m = _n_voxels(D, voxel)
+    if not voxel > 0:  # all points equal: nothing to merge by a grid
+        return P.copy()
+    return _centroids(P, _voxel_labels(_voxel_keys(D, voxel)))
 
 
 def spacing(P: np.ndarray, tree: cKDTree | None = None, *, n_sample: int = 2000) -> float:
