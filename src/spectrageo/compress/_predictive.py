@@ -7,8 +7,9 @@ diagonal), so every coordinate is within ``q / 2`` of the input and every vertex
 prediction). The integer
 coordinates are predicted along a traversal of the connectivity (multi-parallelogram, the
 subset chosen by the encoder) and the residuals coded with an adaptive binary range coder
-(:mod:`._predictive_kernel`; residual format 2, chunk tag 7, since
-docs/decisions.md#codec-model-cost; format 1 files, tag 6, still decode); decoding is integer
+(:mod:`._predictive_kernel`; residual format 3, chunk tag 8, since
+docs/decisions.md#codec-counted-residuals; format 2 (tag 7) and format 1 (tag 6) files still
+decode); decoding is integer
 arithmetic and one product by ``q``, so it is bit-identical on every machine. See
 docs/decisions.md#codec-predictive.
 """
@@ -27,9 +28,13 @@ from ._rate import STEP_MAX, STEP_MIN
 TAG_RESIDUALS = 6
 #: residual chunk of format 2 (:func:`._predictive_kernel._visit2`)
 TAG_RESIDUALS_2 = 7
-#: residual format the encoder writes (1 or 2)
-FORMAT = 2
-_TAGS = {TAG_RESIDUALS: 1, TAG_RESIDUALS_2: 2}
+#: residual chunk of format 3: format 2 with counted adaptive models
+#: (docs/decisions.md#codec-counted-residuals)
+TAG_RESIDUALS_3 = 8
+#: residual format the encoder writes (1, 2 or 3)
+FORMAT = 3
+_TAGS = {TAG_RESIDUALS: 1, TAG_RESIDUALS_2: 2, TAG_RESIDUALS_3: 3}
+_TAG_OF = {v: k for k, v in _TAGS.items()}
 _P = struct.Struct("<dd")  # grid step, bound on each coordinate's error (files before v4)
 #: the compact parameters: the step as float32 (the encoder's grid is that value) and, under
 #: ``max_error`` with a sphere, its radius as float32 (the radius the encoder used)
@@ -76,7 +81,14 @@ class PredictivePlan:
             G = np.zeros_like(R)
             buf = np.zeros(self.n * 3 * 16 + 64, dtype=np.uint8)
             nb = kernel.run(True, self.F, self.n, G, buf, R, R, X, rho, FORMAT)
-            self._cache = (key, varint(self.n) + buf[:nb].tobytes(), G)
+            if FORMAT >= 3:  # no vertex count; the coder's first byte (always 0: the
+                # interval starts inside [0, 1)) and the trailing zero bytes are implied
+                if buf[0] != 0:  # pragma: no cover - LZMA's coder never carries into it
+                    raise RuntimeError("predictive range coder wrote a nonzero first byte")
+                data = buf[1:nb].tobytes().rstrip(b"\0")
+            else:
+                data = varint(self.n) + buf[:nb].tobytes()
+            self._cache = (key, data, G)
         return self._cache[1], self._cache[2]
 
     def params(self, q: float) -> bytes:
@@ -84,7 +96,7 @@ class PredictivePlan:
         return _QR.pack(q, self.sphere) if self.sphere else _Q.pack(q)
 
     def chunks(self, q: float) -> list[tuple[int, bytes]]:
-        return [(TAG_RESIDUALS_2 if FORMAT == 2 else TAG_RESIDUALS, self._encode(q)[0])]
+        return [(_TAG_OF[FORMAT], self._encode(q)[0])]
 
     def reconstruct(self, q: float | None) -> np.ndarray:
         return self.X.copy() if q is None else self._encode(q)[1] * f32_below(float(q))
@@ -160,14 +172,17 @@ def decode(params: bytes, chunks, F: np.ndarray, n: int, method: str, *, complet
     q = _step(params)[0]
     if len(chunks) != 1 or chunks[0][0] not in _TAGS:
         raise InvalidInputError(".sgc predictive stream lacks its residual chunk.")
-    r = Reader(chunks[0][1], "predictive residuals")
-    if r.varint() != n:
-        raise InvalidInputError(".sgc predictive residuals do not match the vertex count.")
-    buf = np.frombuffer(r.rest(), dtype=np.uint8).copy()
+    ver = _TAGS[chunks[0][0]]
+    if ver >= 3:
+        buf = np.frombuffer(b"\0" + chunks[0][1], dtype=np.uint8).copy()
+    else:
+        r = Reader(chunks[0][1], "predictive residuals")
+        if r.varint() != n:
+            raise InvalidInputError(".sgc predictive residuals do not match the vertex count.")
+        buf = np.frombuffer(r.rest(), dtype=np.uint8).copy()
     G = np.zeros((n, 3), dtype=np.int64)
     F = np.ascontiguousarray(F, dtype=np.int64)
     none = np.zeros((0, 3), dtype=np.int64)
-    ver = _TAGS[chunks[0][0]]
     if kernel.run(False, F, n, G, buf, none, none, np.zeros((1, 3)), 0.0, ver) < 0:
         raise InvalidInputError(".sgc predictive residuals are truncated or malformed.")
     if G.size and np.abs(G).max() >= MAX_GRID:

@@ -246,6 +246,22 @@ _DEFAULTS = [
     _d("spectrageo.compress._predictive_kernel.NAX", 3, "tuning", "compress",
        "benchmarks/codec_predictive.py",
        "fandisk, partLp, the two elephants; docs/decisions.md#codec-model-cost"),
+    _d("spectrageo.compress._predictive_kernel.RES_RATE0", 4, "tuning", "compress",
+       "benchmarks/codec4_cad.py",
+       "2, 4, 8, 16 tried on fandisk, partLp, the two elephants and decimations of the first "
+       "two; docs/decisions.md#codec-counted-residuals"),
+    _d("spectrageo.compress._predictive_kernel.RES_RATE_MAX", 32, "tuning", "compress",
+       "benchmarks/codec4_cad.py",
+       "24, 32, 64 tried on fandisk, partLp, the two elephants and decimations of the first "
+       "two; docs/decisions.md#codec-counted-residuals"),
+    _d("spectrageo.compress._predictive_kernel.FLAG_SPREAD", 4, "tuning", "compress",
+       "benchmarks/codec4_cad.py",
+       "2, 3, 4, 6 tried on fandisk, partLp, the two elephants and decimations of the first "
+       "two; docs/decisions.md#codec-counted-residuals"),
+    _d("spectrageo.compress._predictive_kernel.HEIGHT_SHIFT", 2, "tuning", "compress",
+       "benchmarks/codec4_cad.py",
+       "0, 1, 2, 3, 5 tried on fandisk, partLp, the two elephants and decimations of the first "
+       "two; docs/decisions.md#codec-counted-residuals"),
     _d("spectrageo.compress._animation.DEFAULT_STEP", 2e-4, "tuning", "compress-animation", _ECA,
        "looked at on horse-gallop"),
     _d("spectrageo.compress._animation.DEFAULT_BLOCK", 16, "tuning", "compress-animation", _ECA,
