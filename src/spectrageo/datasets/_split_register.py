@@ -28,8 +28,9 @@ REGISTER_DEFAULTS: tuple[Default, ...] = (
     _d(_R + "_api.MAX_POINTS", 8000, "tuning", "register", _ER,
        "18/18 tuning pairs, every one converged, poses within 0.06 deg of 10000; 6000 and 5000 "
        "leave 1-2 unconverged; docs/decisions.md#reg-speed4-verify"),
-    _d(_R + "_api.TARGET_POINTS", 2.0, "tuning", "register", _ER,
-       "with MAX_POINTS; docs/decisions.md#register-speed"),
+    _d(_R + "_api.TARGET_POINTS", 1.0, "tuning", "register", _ER,
+       "18/18 tuning pairs, every one converged, poses within 0.15 deg of 2.0; 0.9 as well; "
+       "1.5 leaves bun000->bun270 unconverged; docs/decisions.md#reg-speed5-target"),
     _d(_R + "_broad.RIVAL_SHARE", 0.9, "tuning", "register", _ER,
        "fragment crop #1 (seed 1): right poses at 0.95-1.0 of the turned room's voxel fitness; "
        "docs/decisions.md#register-rivals"),

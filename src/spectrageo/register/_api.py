@@ -23,15 +23,25 @@ from ._common import (
     check_extent,
     downsample_to,
     points_of,
+    spacing,
     thin,
 )
-from ._narrow import TargetIndex, _within, check_icp_options, constraint, run_narrow
+from ._narrow import (
+    NORMAL_K,
+    TargetIndex,
+    _within,
+    check_icp_options,
+    constraint,
+    neighbors_from_search,
+    run_narrow,
+    spacing_from_search,
+)
 from ._robust import boundary_mask
-from ._robust_fast import outlier_keep
+from ._robust_fast import outlier_keep_knn
 
 #: :func:`register` keeps at most TARGET_POINTS * max_points target points for the narrow phase
-#: (docs/decisions.md#register-speed)
-TARGET_POINTS = 2.0
+#: (docs/decisions.md#register-speed, docs/decisions.md#reg-speed5-target)
+TARGET_POINTS = 1.0
 #: default source size of :func:`register`'s narrow phase (docs/decisions.md#register-speed,
 #: docs/decisions.md#reg-speed4-verify)
 MAX_POINTS = 8000
@@ -122,16 +132,32 @@ def robustify(
     check_positive(k_outliers, "k_outliers", integer=True)
     check_positive(k_boundary, "k_boundary", integer=True)
     check_positive(outlier_threshold, "outlier_threshold")
+    kept, keep, _ = _robustify(P, int(k_outliers), float(outlier_threshold), int(k_boundary),
+                               remove_outliers, remove_boundary)  # fmt: skip
+    return kept, keep
+
+
+def _robustify(
+    P: np.ndarray,
+    k_outliers: int = 10,
+    outlier_threshold: float = 0.6,
+    k_boundary: int = 10,
+    remove_outliers: bool = True,
+    remove_boundary: bool = True,
+) -> tuple[np.ndarray, np.ndarray, tuple | None]:
+    """:func:`robustify` on validated points and options; also returns the outlier test's k-d
+    tree search of ``P`` on itself, ``(tree, d, i)`` as
+    :func:`._robust_fast.outlier_keep_knn` returns it, or None."""
     keep = np.ones(P.shape[0], dtype=bool)
-    nbrs = None  # the RPCA's exact kNN, reused by the boundary test
+    nbrs = search = None  # the RPCA's exact kNN, reused by the boundary test
     if remove_outliers and P.shape[0] > k_outliers + 1:
-        ok, nbrs = outlier_keep(P, int(k_outliers), float(outlier_threshold))
+        ok, nbrs, search = outlier_keep_knn(P, k_outliers, outlier_threshold)
         keep &= ok
     if remove_boundary and P.shape[0] > k_boundary + 1:
-        keep &= ~boundary_mask(P, int(k_boundary), nbrs)
+        keep &= ~boundary_mask(P, k_boundary, nbrs)
     if keep.sum() < 3:  # never leave less than a registrable cloud
         keep[:] = True
-    return P[keep], keep
+    return P[keep], keep, search
 
 
 def broad_phase(source: Any, target: Any, *, rng: Any = 0, **options: Any) -> np.ndarray:
@@ -209,10 +235,19 @@ def prepare_target(
     check_positive(s, "voxel_size")
     Td = downsample_to(Tg, int(TARGET_POINTS * max_points))
     n_kept = Td.shape[0]
+    nbrs = h = tree = None
+    need_normals = method == "point_to_plane"
     if robust:
-        Td, kt = robustify(Td)
+        Td, kt, search = _robustify(Td)
         n_kept = int(kt.sum())
-    index = TargetIndex(Td, need_normals=method == "point_to_plane")
+        if search is not None:
+            # the outlier test's search gives the spacing, most normals' neighbour lists and,
+            # when every point is kept, the tree (the same values as searching the kept points)
+            h = spacing_from_search(kt, search[1], search[2])
+            if need_normals:
+                nbrs = neighbors_from_search(kt, search[1], search[2], NORMAL_K)
+            tree = search[0] if kt.all() else None
+    index = TargetIndex(Td, need_normals=need_normals, neighbors=nbrs, point_spacing=h, tree=tree)
     return PreparedTarget(Tg, s, bool(robust), method, int(max_points), broad_target(Tg, s), Td,
                           index, n_kept)  # fmt: skip
 
@@ -315,9 +350,14 @@ def register(
     # robustification on the clouds the narrow phase will use (down-sampled first: the RPCA
     # patch problem then costs ~0.05 s instead of ~0.5 s on a 40k-point scan)
     Sd = downsample_to(S, max_points)
+    hs = None  # the spacing of Sd, from the outlier test's search when there is one
     if robust:
-        Sd, ks = robustify(Sd)
+        Sd, ks, search = _robustify(Sd)
         info["n_kept_source"], info["n_kept_target"] = int(ks.sum()), pt.n_kept
+        if search is not None:
+            hs = spacing_from_search(ks, search[1], search[2])
+    if hs is None:
+        hs = spacing(Sd)
     # after the broad phase (already refined at the voxel scale) the Tukey scale starts at two
     # voxels instead of the median distance, which at low overlap is dominated by points without
     # a counterpart and would drag the alignment off
@@ -332,7 +372,7 @@ def register(
     def refine(T_start: np.ndarray, iters: int) -> RegistrationResult:
         return run_narrow(Sd, pt.points, T_start, max_iter=iters, tol=tol, method=method,
                           gamma=gamma0, max_points=max_points, index=pt.index, warn=False,
-                          keep_query=True)  # fmt: skip
+                          keep_query=True, source_spacing=hs)  # fmt: skip
 
     def key(r: RegistrationResult) -> tuple[float, float]:
         d = r.info["final_query"][1]

@@ -36,18 +36,49 @@ COARSE_MIN = 2000
 COARSE_UNTIL = COARSE_STRIDE**0.5
 #: approximate nearest neighbours in the coarse iterations (KD-tree ``eps``)
 COARSE_EPS = 1.0
+#: neighbours (the point itself included) of a target normal (Eq. 6.31)
+NORMAL_K = 10
 
 
 class TargetIndex:
-    """KD-tree, spacing and lazily computed unoriented normals of a target cloud."""
+    """KD-tree, spacing and lazily computed unoriented normals of a target cloud.
 
-    def __init__(self, T: np.ndarray, *, normal_k: int = 10, need_normals: bool = True):
+    Parameters
+    ----------
+    T : (n, 3) float64
+        The target points.
+    normal_k : int
+        Neighbours (the point itself included) of each normal (Eq. 6.31).
+    need_normals : bool
+        Whether :meth:`normals_at` is available.
+    neighbors : (n, normal_k) int, optional
+        Rows of ``T`` known to be the ``normal_k`` nearest points of each point in the order of
+        ``tree.query(T[r], normal_k)`` (the point itself first), -1 where unknown; the normals of
+        the known rows are computed from them instead of a search (the same values).
+    point_spacing : float, optional
+        ``spacing(T)`` when already known (e.g. from :func:`spacing_from_search`).
+    tree : cKDTree, optional
+        ``cKDTree(T)`` when already built (with its default options).
+    """
+
+    def __init__(
+        self,
+        T: np.ndarray,
+        *,
+        normal_k: int = NORMAL_K,
+        need_normals: bool = True,
+        neighbors: np.ndarray | None = None,
+        point_spacing: float | None = None,
+        tree: cKDTree | None = None,
+    ):
         self.points = T
-        self.tree = cKDTree(T)
-        self.spacing = spacing(T, self.tree)
+        self.tree = cKDTree(T) if tree is None else tree
+        self.spacing = spacing(T, self.tree) if point_spacing is None else float(point_spacing)
         self.normal_k = int(normal_k)
         self._normals = np.zeros((T.shape[0], 3)) if need_normals else None
         self._known = np.zeros(T.shape[0], dtype=bool) if need_normals else None
+        ok = neighbors is not None and need_normals and neighbors.shape == (T.shape[0], normal_k)
+        self._neighbors = neighbors if ok else None
 
     def normals_at(self, j: np.ndarray) -> np.ndarray:
         """Unit normals (unoriented) of the target points ``j``."""
@@ -58,11 +89,88 @@ class TargetIndex:
         mask[j[~self._known[j]]] = True
         new = np.flatnonzero(mask)
         if new.size:
-            self._normals[new] = knn_normals_at(
-                self.points, self.points[new], self.normal_k, self.tree
-            )[0]
+            if self._neighbors is None or self.normal_k > self.points.shape[0]:
+                N = knn_normals_at(self.points, self.points[new], self.normal_k, self.tree)[0]
+            else:
+                N = self._normals_of(new)
+            self._normals[new] = N
             self._known[new] = True
         return self._normals[j]
+
+    def _normals_of(self, rows: np.ndarray) -> np.ndarray:
+        """:func:`knn_normals_at` of the target at its points ``rows`` (sorted, distinct), the
+        neighbour lists taken from ``neighbors`` where known and searched elsewhere, all rows
+        in one batch as :func:`knn_normals_at` computes them."""
+        idx = self._neighbors[rows].astype(np.intp)
+        miss = np.flatnonzero(idx[:, 0] < 0)
+        if miss.size:
+            k = self.normal_k
+            _, found = self.tree.query(self.points[rows[miss]], k=k,
+                                       workers=workers_for(miss.size))  # fmt: skip
+            idx[miss] = np.asarray(found).reshape(miss.size, k)
+        return _normals_from(self.points, idx)
+
+
+def _normals_from(P: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Unoriented unit normals (m, 3) of the neighbourhoods ``P[idx]`` (``idx`` (m, k)): the
+    eigenvector of the smallest eigenvalue of each neighbourhood's covariance (Eq. 6.31), the
+    computation of :func:`knn_normals_at` after its search."""
+    Q = P[idx]
+    Q = Q - Q.mean(axis=1, keepdims=True)
+    C = np.einsum("nki,nkj->nij", Q, Q)
+    _, vec = np.linalg.eigh(C)
+    return vec[:, :, 0]
+
+
+def neighbors_from_search(
+    keep: np.ndarray, d: np.ndarray, i: np.ndarray, normal_k: int
+) -> np.ndarray | None:
+    """The neighbour lists of :class:`TargetIndex` for the cloud ``P[keep]``, from a search of
+    ``P`` on itself.
+
+    ``d``, ``i`` (n, K) are the distances and rows of ``cKDTree(P).query(P, K)`` with every
+    point first in its own row and no two points equal. A kept row whose first ``normal_k``
+    entries are all kept and whose first ``normal_k + 1`` distances strictly increase has
+    those entries as its ``normal_k`` nearest points in ``P[keep]``, in the one order any
+    search returns them (no ties; every other point is farther); its entry is that list (rows
+    of ``P[keep]``), other rows are -1. Returns None when ``K < normal_k + 1``.
+    """
+    n, K = d.shape
+    if K < normal_k + 1:
+        return None
+    dd = d[:, : normal_k + 1]
+    ok = np.all(dd[:, 1:] > dd[:, :-1], axis=1)
+    rows = i[:, :normal_k]
+    if not keep.all():
+        ok &= keep[rows].all(axis=1)
+        rows = (np.cumsum(keep) - 1)[rows]
+    out = np.where(ok[:, None], rows, -1)
+    return out[keep] if not keep.all() else out
+
+
+def spacing_from_search(
+    keep: np.ndarray, d: np.ndarray, i: np.ndarray, *, n_sample: int = 2000
+) -> float | None:
+    """:func:`spacing` of ``P[keep]`` from a search of ``P`` on itself, or None.
+
+    ``d``, ``i`` (n, K) are the distances and rows of ``cKDTree(P).query(P, K)`` with every
+    point first in its own row and no two points equal. The nearest other point of ``P[keep]``
+    to a kept point is the first kept entry after the point itself, at that entry's distance
+    (the same value a search of ``P[keep]`` computes); :func:`spacing`'s median is taken over
+    its strided subset of ``P[keep]``. None when a point of the subset has no kept entry or the
+    median is not positive (then :func:`spacing` decides).
+    """
+    rows = np.flatnonzero(keep)
+    m = rows.size
+    if m < 2:
+        return None
+    sub = rows[np.arange(0, m, max(1, m // n_sample))]
+    kept = keep[i[sub, 1:]]
+    first = np.argmax(kept, axis=1)
+    if not kept[np.arange(sub.size), first].all():
+        return None
+    s = float(np.median(d[sub, 1 + first]))
+    return s if s > 0 else None
 
 
 def tukey_weights(r: np.ndarray, gamma: float) -> np.ndarray:
@@ -289,9 +397,11 @@ def run_narrow(
     warn: bool = True,
     coarse: bool = True,
     keep_query: bool = False,
+    source_spacing: float | None = None,
 ) -> RegistrationResult:
     """:func:`icp` on validated arrays: ``S`` down-sampled to ``max_points``, the target index
-    built unless given, the scale floor two spacings and the inlier distance three."""
+    built unless given, the scale floor two spacings and the inlier distance three
+    (``source_spacing``: :func:`spacing` of the down-sampled ``S`` when already known)."""
     check_icp_options(max_iter, tol, method)
     check_positive(max_points, "max_points", integer=True)
     if gamma is not None:
@@ -304,7 +414,8 @@ def run_narrow(
             downsample_to(Tg, max(5 * max_points, 100000)),
             need_normals=method == "point_to_plane",
         )
-    h = max(index.spacing, spacing(Sd), 1e-12 * max(bbox_diagonal(Tg), 1.0))
+    hs = spacing(Sd) if source_spacing is None else float(source_spacing)
+    h = max(index.spacing, hs, 1e-12 * max(bbox_diagonal(Tg), 1.0))
     dist = float(inlier_distance) if inlier_distance is not None else 3.0 * h
     res = icp(
         Sd,

@@ -37,8 +37,16 @@ SCREEN_MARGIN = 1e-9
 
 
 def _knn(X: np.ndarray, k: int):
-    """:func:`spectrageo.outliers._common.knn_chunked` of ``X`` on itself, when every point is the
-    first answer of its own query (else None: the caller takes the general path)."""
+    """:func:`spectrageo.outliers._common.knn_chunked` of ``X`` on itself and the k-d tree of
+    ``X``, when every point is the first answer of its own query (else None: the caller takes
+    the general path)."""
+    found = _knn_search(X, k)
+    return None if found is None else found[:2]
+
+
+def _knn_search(X: np.ndarray, k: int):
+    """:func:`_knn` and the tree's answer: ``(neighbours, tree, d, i)`` with the distances ``d``
+    and rows ``i`` (n, k + 1) of ``tree.query(X, k + 1)``, the point itself first; or None."""
     from ..outliers._common import KNN_CHUNK, KNN_SERIAL_BELOW, Neighbours
 
     n = X.shape[0]
@@ -52,7 +60,7 @@ def _knn(X: np.ndarray, k: int):
     itype = np.int32 if n < 2**31 - 1 else np.int64
     idx = np.ascontiguousarray(i[:, 1:], dtype=itype)
     dd = np.ascontiguousarray(d[:, 1:])
-    return Neighbours(idx, dd.mean(axis=1), dd[:, -1].copy(), 0), tree
+    return Neighbours(idx, dd.mean(axis=1), dd[:, -1].copy(), 0), tree, d, i
 
 
 def _rebuild(X: np.ndarray, tree: cKDTree, idx: np.ndarray, s1: np.ndarray, k: int):
@@ -104,6 +112,15 @@ def outlier_keep(P: np.ndarray, k: int, threshold: float) -> tuple[np.ndarray, n
     """Points whose RPCA outlier score ``m_i`` (Eq. 6.42, in point spacings) is at most
     ``threshold``, and the exact kNN that the scoring searched.
 
+    :func:`outlier_keep_knn` without its third value.
+    """
+    return outlier_keep_knn(P, k, threshold)[:2]
+
+
+def outlier_keep_knn(P: np.ndarray, k: int, threshold: float) -> tuple:
+    """Points whose RPCA outlier score ``m_i`` (Eq. 6.42, in point spacings) is at most
+    ``threshold``, the exact kNN that the scoring searched, and its k-d tree search.
+
     The same decision as ``outlier_result(P, k).scores <= threshold``
     (:func:`._robust.outlier_result`) for every point; see the module docstring for what is
     left out.
@@ -124,6 +141,10 @@ def outlier_keep(P: np.ndarray, k: int, threshold: float) -> tuple[np.ndarray, n
     neighbors : (n, k) int or None
         The exact ``k`` nearest neighbours of every point in input order (self excluded), or
         None when they were not searched on the whole cloud (exact copies).
+    search : tuple or None
+        ``(tree, d, i)``: the ``cKDTree`` of ``P`` and its answer to ``tree.query(P, k + 1)``,
+        distances ``d`` (n, k + 1) float64 and rows ``i`` (n, k + 1) int, every point first in its
+        own row and no two points equal; None when the general path was taken.
     """
     from ..outliers import RPCAOptions
     from ..outliers import _rpca_numpy as rn
@@ -136,11 +157,12 @@ def outlier_keep(P: np.ndarray, k: int, threshold: float) -> tuple[np.ndarray, n
     covered = opts.refine and opts.second_pass == "replay" and opts.tangent_weight <= 1
     if covered and k + 1 < n <= BLOCK_SIZE and np.isfinite(threshold) and threshold >= 0:
         with rn._blas_controller().limit(limits=1, user_api="blas"):
-            found = _knn(X, k)
+            found = _knn_search(X, k)
             if found is not None:
-                return _keep(X, k, float(threshold), opts, *found)
+                nb, tree, d, i = found
+                return (*_keep(X, k, float(threshold), opts, nb, tree), (tree, d, i))
     res = outlier_result(X, k)
-    return np.asarray(res.scores) <= threshold, exact_neighbors(res)
+    return np.asarray(res.scores) <= threshold, exact_neighbors(res), None
 
 
 def _keep(
