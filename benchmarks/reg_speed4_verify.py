@@ -36,7 +36,7 @@ class _Stages:
 
         self.t = {"verify": 0.0, "narrow": 0.0, "robustify": 0.0}
         for mod, name, key in ((_broad, "icp", "verify"), (_api, "run_narrow", "narrow"),
-                               (_api, "robustify", "robustify")):  # fmt: skip
+                               (_api, "_robustify", "robustify")):  # fmt: skip
             setattr(mod, name, self._wrap(getattr(mod, name), key))
 
     def _wrap(self, fn, key):
