@@ -12,8 +12,9 @@ float32), so it suits clouds of up to some 10^5 points; steps 8-9 are not availa
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import cache, partial
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -72,6 +73,32 @@ def _blas_controller() -> Any:
     return ThreadpoolController()
 
 
+class FirstPass(NamedTuple):
+    """Steps 2-3 of the NumPy patch RPCA (:func:`first_pass`)."""
+
+    Pn: np.ndarray  # (n, 3) centred points in spacings, ``opts.dtype``
+    h: float  # the point spacing
+    centre: np.ndarray  # (3,) the centroid subtracted
+    S1: np.ndarray  # (n, 3) float32 residual vectors of the pass (0 rows without weighting)
+    solve: Callable  # the inexact ALM with the options' parameters
+    out: tuple  # ``solve``'s result on the patches: scores, E0, n_iter, converged, residual
+
+
+def first_pass(X: np.ndarray, nb: Any, opts: RPCAOptions, record: list | None) -> FirstPass:
+    """Steps 2-3 on the exact kNN ``nb`` (:func:`._common.knn_chunked`): the points centred and
+    divided by the spacing, and the inexact ALM (Eq. 4.22) on the patch matrix (Eq. 5.98);
+    ``record`` (a list, or None) receives what the replayed second pass needs."""
+    h = spacing_from(nb.dmean)
+    dt = np.dtype(opts.dtype)
+    check_span(X, h, dt)
+    centre = X.mean(axis=0)
+    Pn = ((X - centre) * (1.0 / h)).astype(dt)
+    S1 = np.empty((X.shape[0], 3) if opts.tangent_weight < 1 else (0, 3), dtype=np.float32)
+    solve = partial(_ialm, lam=opts.lam, rho=opts.rho, tol=opts.tol, rank_tol=opts.rank_tol,
+                    max_iter=opts.max_iter)  # fmt: skip
+    return FirstPass(Pn, h, centre, S1, solve, solve(_patches(Pn, nb.idx), S1, record))
+
+
 def _score(X: np.ndarray, k: int, opts: RPCAOptions, block_size: int, smoothed: bool):
     """:func:`score_numpy` inside the BLAS limit."""
     n = X.shape[0]
@@ -79,18 +106,12 @@ def _score(X: np.ndarray, k: int, opts: RPCAOptions, block_size: int, smoothed: 
     if nb.n_zero:  # score the distinct positions
         again = partial(score_numpy, opts=opts, block_size=block_size, smoothed=smoothed)
         return scores_deduplicated(X, k, again, {})
-    h = spacing_from(nb.dmean)
-    dt = np.dtype(opts.dtype)
-    check_span(X, h, dt)
     idx = nb.idx
-    centre = X.mean(axis=0)
-    Pn = ((X - centre) * (1.0 / h)).astype(dt)
     weighted = opts.tangent_weight < 1
-    S1 = np.empty((n, 3) if weighted else (0, 3), dtype=np.float32)
     record: list | None = [] if opts.refine and opts.second_pass == "replay" else None
-    solve = partial(_ialm, lam=opts.lam, rho=opts.rho, tol=opts.tol, rank_tol=opts.rank_tol,
-                    max_iter=opts.max_iter)  # fmt: skip
-    scores, E0, n_iter, converged, residual = solve(_patches(Pn, idx), S1, record)
+    first = first_pass(X, nb, opts, record)
+    Pn, h, centre, S1, solve = first.Pn, first.h, first.centre, first.S1, first.solve
+    scores, E0, n_iter, converged, residual = first.out
     s1, S2, n_refined = scores, S1, 0
     if opts.refine:
         rebuilt, old_idx = _rebuild(X, idx, s1, k)
@@ -273,19 +294,27 @@ def _replay(M_old: np.ndarray, M_new: np.ndarray, steps: list, vec: np.ndarray):
     return scores, E0
 
 
+def rebuild_rows(idx: np.ndarray, s1: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Step 5's choice: ``(flagged (n,) bool, rows (r,) int64)``, the points whose first-pass
+    score reaches the automatic threshold (floored at ``REFINE_MIN_TAU``) and the rows whose
+    patch ``idx[i]`` holds more than ``k / 2`` of them; no rows when fewer than ``k + 1`` points
+    or all of them are unflagged."""
+    tau = max(_thresholds.auto_threshold(s1, minimum=_thresholds.RPCA_MIN_TAU), REFINE_MIN_TAU)
+    flagged = s1 >= tau
+    n_kept = s1.size - int(np.count_nonzero(flagged))
+    if n_kept < k + 1 or n_kept == s1.size:
+        return flagged, np.empty(0, dtype=np.int64)
+    return flagged, np.flatnonzero(np.count_nonzero(flagged[idx], axis=1) * 2 > k)
+
+
 def _rebuild(X: np.ndarray, idx: np.ndarray, s1: np.ndarray, k: int) -> tuple[np.ndarray, Any]:
     """Step 5 (:func:`._rpca_core._rebuild_outlier_patches`): the patches with more than ``k / 2``
     flagged points get the ``k`` nearest unflagged points of their centre, in place in ``idx``;
     returns the rebuilt rows and their former neighbour lists."""
-    tau = max(_thresholds.auto_threshold(s1, minimum=_thresholds.RPCA_MIN_TAU), REFINE_MIN_TAU)
-    flagged = s1 >= tau
-    kept = np.flatnonzero(~flagged)
-    none = np.empty(0, dtype=np.int64), idx[:0].copy()
-    if kept.size < k + 1 or kept.size == s1.size:
-        return none
-    rebuild = np.flatnonzero(np.count_nonzero(flagged[idx], axis=1) * 2 > k)
+    flagged, rebuild = rebuild_rows(idx, s1, k)
     if rebuild.size == 0:
-        return none
+        return rebuild, idx[:0].copy()
+    kept = np.flatnonzero(~flagged)
     pos = np.minimum(np.searchsorted(kept, rebuild), kept.size - 1)
     own = np.where(kept[pos] == rebuild, pos, -1)  # an unflagged centre excludes itself
     nb = knn_chunked(X[kept], k, query=X[rebuild], self_index=own)

@@ -25,8 +25,6 @@ cover go through :func:`._robust.outlier_result` unchanged.
 
 from __future__ import annotations
 
-from functools import partial
-
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -74,18 +72,10 @@ def _rebuild(X: np.ndarray, tree: cKDTree, idx: np.ndarray, s1: np.ndarray, k: i
     give differently) or too few unflagged ones, the unflagged points' tree answers as before.
     """
     from ..outliers import _rpca_numpy as rn
-    from ..outliers import _thresholds
-    from ..outliers._rpca_types import REFINE_MIN_TAU
 
-    tau = max(_thresholds.auto_threshold(s1, minimum=_thresholds.RPCA_MIN_TAU), REFINE_MIN_TAU)
-    flagged = s1 >= tau
-    n_kept = s1.size - int(np.count_nonzero(flagged))
-    none = np.empty(0, dtype=np.int64), idx[:0].copy()
-    if n_kept < k + 1 or n_kept == s1.size:
-        return none
-    rebuild = np.flatnonzero(np.count_nonzero(flagged[idx], axis=1) * 2 > k)
+    flagged, rebuild = rn.rebuild_rows(idx, s1, k)
     if rebuild.size == 0:
-        return none
+        return rebuild, idx[:0].copy()
     kq = min(s1.size, 2 * (k + 1))
     while True:
         d, i = tree.query(X[rebuild], k=kq)
@@ -170,21 +160,13 @@ def _keep(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Steps 2-7 of :func:`spectrageo.outliers._rpca_numpy._score` for the decision only."""
     from ..outliers import _rpca_numpy as rn
-    from ..outliers._common import check_span, spacing_from
 
     n = X.shape[0]
-    h = spacing_from(nb.dmean)
-    dt = np.dtype(opts.dtype)
-    check_span(X, h, dt)
     idx = nb.idx
-    centre = X.mean(axis=0)
-    Pn = ((X - centre) * (1.0 / h)).astype(dt)
     weighted = opts.tangent_weight < 1
-    S1 = np.empty((n, 3) if weighted else (0, 3), dtype=np.float32)
     record: list = []
-    solve = partial(rn._ialm, lam=opts.lam, rho=opts.rho, tol=opts.tol, rank_tol=opts.rank_tol,
-                    max_iter=opts.max_iter)  # fmt: skip
-    s1 = solve(rn._patches(Pn, idx), S1, record)[0]
+    first = rn.first_pass(X, nb, opts, record)
+    Pn, S1, s1 = first.Pn, first.S1, first.out[0]
     rebuilt, old_idx = _rebuild(X, tree, idx, s1, k)
     scores, S2 = s1, S1
     if rebuilt.size:
