@@ -73,3 +73,18 @@ def data_out_args():
     ap.add_argument("--data", default=os.environ.get("SPECTRAGEO_DATA", "../shared/data"))
     ap.add_argument("--out", default=None)
     return ap.parse_args()
+
+
+#: kinds of registration pairs: the real scans, and every kind of the evaluation
+REAL_PAIRS = ("bunny", "open3d")
+ALL_PAIRS = ("bunny", "open3d", "generated", "fragment-crops")
+
+
+def register_tuning_pairs(kinds: tuple[str, ...] = REAL_PAIRS):
+    """``(ev, pairs, seed)``: the registration evaluation module, its tuning pairs of ``kinds``
+    (``spectrageo.evaluate.register.pairs_for`` on the shared data) and the tuning seed."""
+    from spectrageo.datasets import data_dir
+    from spectrageo.evaluate import register as ev
+
+    pairs = ev.pairs_for(Path(data_dir(required=True)), ev.TUNING, kinds)
+    return ev, pairs, ev.TUNING["reg_seed"]

@@ -33,7 +33,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _util import machine_line, write_section  # noqa: E402
+from _util import (  # noqa: E402
+    ALL_PAIRS,
+    REAL_PAIRS,
+    machine_line,
+    register_tuning_pairs,
+    write_section,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 STAGES = {"voxel": ("voxel_downsample", "downsample_to"), "shape": ("shape_properties",),
@@ -129,16 +135,10 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--ref", default="HEAD", help="git revision of the reference functions")
     args = ap.parse_args()
-    from spectrageo.datasets import data_dir
-    from spectrageo.evaluate import register as ev
     from spectrageo.register import register
 
     warnings.simplefilter("ignore")
-    data = Path(data_dir(required=True))
-    cfg = ev.TUNING
-    parts = ("bunny", "open3d", "generated", "fragment-crops") if args.all else ("bunny", "open3d")
-    pairs = ev.pairs_for(data, cfg, parts)
-    seed = cfg["reg_seed"]
+    _, pairs, seed = register_tuning_pairs(ALL_PAIRS if args.all else REAL_PAIRS)
     with tempfile.TemporaryDirectory() as tmp:
         impl = _Impl(*_load_ref(args.ref, Path(tmp)))
         for which in ("ref", "tree"):

@@ -50,7 +50,7 @@ def _decision(P: np.ndarray) -> np.ndarray:
     from spectrageo.register._robust import boundary_mask
     from spectrageo.register._robust_fast import outlier_keep
 
-    keep, nb = outlier_keep(P, 10, 0.6)
+    keep, nb, _ = outlier_keep(P, 10, 0.6)
     return keep & ~boundary_mask(P, 10, nb)
 
 

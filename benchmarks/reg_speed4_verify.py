@@ -25,7 +25,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _util import machine_line, write_section  # noqa: E402
+from _util import (  # noqa: E402
+    ALL_PAIRS,
+    REAL_PAIRS,
+    machine_line,
+    register_tuning_pairs,
+    write_section,
+)
 
 
 class _Stages:
@@ -67,16 +73,9 @@ def main() -> None:
     ap.add_argument("--all", action="store_true", help="also the generated and crop pairs")
     ap.add_argument("--repeats", type=int, default=2)
     args = ap.parse_args()
-    from spectrageo.datasets import data_dir
-    from spectrageo.evaluate import register as ev
-
     warnings.simplefilter("ignore")
-    data = Path(data_dir(required=True))
-    cfg = ev.TUNING
-    parts = ("bunny", "open3d", "generated", "fragment-crops") if args.all else ("bunny", "open3d")
-    pairs = ev.pairs_for(data, cfg, parts)
+    ev, pairs, seed = register_tuning_pairs(ALL_PAIRS if args.all else REAL_PAIRS)
     stages = _Stages()
-    seed = cfg["reg_seed"]
     ev._run("spectrageo", pairs[-1], seed)
     ev._run("o3d_ransac_fpfh_icp", pairs[-1], seed)
     stages.take()

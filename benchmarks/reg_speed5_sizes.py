@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _util import machine_line, write_section  # noqa: E402
+from _util import ALL_PAIRS, machine_line, register_tuning_pairs, write_section  # noqa: E402
 
 
 def _pose_change(A: np.ndarray, B: np.ndarray, diag: float) -> tuple[float, float]:
@@ -44,17 +44,12 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--open3d", action="store_true", help="also time Open3D RANSAC+FPFH+ICP")
     args = ap.parse_args()
-    from spectrageo.datasets import data_dir
-    from spectrageo.evaluate import register as ev
     from spectrageo.metrics import registration as rm
     from spectrageo.register import _api, register
     from spectrageo.register._common import bbox_diagonal
 
     warnings.simplefilter("ignore")
-    data = Path(data_dir(required=True))
-    cfg = ev.TUNING
-    seed = cfg["reg_seed"]
-    pairs = ev.pairs_for(data, cfg)
+    ev, pairs, seed = register_tuning_pairs(ALL_PAIRS)
     values = list(args.values)
     register(pairs[0]["source"], pairs[0]["target"], rng=seed)  # warm-up
     # per value: list over pairs of (cpu median, recall, converged, T, rot err)

@@ -39,7 +39,7 @@ def test_outlier_keep_is_the_full_decision(name):
     X = _clouds()[name]
     ref = outlier_result(X, 10)
     for thr in (0.0, 0.3, 0.6, 1.0, 5.0):
-        keep, nbrs = outlier_keep(X, 10, thr)
+        keep, nbrs, _ = outlier_keep(X, 10, thr)
         np.testing.assert_array_equal(keep, ref.scores <= thr)
         np.testing.assert_array_equal(nbrs, exact_neighbors(ref))
     assert keep.dtype == bool and keep.shape == (X.shape[0],)
@@ -47,7 +47,7 @@ def test_outlier_keep_is_the_full_decision(name):
 
 def test_outlier_keep_removes_the_scattered_points():
     X = _clouds()["noisy"]
-    keep, _ = outlier_keep(X, 10, 0.6)
+    keep = outlier_keep(X, 10, 0.6)[0]
     assert keep[:3000].mean() > 0.95
     assert keep[3000:].mean() < 0.5
 
@@ -56,7 +56,7 @@ def test_knn_shortcut_matches_the_chunked_search():
     from spectrageo.outliers._common import knn_chunked
 
     X = _clouds()["noisy"]
-    nb, tree = _knn(X, 10)
+    nb, tree = _knn(X, 10)[:2]
     ref = knn_chunked(X, 10)
     np.testing.assert_array_equal(nb.idx, ref.idx)
     np.testing.assert_array_equal(nb.dmean, ref.dmean)
@@ -70,7 +70,7 @@ def test_rebuild_from_the_whole_tree_matches(name):
     from spectrageo.outliers import _rpca_numpy as rn
 
     X = _clouds()[name]
-    nb, tree = _knn(X, 10)
+    nb, tree = _knn(X, 10)[:2]
     s1 = np.zeros(X.shape[0])
     rng = np.random.default_rng(3)
     s1[rng.choice(X.shape[0], X.shape[0] // 8, replace=False)] = 5.0  # flagged points
@@ -89,7 +89,7 @@ def test_boundary_distances_are_the_formula_they_replace():
     from spectrageo.register._robust import _neighbor_distances
 
     X = _clouds()["noisy"]
-    _, nbrs = outlier_keep(X, 10, 0.6)
+    nbrs = outlier_keep(X, 10, 0.6)[1]
     ref = np.sqrt(np.square(X[nbrs] - X[:, None, :]).sum(axis=2))
     np.testing.assert_array_equal(_neighbor_distances(X, nbrs), ref)
     np.testing.assert_array_equal(boundary_mask(X, 10, nbrs), boundary_mask(X, 10))
@@ -99,7 +99,7 @@ def test_outlier_keep_on_a_real_scan(shared_data):
     f = shared_file(shared_data, "scans", "bunny", "bun045.ply.gz")
     X = io.read_point_cloud(f).points
     ref = outlier_result(X, 10)
-    keep, nbrs = outlier_keep(X, 10, 0.6)
+    keep, nbrs, _ = outlier_keep(X, 10, 0.6)
     np.testing.assert_array_equal(keep, ref.scores <= 0.6)
     np.testing.assert_array_equal(nbrs, exact_neighbors(ref))
     assert 0 < np.count_nonzero(~keep) < 0.05 * X.shape[0]
@@ -121,6 +121,6 @@ def test_outlier_keep_on_random_clouds(seed, k):
         X = np.asfortranarray(np.column_stack([rng.random((n, 2)), 0.01 * rng.normal(size=n)]))
     ref = outlier_result(X, k)
     for thr in (0.1, 0.6, 2.0):
-        keep, nbrs = outlier_keep(X, k, thr)
+        keep, nbrs, _ = outlier_keep(X, k, thr)
         np.testing.assert_array_equal(keep, ref.scores <= thr)
         np.testing.assert_array_equal(nbrs, exact_neighbors(ref))

@@ -22,7 +22,8 @@ from spectrageo.register._narrow import (
     neighbors_from_search,
     spacing_from_search,
 )
-from spectrageo.register._robust_fast import outlier_keep, outlier_keep_knn
+from spectrageo.register._robust import exact_neighbors, outlier_result
+from spectrageo.register._robust_fast import outlier_keep
 
 from conftest import shared_file
 
@@ -108,10 +109,11 @@ def test_neighbors_from_search_needs_enough_columns():
     np.testing.assert_array_equal(index.normals_at(rows), TargetIndex(P).normals_at(rows))
 
 
-def test_outlier_keep_knn_returns_its_search():
+def test_outlier_keep_returns_its_search():
     P = _clouds()["noisy"]
-    keep, nbrs, search = outlier_keep_knn(P, 10, 0.6)
-    k2, n2 = outlier_keep(P, 10, 0.6)
+    keep, nbrs, search = outlier_keep(P, 10, 0.6)
+    full = outlier_result(P, 10)
+    k2, n2 = full.scores <= 0.6, exact_neighbors(full)
     np.testing.assert_array_equal(keep, k2)
     np.testing.assert_array_equal(nbrs, n2)
     tree, d, i = search
@@ -120,7 +122,7 @@ def test_outlier_keep_knn_returns_its_search():
     np.testing.assert_array_equal(i, i0)
     assert tree.n == P.shape[0]
     dup = np.vstack([P[:500], P[:20]])  # exact copies: no search to reuse
-    assert outlier_keep_knn(dup, 10, 0.6)[2] is None
+    assert outlier_keep(dup, 10, 0.6)[2] is None
 
 
 def _pair():

@@ -37,7 +37,7 @@ from ._narrow import (
     spacing_from_search,
 )
 from ._robust import boundary_mask
-from ._robust_fast import outlier_keep_knn
+from ._robust_fast import outlier_keep
 
 #: :func:`register` keeps at most TARGET_POINTS * max_points target points for the narrow phase
 #: (docs/decisions.md#register-speed, docs/decisions.md#reg-speed5-target)
@@ -147,11 +147,11 @@ def _robustify(
 ) -> tuple[np.ndarray, np.ndarray, tuple | None]:
     """:func:`robustify` on validated points and options; also returns the outlier test's k-d
     tree search of ``P`` on itself, ``(tree, d, i)`` as
-    :func:`._robust_fast.outlier_keep_knn` returns it, or None."""
+    `._robust_fast.outlier_keep` returns it, or None."""
     keep = np.ones(P.shape[0], dtype=bool)
     nbrs = search = None  # the RPCA's exact kNN, reused by the boundary test
     if remove_outliers and P.shape[0] > k_outliers + 1:
-        ok, nbrs, search = outlier_keep_knn(P, k_outliers, outlier_threshold)
+        ok, nbrs, search = outlier_keep(P, k_outliers, outlier_threshold)
         keep &= ok
     if remove_boundary and P.shape[0] > k_boundary + 1:
         keep &= ~boundary_mask(P, k_boundary, nbrs)

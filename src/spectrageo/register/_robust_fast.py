@@ -35,16 +35,10 @@ SCREEN_MARGIN = 1e-9
 
 
 def _knn(X: np.ndarray, k: int):
-    """:func:`spectrageo.outliers._common.knn_chunked` of ``X`` on itself and the k-d tree of
-    ``X``, when every point is the first answer of its own query (else None: the caller takes
-    the general path)."""
-    found = _knn_search(X, k)
-    return None if found is None else found[:2]
-
-
-def _knn_search(X: np.ndarray, k: int):
-    """:func:`_knn` and the tree's answer: ``(neighbours, tree, d, i)`` with the distances ``d``
-    and rows ``i`` (n, k + 1) of ``tree.query(X, k + 1)``, the point itself first; or None."""
+    """:func:`spectrageo.outliers._common.knn_chunked` of ``X`` on itself, the k-d tree of ``X``
+    and the tree's answer: ``(neighbours, tree, d, i)`` with the distances ``d`` and rows ``i``
+    (n, k + 1) of ``tree.query(X, k + 1)``, the point itself first; None when a point is not
+    the first answer of its own query (exact copies: the caller takes the general path)."""
     from ..outliers._common import KNN_CHUNK, KNN_SERIAL_BELOW, Neighbours
 
     n = X.shape[0]
@@ -69,7 +63,8 @@ def _rebuild(X: np.ndarray, tree: cKDTree, idx: np.ndarray, s1: np.ndarray, k: i
     The neighbours are found in ``tree`` (the whole cloud's) by asking for more of them and
     leaving out the flagged points, instead of a k-d tree of the unflagged points; where a row
     has two equally distant candidates among its first ``k + 1`` (whose order two trees may
-    give differently) or too few unflagged ones, the unflagged points' tree answers as before.
+    give differently) or too few unflagged ones, the search falls back to a k-d tree of the
+    unflagged points (:func:`spectrageo.outliers._rpca_numpy._rebuild`).
     """
     from ..outliers import _rpca_numpy as rn
 
@@ -98,16 +93,7 @@ def _rebuild(X: np.ndarray, tree: cKDTree, idx: np.ndarray, s1: np.ndarray, k: i
     return rebuild, old
 
 
-def outlier_keep(P: np.ndarray, k: int, threshold: float) -> tuple[np.ndarray, np.ndarray | None]:
-    """Points whose RPCA outlier score ``m_i`` (Eq. 6.42, in point spacings) is at most
-    ``threshold``, and the exact kNN that the scoring searched.
-
-    :func:`outlier_keep_knn` without its third value.
-    """
-    return outlier_keep_knn(P, k, threshold)[:2]
-
-
-def outlier_keep_knn(P: np.ndarray, k: int, threshold: float) -> tuple:
+def outlier_keep(P: np.ndarray, k: int, threshold: float) -> tuple:
     """Points whose RPCA outlier score ``m_i`` (Eq. 6.42, in point spacings) is at most
     ``threshold``, the exact kNN that the scoring searched, and its k-d tree search.
 
@@ -147,7 +133,7 @@ def outlier_keep_knn(P: np.ndarray, k: int, threshold: float) -> tuple:
     covered = opts.refine and opts.second_pass == "replay" and opts.tangent_weight <= 1
     if covered and k + 1 < n <= BLOCK_SIZE and np.isfinite(threshold) and threshold >= 0:
         with rn._blas_controller().limit(limits=1, user_api="blas"):
-            found = _knn_search(X, k)
+            found = _knn(X, k)
             if found is not None:
                 nb, tree, d, i = found
                 return (*_keep(X, k, float(threshold), opts, nb, tree), (tree, d, i))
