@@ -2,6 +2,8 @@
 
     python benchmarks/codec_predictive.py --split tuning       # writes _out/codec_predictive_tuning.md
     python benchmarks/codec_predictive.py --split validation   # the held-out meshes, once
+    python benchmarks/codec_predictive.py --split validation --methods auto-reorder
+                                          # the default method alone: _out/codec_auto_reorder_*.md
 
 Per mesh of the split registry's ``compress`` task: Draco (level 10) at 6-16 quantisation bits,
 ``predictive-reorder`` at the ``max_error`` points and ``spectral-reorder`` at its steps of
@@ -23,22 +25,28 @@ from _util import machine_line, write_section  # noqa: E402
 from spectrageo.datasets import data_dir  # noqa: E402
 from spectrageo.evaluate import compress as ev  # noqa: E402
 
+DEFAULT_METHODS = "predictive-reorder,spectral-reorder"
+
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--split", default="tuning", choices=sorted(ev.SPLITS))
-    ap.add_argument("--methods", default="predictive-reorder,spectral-reorder")
+    ap.add_argument("--methods", default=DEFAULT_METHODS)
     args = ap.parse_args()
     methods = args.methods.split(",") + ["draco"]
     rows = ev.evaluate(data_dir(required=True), methods, splits=(args.split,))
+    flag = "" if args.methods == DEFAULT_METHODS else f" --methods {args.methods}"
     eq = [r for r in ev.equal_error_rows(rows) if r["peer"].startswith("draco q=")]
     lines = [
-        f"## Static --reorder against Draco at equal Hausdorff ({args.split} split)",
+        "## Static --reorder against Draco at equal Hausdorff"
+        + ("" if args.methods == DEFAULT_METHODS else f", {args.methods}")
+        + f" ({args.split} split)",
         "",
         machine_line(),
         "",
-        f"`python benchmarks/codec_predictive.py --split {args.split}`: the smaller of "
-        f"{' and '.join(args.methods.split(','))} over Draco's default mode (DracoPy, compression "
+        f"`python benchmarks/codec_predictive.py --split {args.split}{flag}`: "
+        + ("the smaller of " if len(methods) > 2 else "")
+        + f"{' and '.join(args.methods.split(','))} over Draco's default mode (DracoPy, compression "
         "level 10, which reorders) at each Draco point's exact symmetric Hausdorff distance, "
         "Draco in the same run; `conn bpv`: our connectivity share.",
         "",
@@ -67,7 +75,8 @@ def main() -> None:
             f"Geometric mean {np.exp(np.mean(np.log(ratios))):.3f}, largest {max(ratios):.3f} "
             "(cells: our size / Draco's at Draco's Hausdorff, @ Draco's bits per vertex).",
         ]
-    write_section(f"codec_predictive_{args.split}", "\n".join(lines))
+    name = "codec_predictive" if args.methods == DEFAULT_METHODS else "codec_" + methods[0]
+    write_section(f"{name.replace('-', '_')}_{args.split}", "\n".join(lines))
 
 
 if __name__ == "__main__":

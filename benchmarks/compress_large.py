@@ -34,6 +34,7 @@ RESULT = {{
     "n": int(V.shape[0]), "m": int(F.shape[0]), "encode_s": te, "decode_s": td,
     "bpv": 8.0 * len(data) / V.shape[0],
     "connectivity_bpv": compress.info(data)["connectivity_bpv"],
+    "method": compress.info(data)["method"],
     "rms": float(np.sqrt(np.mean(np.sum((V2 - V) ** 2, axis=1)))) / diag if kept else None,
     "hausdorff": hausdorff(V2, F2, V, F, symmetric=True).hd_symmetric / diag,
     "order_kept": kept and bool(np.array_equal(F2, F)),
@@ -76,6 +77,10 @@ CASES = [
     ("spectral --reorder --bpv 12", {"method": "spectral", "reorder": True, "bpv": 12.0}),
     ("feature (defaults)", {"method": "feature"}),
     ("saliency (defaults)", {"method": "saliency"}),
+    ("auto (default method) --error 1e-4", {"error": 1e-4}),
+    ("auto --reorder --bpv 12", {"reorder": True, "bpv": 12.0}),
+    ("auto --reorder --max-error 3.1e-4", {"reorder": True, "max_error": 3.1e-4}),
+    ("auto --reorder --max-error 3e-3", {"reorder": True, "max_error": 3e-3}),
 ]
 #: (label, quantisation bits, compression level, preserve order)
 DRACO_CASES = [
@@ -119,6 +124,8 @@ def main() -> None:
         "|---|---:|---:|---:|---|---:|---:|---:|",
     ]
     for label, r in rows:
+        if label.startswith("auto") and "method" in r:
+            label += f" (chose {r['method']})"
         lines.append(
             f"| {label} | {r['bpv']:.2f} | {_fmt(r['rms'], '.2e')} | {r['hausdorff']:.2e} "
             f"| {'yes' if r['order_kept'] else 'no'} | {r['encode_s']:.1f} | {r['decode_s']:.1f} "

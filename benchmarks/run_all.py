@@ -103,6 +103,11 @@ SECTIONS = [
     ("doi_codec", _script("doi_codec")),
     ("connectivity", _script("connectivity")),
     ("codec_predictive_validation", [*_script("codec_predictive"), "--split", "validation"]),
+    ("codec_auto_tuning", [*_script("codec_auto"), "--split", "tuning"]),
+    (
+        "codec_auto_reorder_validation",
+        [*_script("codec_predictive"), "--split", "validation", "--methods", "auto-reorder"],
+    ),
     ("compress_animation", _evaluate("compress-animation", "compress_animation")),
     ("rate_animation", _script("rate_animation")),
     ("anim_pca_pred_validation", [*_script("anim_pca_pred"), "--split", "validation"]),

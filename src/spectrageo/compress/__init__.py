@@ -4,7 +4,9 @@
   spectral coding on overlapped submeshes, Algorithms 6-8, Eq. 5.42-5.45; progressive),
   ``"feature"`` (feature-aware high-pass quantisation, Algorithm 9, Eq. 5.53-5.54) and
   ``"saliency"`` (saliency classes choose the deltas sent, Algorithm 10) and ``"predictive"``
-  (uniform grid, parallelogram prediction, adaptive range coding: :mod:`._predictive`).
+  (uniform grid, parallelogram prediction, adaptive range coding: :mod:`._predictive`). The
+  default, ``method="auto"``, keeps the smaller of ``"predictive"`` and ``"spectral"`` at the
+  target given (``"spectral"`` without one).
 * :func:`encode_animation` / :func:`decode_animation` / :func:`info_animation`,
   :class:`StreamEncoder` / :class:`StreamDecoder` for animations (Sections 5.2.2 and 5.2.4).
 * Rate control: ``bpv=`` / ``bpvf=`` (whole file) or ``error=``, met within 5 % by bisection of
@@ -20,6 +22,7 @@ the same bits on every machine (docs/decisions.md#deterministic-decoders).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -33,6 +36,8 @@ from ._sga_format import ALL_METHODS, is_animation
 
 __all__ = [
     "ANIMATION_METHODS",
+    "AUTO_SPECTRAL_BPV",
+    "ENCODE_METHODS",
     "METHODS",
     "StreamDecoder",
     "StreamEncoder",
@@ -45,6 +50,11 @@ __all__ = [
 ]
 
 METHODS = ("spectral", "feature", "saliency", "predictive")
+#: what :func:`encode` takes: a file's method, or ``"auto"`` (the default)
+ENCODE_METHODS = ("auto", *METHODS)
+#: ``"auto"`` tries ``"spectral"`` when the ``"predictive"`` file's geometry takes at most this many
+#: bits per vertex (docs/decisions.md#codec-auto)
+AUTO_SPECTRAL_BPV = 8.0
 TAG_CONNECTIVITY = 1
 
 #: default quantisation step (fraction of the bounding-box diagonal) when no rate is requested
@@ -77,7 +87,7 @@ def encode(
     V,
     F,
     *,
-    method: str = "spectral",
+    method: str = "auto",
     bpv: float | None = None,
     error: float | None = None,
     reorder: bool = False,
@@ -92,7 +102,15 @@ def encode(
     V : (n, 3) float
     F : (m, 3) int
         Every vertex index in ``0..n-1``; vertices that no face uses are coded too.
-    method : {"spectral", "feature", "saliency", "predictive"}
+    method : {"auto", "spectral", "feature", "saliency", "predictive"}
+        ``"auto"`` (default): with a target (``bpv``, ``error`` or ``max_error``) the file of
+        ``"predictive"`` or ``"spectral"`` that serves it best: the smaller file meeting
+        ``error`` / ``max_error``, or, at ``bpv``, the one with the smaller RMS vertex error
+        (ties to ``"predictive"``). ``"spectral"`` is tried only when the ``"predictive"``
+        file's geometry takes at most :data:`AUTO_SPECTRAL_BPV` bits per vertex (at larger
+        rates it is the larger file). Without a target (or with ``step``, or with method
+        options, which are then ``"spectral"``'s) ``"auto"`` is ``"spectral"``, whose files are
+        progressive. :func:`info` names the method chosen.
     bpv : float, optional
         Target size in bits per vertex of the whole file (header and connectivity included).
     error : float, optional
@@ -111,7 +129,7 @@ def encode(
         the symmetric vertex-to-surface Hausdorff distance. ``predictive`` keeps every coordinate
         within ``max_error / sqrt(3)``; the other methods take the largest step that keeps it.
     **options
-        Method parameters. ``spectral``: ``submesh_size`` (300), ``overlap`` (0.1), ``k``
+        Method parameters (with ``"auto"``: ``"spectral"``'s). ``spectral``: ``submesh_size`` (300), ``overlap`` (0.1), ``k``
         (dictionary size per submesh, default ``submesh_size``: the quantiser, not a cut-off,
         drops the high frequencies), ``basis`` ("oi", "exact", "doi"), ``zeta`` (4),
         ``n_iter`` (1), ``eps`` (DOI residual threshold), ``seed`` (0). ``feature`` /
@@ -121,13 +139,28 @@ def encode(
     -------
     bytes
         The ``.sgc`` file content.
+
+    Raises
+    ------
+    InvalidInputError
+        Bad arrays or arguments, or a target that the method (with ``"auto"``: neither method)
+        reaches.
+
+    Examples
+    --------
+    >>> from spectrageo.geometry import icosphere  # doctest: +SKIP
+    >>> V, F = icosphere(3)  # doctest: +SKIP
+    >>> data = encode(V, F, max_error=1e-3, reorder=True)  # doctest: +SKIP
+    >>> info(data)["method"] in ("predictive", "spectral")  # doctest: +SKIP
+    True
     """
-    check_choice(method, "method", METHODS)
+    check_choice(method, "method", ENCODE_METHODS)
     _check_rate(bpv, error, max_error)
     if step is not None and (bpv is not None or error is not None or max_error is not None):
         raise InvalidInputError("`step` cannot be combined with `bpv`, `error` or `max_error`.")
     if step is not None and not (isinstance(step, int | float) and STEP_MIN <= step <= STEP_MAX):
         raise InvalidInputError(f"`step` must be in [{STEP_MIN}, {STEP_MAX}]; got {step!r}.")
+    targeted = bpv is not None or error is not None or max_error is not None
     V = as_points(V, "V")
     F = as_faces(F, V.shape[0], "F")
     if V.shape[0] > _container.MAX_COUNT or F.shape[0] > _container.MAX_COUNT:
@@ -142,40 +175,70 @@ def encode(
     diag = float(np.linalg.norm(hi - lo))
     # rounded to what the header stores exactly (docs/decisions.md#codec-container-v4)
     origin, scale = _container.compact_frame(0.5 * (lo + hi), diag if diag > 0 else 1.0)
-    origin = np.asarray(origin)
-    X = (V - origin) / scale
+    prep = _Prepared(V, F, (V - np.asarray(origin)) / scale, origin, scale, conn, bool(reorder))
     if bpv is not None:  # a target below the connectivity's share is refused before any search
         check_connectivity_floor(float(bpv), len(conn), V.shape[0], bool(reorder))
+    target = _Target(bpv, error, max_error, step)
+    if method != "auto":
+        return _encode_one(prep, method, target, options)[0]
+    if not targeted or options:  # method options with "auto" are spectral's, as they were
+        return _encode_one(prep, "spectral", target, options)[0]
+    return _encode_auto(prep, target)
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    """A mesh ready for a codec: (reordered) arrays, the normalised coordinates ``X`` in the
+    header's frame, and the connectivity chunk."""
+
+    V: np.ndarray
+    F: np.ndarray
+    X: np.ndarray
+    origin: tuple
+    scale: float
+    conn: bytes
+    reorder: bool
+
+
+@dataclass(frozen=True)
+class _Target:
+    bpv: float | None
+    error: float | None
+    max_error: float | None
+    step: float | None
+
+
+def _encode_one(prep: _Prepared, method: str, target: _Target, options: dict) -> tuple:
+    """One method's file for ``target``: ``(bytes, plan, step)``."""
+    X, n = prep.X, prep.V.shape[0]
+    bpv, error, max_error = target.bpv, target.error, target.max_error
     mod = _module(method)
-    plan = mod.make_plan(X, F, method, options)
+    plan = mod.make_plan(X, prep.F, method, options)
 
     def build(s: float, p=plan) -> bytes:
         c = _container.Container(
             method,
-            V.shape[0],
-            F.shape[0],
-            tuple(float(x) for x in origin),
-            float(scale),
+            n,
+            prep.F.shape[0],
+            tuple(float(x) for x in prep.origin),
+            float(prep.scale),
             p.params(s),
-            bool(reorder),
-            [(TAG_CONNECTIVITY, conn), *p.chunks(s)],
+            prep.reorder,
+            [(TAG_CONNECTIVITY, prep.conn), *p.chunks(s)],
         )
         return c.to_bytes()
 
-    n = V.shape[0]
     if max_error is not None:
-        return build(_max_error_step(plan, X, float(max_error), method))
+        s = _max_error_step(plan, X, float(max_error), method)
+        return build(s), plan, s
     if bpv is None and error is None:
-        return build(DEFAULT_STEP[method] if step is None else float(step))
+        s = DEFAULT_STEP[method] if target.step is None else float(target.step)
+        return build(s), plan, s
     # the delta codecs choose their level of detail (Algorithm 9 step 5, Algorithm 10 steps
     # 4-5) unless it is given
     given = {"feature": "feature_fraction", "saliency": "class_keep"}.get(method)
     chosen = given is not None and not {given, "ratio", "mask"} & set(options)
     plans = plan.levels() if chosen else [plan]
-
-    def rms(p, s) -> float:  # s=None: unquantised (the floor of the method)
-        d = p.reconstruct(s) - X
-        return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
 
     best, failure = None, None
     for p in plans:
@@ -187,9 +250,9 @@ def encode(
                     increasing=False,
                     what="bpv",
                 )
-                key = rms(p, s) if len(plans) > 1 else 0.0
+                key = _rms(p, s, X) if len(plans) > 1 else 0.0
             else:
-                s = error_step(lambda s, p=p: rms(p, s), float(error), method)
+                s = error_step(lambda s, p=p: _rms(p, s, X), float(error), method)
                 key = len(build(s, p)) if len(plans) > 1 else 0
         except InvalidInputError as exc:
             failure = exc  # the last level (uniform) reaches the widest range of requests
@@ -198,7 +261,44 @@ def encode(
             best = (key, p, s)
     if best is None:
         raise failure
-    return build(best[2], best[1])
+    return build(best[2], best[1]), best[1], best[2]
+
+
+def _rms(plan, s, X: np.ndarray) -> float:
+    """RMS vertex error of ``plan`` at step ``s`` (``None``: unquantised, the method's floor)."""
+    d = plan.reconstruct(s) - X
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
+
+
+def _encode_auto(prep: _Prepared, target: _Target) -> bytes:
+    """``method="auto"`` with a target: ``predictive``, then ``spectral`` where it may be smaller.
+
+    ``spectral`` is tried when the ``predictive`` file's geometry (or, at ``bpv``, the target's
+    share beyond the connectivity) takes at most :data:`AUTO_SPECTRAL_BPV` bits per vertex, or
+    when ``predictive`` cannot serve the target. Kept: the smaller file at ``error`` /
+    ``max_error``; at ``bpv`` the smaller RMS vertex error (ties to ``predictive``).
+    """
+    n = prep.V.shape[0]
+    conn_bpv = 8.0 * len(prep.conn) / n
+    found, failure = [], None
+    try:
+        found.append(_encode_one(prep, "predictive", target, {}))
+    except InvalidInputError as exc:
+        failure = exc
+    if target.bpv is not None:
+        geometry_bpv = float(target.bpv) - conn_bpv
+    else:
+        geometry_bpv = 8.0 * len(found[0][0]) / n - conn_bpv if found else 0.0
+    if not found or geometry_bpv <= AUTO_SPECTRAL_BPV:
+        try:
+            found.append(_encode_one(prep, "spectral", target, {}))
+        except InvalidInputError as exc:
+            failure = failure or exc
+    if not found:
+        raise failure
+    if target.bpv is not None:
+        return min(found, key=lambda f: _rms(f[1], f[2], prep.X))[0]
+    return min(found, key=lambda f: len(f[0]))[0]
 
 
 def _max_error_step(plan, X: np.ndarray, bound: float, method: str) -> float:

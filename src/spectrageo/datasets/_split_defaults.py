@@ -262,6 +262,10 @@ _DEFAULTS = [
        "benchmarks/codec4_cad.py",
        "0, 1, 2, 3, 5 tried on fandisk, partLp, the two elephants and decimations of the first "
        "two; docs/decisions.md#codec-counted-residuals"),
+    _d("spectrageo.compress.AUTO_SPECTRAL_BPV", 8.0, "tuning", "compress",
+       "benchmarks/codec_auto.py",
+       "spectral smaller only up to a predictive geometry rate of 6.2 bpv on fandisk, partLp, "
+       "the two elephants (next point 9.9 bpv); docs/decisions.md#codec-auto"),
     _d("spectrageo.compress._animation.DEFAULT_STEP", 2e-4, "tuning", "compress-animation", _ECA,
        "looked at on horse-gallop"),
     _d("spectrageo.compress._animation.DEFAULT_BLOCK", 16, "tuning", "compress-animation", _ECA,

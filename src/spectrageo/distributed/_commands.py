@@ -73,7 +73,7 @@ def _denoise_presets_help() -> str:
 def _compress_methods() -> list[str]:
     from .. import compress
 
-    return list(compress.METHODS) + list(compress.ANIMATION_METHODS)
+    return list(compress.ENCODE_METHODS) + list(compress.ANIMATION_METHODS)
 
 
 # ----------------------------------------------------------------------------- the schemas
@@ -197,7 +197,8 @@ COMPRESS = CommandSchema(
     options=(
         Option(
             "method", ("--method",), choices=_compress_methods,
-            help="default: spectral (meshes), blocks (animations)",
+            help="default: auto (meshes: with a target, the smaller of predictive and spectral; "
+            "without one, spectral), blocks (animations)",
         ),
         Option(
             "bpv", ("--bpv",), type=float, metavar="X", group="rate",

@@ -117,11 +117,11 @@ def run_compress(args) -> int:
         return _compress_animation(args)
     if args.bpvf is not None:
         raise InvalidInputError("meshes take --bpv (bits per vertex), not --bpvf.")
-    method = args.method or "spectral"
-    if method not in compress.METHODS:
+    method = args.method or "auto"
+    if method not in compress.ENCODE_METHODS:
         raise InvalidInputError(
             f"--method {method!r} is an animation codec; meshes take one of "
-            f"{list(compress.METHODS)}."
+            f"{list(compress.ENCODE_METHODS)}."
         )
     mesh = _read_mesh(args.input, no_weld=args.no_weld)
     d, dt = _encode_to(
@@ -142,11 +142,12 @@ def run_compress(args) -> int:
         if d["reordered"]
         else "vertex and face order kept"
     )
+    chosen = d["method"] if method == d["method"] else f"{d['method']} (chosen by {method})"
     share = d["parameters"].get("sent_share")
     level = "" if share is None else f" (deltas of {100 * share:.0f} % of the vertices sent)"
     status(
         f"wrote {args.output}: {d['bytes']} bytes, {d['bpv']:.2f} bpv "
-        f"(connectivity {d['connectivity_bpv']:.2f}), {method}{level}, {order}, {dt:.2f} s"
+        f"(connectivity {d['connectivity_bpv']:.2f}), {chosen}{level}, {order}, {dt:.2f} s"
     )
     return 0
 

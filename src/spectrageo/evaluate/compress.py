@@ -4,7 +4,8 @@ Per mesh of :data:`SPLITS` and rate point: bits per vertex of the whole file, RM
 symmetric Hausdorff distance and symmetric RMS vertex-to-surface distance over the diagonal, NMSVE (Eq. 4.32), theta (order-keeping methods
 only), order kept, encode / decode times. Methods: ``spectral`` (:data:`STEPS`),
 ``spectral-reorder`` (:data:`STEPS`), ``predictive`` and ``predictive-reorder``
-(:data:`MAX_ERRORS`), ``feature`` and ``uniform-delta`` (Algorithm 9 and its baseline, at
+(:data:`MAX_ERRORS`), when named ``auto`` and ``auto-reorder`` (the default of
+:func:`spectrageo.compress.encode`, at :data:`MAX_ERRORS`), ``feature`` and ``uniform-delta`` (Algorithm 9 and its baseline, at
 :data:`GEOMETRY_BPV` through the rate control), ``saliency`` (Algorithm 10); peers when installed:
 Draco (DracoPy, :data:`DRACO_BITS`, default mode at compression level 10 and
 order-preserving) and quantisation + zstd.
@@ -49,6 +50,9 @@ METHODS = (
     "uniform-delta",
     "saliency",
 )
+#: run only when named: ``compress.encode(method="auto")`` at :data:`MAX_ERRORS` (its two
+#: methods are in :data:`METHODS` already)
+EXTRA_METHODS = ("auto", "auto-reorder")
 PEERS = ("draco", "draco-ordered", "quant-zstd")
 STEPS = {
     "spectral": (3e-3, 1e-3, 3e-4, 1e-4),
@@ -189,7 +193,7 @@ def evaluate(
     from .. import io
 
     data = Path(data_dir)
-    methods = check_names(methods or METHODS + PEERS, METHODS + PEERS, "method")
+    methods = check_names(methods or METHODS + PEERS, METHODS + EXTRA_METHODS + PEERS, "method")
     splits = check_names(splits, sorted(SPLITS), "split")
     todo = [(s, p) for s in splits for p in SPLITS[s]] + (
         [("large", p) for p in LARGE] if large else []
@@ -216,11 +220,11 @@ def evaluate(
                     (m, f"bpv=conn+{g:g}", _ours, (m, V, F, None, conn_bpv + g))
                     for g in GEOMETRY_BPV
                 ]
-            elif m.startswith("predictive"):
+            elif m.startswith(("predictive", "auto")):
                 jobs += [
                     (m, f"max_error={e:g}", _ours, (m, V, F, None, None, e)) for e in MAX_ERRORS
                 ]
-            elif m in METHODS:
+            elif m in STEPS:
                 jobs += [(m, f"step={s:g}", _ours, (m, V, F, s)) for s in STEPS[m]]
             elif m.startswith("draco") and peers and have("DracoPy"):
                 o = m == "draco-ordered"
@@ -273,8 +277,8 @@ def equal_error_rows(rows: list[dict], key: str = "hausdorff") -> list[dict]:
     """Our size at each Draco point's error ``key`` (``hausdorff`` or ``rms_surface``): order
     kept against ``draco-ordered`` (best of the order-keeping methods), the best reordering one
     against ``draco``."""
-    ours_ordered = ("spectral", "predictive", "feature", "saliency")
-    ours_reorder = ("spectral-reorder", "predictive-reorder")
+    ours_ordered = ("spectral", "predictive", "feature", "saliency", "auto")
+    ours_reorder = ("spectral-reorder", "predictive-reorder", "auto-reorder")
     out = []
     for split, model in dict.fromkeys((r["split"], r["model"]) for r in rows):
         mine = [r for r in rows if (r["split"], r["model"]) == (split, model)]
