@@ -53,7 +53,7 @@ def test_canonical_faces_are_a_fixed_point(kind):
     np.testing.assert_array_equal(G2, G)
     np.testing.assert_array_equal(perm2, np.arange(n))
     code = _conn_traverse._encode_inline(G)
-    assert code is not None and code[0] == _conn_traverse.MARKER_INLINE
+    assert code is not None and code[0] == _conn_traverse.MARKER_INLINE2
     np.testing.assert_array_equal(_conn_traverse.decode(code, n, len(G)), G)
 
 
@@ -75,7 +75,7 @@ def test_reorder_of_non_manifold_mesh_writes_inline_and_decodes_to_it():
     n, F = _odd("four_faces_on_edges")
     V = np.r_[V, V[:6] * 1.2]
     Vr, G, perm, code = reorder_coded(V, F)
-    assert code[0] == _conn_traverse.MARKER_INLINE
+    assert code[0] == _conn_traverse.MARKER_INLINE2
     np.testing.assert_array_equal(decode_faces(code, n, len(G)), G)
     data = compress.encode(V, F, method="predictive", reorder=True, max_error=1e-3)
     V2, F2 = compress.decode(data)

@@ -1,4 +1,4 @@
-"""The inline connectivity format of canonical faces (first byte 0x43)."""
+"""The inline connectivity formats of canonical faces (first bytes 0x43, 0x44)."""
 
 from __future__ import annotations
 
@@ -33,19 +33,26 @@ def _stream_format(G):
         mp.undo()
 
 
-#: the 8-section cylinder in canonical order as the 0x42 format wrote it
+#: the 8-section cylinder in canonical order as the 0x42 format wrote it before the shorter
+#: range coder flush (docs/decisions.md#codec-rc-flush), and as it writes it now
 _CANONICAL_FORMAT = bytes.fromhex("42120300000001020910000019beb554dcc38d00")
-#: the same faces in the inline format (pinned: the format and its models must not drift)
+_CANONICAL_FORMAT_NOW = bytes.fromhex("42120300000001020910000019beb555")
+#: the same faces in the inline format 0x43 (read only) and in 0x44, which leaves out the
+#: coder's first byte and the flush's zero bytes (pinned: the formats and models must not drift)
 _INLINE_FORMAT = bytes.fromhex("43003a735a4127ce161363")
+_INLINE2_FORMAT = bytes.fromhex("443a735a4128")
 
 
 def test_canonical_stream_format_files_still_decode():
     V, F = _cylinder8()
     _, G, _, code = reorder_coded(V, F)
     assert _CANONICAL_FORMAT[0] == _conn_traverse.MARKER_CANONICAL
-    np.testing.assert_array_equal(decode_faces(_CANONICAL_FORMAT, len(V), len(G)), G)
-    assert _stream_format(G) == _CANONICAL_FORMAT
-    assert code == _INLINE_FORMAT
+    for old in (_CANONICAL_FORMAT, _INLINE_FORMAT):
+        np.testing.assert_array_equal(decode_faces(old, len(V), len(G)), G)
+    assert _stream_format(G) == _CANONICAL_FORMAT_NOW
+    np.testing.assert_array_equal(decode_faces(_CANONICAL_FORMAT_NOW, len(V), len(G)), G)
+    assert code == _INLINE2_FORMAT
+    np.testing.assert_array_equal(decode_faces(code, len(V), len(G)), G)
     for cut in (2, 10):
         with pytest.raises(InvalidInputError):
             decode_faces(_CANONICAL_FORMAT[:cut], len(V), len(G))
@@ -55,7 +62,7 @@ def test_inline_format_is_smaller_on_irregular_meshes():
     for seed in range(3):
         V, F = _irregular(seed)
         _, G, _, code = reorder_coded(V, F)
-        assert code[0] == _conn_traverse.MARKER_INLINE
+        assert code[0] == _conn_traverse.MARKER_INLINE2
         old = _stream_format(G)
         assert old[0] == _conn_traverse.MARKER_CANONICAL
         assert len(code) < 0.95 * len(old)
@@ -90,7 +97,7 @@ def test_faces_that_only_look_canonical_keep_the_general_formats():
     H[[5, 6]] = H[[6, 5]]  # same vertex order, faces swapped: not the traversal's order
     assert _conn_traverse._maybe_canonical(H)
     code = _conn_traverse.encode(H)
-    assert code[0] != _conn_traverse.MARKER_INLINE
+    assert code[0] not in (_conn_traverse.MARKER_INLINE, _conn_traverse.MARKER_INLINE2)
     np.testing.assert_array_equal(_conn_traverse.decode(code, len(V), len(H)), H)
 
 
@@ -102,9 +109,9 @@ def test_cut_or_random_inline_streams_are_refused_or_decode_in_range():
     for cut in (1, 3, len(code) // 2):
         with pytest.raises(InvalidInputError):
             decode_faces(code[:cut], len(V), len(G))
-    for _ in range(20):
+    for i in range(40):
         junk = (
-            bytes([0x43])
+            bytes([0x43 if i % 2 else 0x44])
             + rng.integers(0, 256, size=int(rng.integers(0, 64))).astype(np.uint8).tobytes()
         )
         try:

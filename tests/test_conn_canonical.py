@@ -25,7 +25,7 @@ def test_canonical_faces_use_the_short_format_and_round_trip(mesh):
         s = trimesh.creation.icosphere(subdivisions=2)
         V, F = np.asarray(s.vertices), np.asarray(s.faces, dtype=np.int64)
     _, G, _, code = reorder_coded(V, F)
-    assert code[0] == _conn_traverse.MARKER_INLINE
+    assert code[0] == _conn_traverse.MARKER_INLINE2
     np.testing.assert_array_equal(decode_faces(code, len(V), len(G)), G)
 
 
@@ -89,7 +89,7 @@ def test_counted_rates_never_make_a_certainty():
 def test_reorder_file_with_canonical_connectivity_decodes():
     V, F = _cylinder()
     Vr, G, _, code = reorder_coded(V, F)
-    assert code[0] == _conn_traverse.MARKER_INLINE
+    assert code[0] == _conn_traverse.MARKER_INLINE2
     data = compress.encode(V, F, method="predictive", reorder=True, max_error=1e-3)
     V2, F2 = compress.decode(data)
     np.testing.assert_array_equal(F2, G)
@@ -110,4 +110,4 @@ def test_adaptive_format_files_still_decode():
     _, G, _, code = reorder_coded(V, F)
     assert _ADAPTIVE_FORMAT[0] == _conn_traverse.MARKER_ADAPTIVE
     np.testing.assert_array_equal(decode_faces(_ADAPTIVE_FORMAT, len(V), len(G)), G)
-    assert code[0] == _conn_traverse.MARKER_INLINE and len(code) < len(_ADAPTIVE_FORMAT)
+    assert code[0] == _conn_traverse.MARKER_INLINE2 and len(code) < len(_ADAPTIVE_FORMAT)

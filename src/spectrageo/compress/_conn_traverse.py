@@ -18,9 +18,11 @@ symbols use adaptive models (:mod:`._rangecoder`, first byte :data:`MARKER_ADAPT
 third vertex in :data:`NV_CTX` contexts (faces already decoded around the gate's end); the other
 stages static categorical models with ``constriction``'s ANS coder. Files of the static format
 (:data:`MARKER`: every stream static, the third vertex in 16 contexts) still decode. Faces
-already in canonical order are written as :data:`MARKER_INLINE`: stages 2-3 implied, every
+already in canonical order are written as :data:`MARKER_INLINE2`: stages 2-3 implied, every
 stage-1 symbol range coded in traversal order under contexts of the decoded neighbourhood
-(docs/decisions.md#codec-conn-inline); :data:`MARKER_CANONICAL` files (the same with stage-1
+(docs/decisions.md#codec-conn-inline), the coder's first byte (always zero) left out
+(docs/decisions.md#codec-rc-flush); :data:`MARKER_INLINE` (with that byte) and
+:data:`MARKER_CANONICAL` files (the same with stage-1
 streams, docs/decisions.md#codec-conn-canonical) still decode. Both sides
 run one compiled state machine (:func:`_topology`). See docs/decisions.md#compress-connectivity,
 docs/decisions.md#compress-conn-contexts and docs/decisions.md#codec-conn-adaptive.
@@ -587,7 +589,10 @@ MARKER_CANONICAL = 0x42
 #: coded in traversal order under contexts of the decoded neighbourhood, the walks before the
 #: interior neighbours among the candidates (docs/decisions.md#codec-conn-inline)
 MARKER_INLINE = 0x43
-MARKERS = (MARKER, MARKER_ADAPTIVE, MARKER_CANONICAL, MARKER_INLINE)
+#: :data:`MARKER_INLINE` without the range coder's first byte, which is always zero (the coded
+#: interval starts inside ``[0, 1)``); written (docs/decisions.md#codec-rc-flush)
+MARKER_INLINE2 = 0x44
+MARKERS = (MARKER, MARKER_ADAPTIVE, MARKER_CANONICAL, MARKER_INLINE, MARKER_INLINE2)
 _NO_RC = np.zeros(0, dtype=np.uint8)
 
 
@@ -643,7 +648,7 @@ def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
 
 def encode(F: np.ndarray) -> bytes:
     """Traversal code of ``F`` (int64, (m, 3), m >= 1); see the module docstring. Faces in
-    :func:`canonical` order: :data:`MARKER_INLINE`; others: the smaller of the adaptive and the
+    :func:`canonical` order: :data:`MARKER_INLINE2`; others: the smaller of the adaptive and the
     static format."""
     F = np.ascontiguousarray(F, dtype=np.int64)
     m = F.shape[0]
@@ -719,7 +724,7 @@ def _maybe_canonical(F: np.ndarray) -> bool:
 
 
 def _encode_inline(F: np.ndarray) -> bytes | None:
-    """:data:`MARKER_INLINE` code of ``F``, or None when its faces are not in canonical order."""
+    """:data:`MARKER_INLINE2` code of ``F``, or None when its faces are not in canonical order."""
     m = F.shape[0]
     n_univ = int(F.max()) + 1
     ekeys, eptr, efaces = _edge_table(F, n_univ)
@@ -735,7 +740,9 @@ def _encode_inline(F: np.ndarray) -> bytes | None:
         return None
     if (F != Fc[np.arange(m)[:, None], (np.argmin(Fc, axis=1)[:, None] + np.arange(3)) % 3]).any():
         return None
-    return bytes([MARKER_INLINE]) + rbuf[:nb].tobytes()
+    if rbuf[0] != 0:  # pragma: no cover - LZMA's coder never carries into its first byte
+        raise RuntimeError("connectivity range coder wrote a nonzero first byte")
+    return bytes([MARKER_INLINE2]) + rbuf[1:nb].tobytes()
 
 
 def _decode_inline(blob: bytes, n_vertices: int, m: int) -> np.ndarray:
@@ -771,8 +778,9 @@ def decode(buf: bytes, n_vertices: int, n_faces: int) -> np.ndarray:
     if marker not in MARKERS:
         raise InvalidInputError(".sgc connectivity is malformed (unknown scheme).")
     m = int(n_faces)
-    if marker == MARKER_INLINE:
-        Fc = _decode_inline(r.rest(), n_vertices, m)
+    if marker in (MARKER_INLINE, MARKER_INLINE2):
+        blob = r.rest()
+        Fc = _decode_inline(b"\0" + blob if marker == MARKER_INLINE2 else blob, n_vertices, m)
     else:
         Fc = _decode_streams(r, marker, n_vertices, m)
         if marker != MARKER_CANONICAL:

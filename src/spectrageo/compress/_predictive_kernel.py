@@ -695,21 +695,5 @@ def run(enc, F, n, G, buf, L, H, X, rho, ver=1):
         if not enc and ver < 3 and st[5] > buf.size + 8:
             return -1
     if enc:
-        if ver >= 3:
-            _round_low(st)
         return finish(st, buf)
     return st[5] if st[5] <= buf.size + 4 or ver >= 3 else -1
-
-
-@numba.njit(cache=True)
-def _round_low(st):
-    """Encoder: move ``low`` to the value of ``[low, low + range)`` with the most trailing
-    zero bits (32 or, as ``range >= 2**24``, at least 24), so that the flushed bytes end in
-    zeros."""
-    low = st[0]
-    for sh in (32, 24):
-        m = (np.int64(1) << sh) - 1
-        v = (low + m) & ~m
-        if v < low + st[1]:
-            st[0] = v
-            return

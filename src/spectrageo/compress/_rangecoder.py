@@ -22,6 +22,8 @@ SYM_STRIDE = UNARY + 66
 #: ``1 / min(n + RATE0, RATE_MAX)`` of the way (docs/decisions.md#codec-conn-canonical)
 RATE0 = 2
 RATE_MAX = 32
+#: trailing zero bytes :func:`finish` leaves out (the decoders' end checks allow four)
+TRIM = 4
 
 
 @numba.njit(cache=True, inline="always")
@@ -45,11 +47,34 @@ def start(enc, st, buf):
 
 
 @numba.njit(cache=True)
+def round_low(st):
+    """Encoder: move ``low`` to the value of ``[low, low + range)`` with the most trailing
+    zero bits (32 or, as ``range >= 2**24``, at least 24), so that the flushed bytes end in
+    zeros. Any value of the final interval decodes to the same symbols."""
+    low = st[0]
+    for sh in (32, 24):
+        m = (np.int64(1) << sh) - 1
+        v = (low + m) & ~m
+        if v < low + st[1]:
+            st[0] = v
+            return
+
+
+@numba.njit(cache=True)
 def finish(st, buf):
-    """Encoder: flush; returns the byte count."""
+    """Encoder: flush (:func:`round_low`, then the five bytes of ``low`` and the cache) and
+    return the byte count without up to :data:`TRIM` trailing zero bytes, at least one byte.
+
+    The decoder reads a byte past the end as zero (:func:`_next_byte`), and ends at most
+    :data:`TRIM` bytes past it, which its end checks (``<= size + 4``) allow."""
+    round_low(st)
     for _ in range(5):
         _shift_low(st, buf)
-    return st[5]
+    nb = st[5]
+    t = 0
+    while t < TRIM and nb - t > 1 and nb - t - 1 < buf.size and buf[nb - t - 1] == 0:
+        t += 1
+    return nb - t
 
 
 @numba.njit(cache=True)
