@@ -34,6 +34,7 @@ HELP = {
         "is the whole file in bits per vertex per frame, --error the KG error in percent.",
         "spectrageo compress fandisk.off fandisk.sgc --bpv 20\n"
         "spectrageo compress part.obj part.sgc --method feature --error 0.002\n"
+        "spectrageo compress part.obj part.sgc --max-error 1e-4 --reorder   # auto\n"
         "spectrageo compress part.obj part.sgc --method predictive --max-error 1e-4 --reorder\n"
         "spectrageo compress crane.npz crane.sga --method pca-qp --bpvf 4\n"
         "spectrageo compress frames/ anim.sga --error 0.1   # KG error in percent",
