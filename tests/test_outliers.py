@@ -319,6 +319,7 @@ def test_remove_far_outliers_synthetic(method):
     np.testing.assert_array_equal(r.points.points, P[r.keep])
     # the threshold reproduces the mask (rpca: points of small volumetric clusters removed too)
     if method == "rpca":
+        from spectrageo.outliers._local_density import locally_sparse_kept, on_surface
         from spectrageo.outliers._rpca_types import SPARSE_FACTOR
         from spectrageo.outliers.static import SPARSE_GATE
 
@@ -326,7 +327,10 @@ def test_remove_far_outliers_synthetic(method):
         d = rs.kth_distance
         sparse = (d > SPARSE_FACTOR * np.median(d)) & (r.scores >= SPARSE_GATE * r.threshold)
         cmp = (r.scores < r.threshold) & ~rs.clusters & ~sparse
+        local = locally_sparse_kept(P, cmp, d, 10)
+        cmp &= ~(local & ~on_surface(P, local, rs.knn))
         n_extra = r.info["n_cluster_outliers"] + r.info["n_sparse_outliers"]
+        n_extra += r.info["n_locally_sparse"]
         assert n_extra >= np.count_nonzero(~r.keep & (r.scores < r.threshold))
     else:
         cmp = r.scores <= r.threshold

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import spectrageo.outliers._local_density as ld
 import spectrageo.outliers.static as st
 from spectrageo.outliers import RPCAOptions, detect_outliers
 from test_outliers_rescore import _contaminate, _f1, _wavy_sheet  # noqa: E402
@@ -48,6 +49,7 @@ def test_further_passes_only_remove_more(sheet_30, monkeypatch):
     """Every tried pass standing (RESCORE_FOUND = RESCORE_LIFT = 0): RESCORE_PASSES passes,
     only more points removed each time; scores and threshold stay the first pass's."""
     Q, lab = sheet_30
+    monkeypatch.setattr(ld, "LOCAL_FACTOR", None)  # the passes' own removals
     two = detect_outliers(Q, options=RPCAOptions())
     monkeypatch.setattr(st, "RESCORE_FOUND", 0.0)
     monkeypatch.setattr(st, "RESCORE_LIFT", 0.0)

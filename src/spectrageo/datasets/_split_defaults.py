@@ -119,6 +119,19 @@ _DEFAULTS = [
     _d(_O + "static.HARM_SPREAD", 8.0, "tuning", "outliers-scantypes",
        "benchmarks/outliers3_harm.py",
        "largest of 3-8 / inf with no 1-2 % injected tuning case lower (inf: 4_6_crop -0.009)"),
+    _d(_O + "_local_density.LOCAL_FACTOR", 2.25, "tuning", "outliers-scantypes",
+       "benchmarks/outliers5_local.py",
+       "largest of 2 / 2.25 / 2.5 with both LiDAR rows above radius removal (30 %: 0.832, "
+       "2.5: 0.826, radius 0.828); no scan-type case lower; docs/decisions.md#outliers5-local-density"),
+    _d(_O + "_local_density.LOCAL_REFERENCE", 3, "tuning", "outliers-scantypes",
+       "benchmarks/outliers5_local.py",
+       "30 kept points (m = 1: 4_6_crop 30 % 0.672 against 0.721, diagnosis at gamma 1.75); "
+       "docs/decisions.md#outliers5-local-density"),
+    _d(_O + "_local_density.LOCAL_FLOOR", 0.05, "tuning", "outliers-scantypes",
+       "benchmarks/outliers5_local.py",
+       "not swept: every scan-type tuning figure the same without the floor; it bounds the "
+       "neighbour searches (0.14 s against 2.2 s at 955k points); "
+       "docs/decisions.md#outliers5-local-density"),
     _d(_O + "static.DEFAULT_THRESHOLD_RULE", "valley", "tuning", "outliers", _EO,
        "mean F1 0.890 against 0.887 (density) on the tuning split"),
     _d(_O + "static.VALLEY_BIN", 0.05, "tuning", "outliers", _EO,

@@ -18,6 +18,7 @@ from .._validation import (
     options_with_legacy,
 )
 from ..geometry import PointCloud
+from . import _local_density
 from ._common import SortedCloud, check_k, knn_grid, numba_threads
 from ._organized import grid_labels
 from ._support import sparse_surface, within_spread
@@ -333,6 +334,13 @@ def remove_outliers(
     cloud a further pass is tried, which stands only when it removes that share with a median
     score of at least :data:`RESCORE_LIFT` times its threshold (else
     ``info["rescore_dropped"]``), up to :data:`RESCORE_PASSES` passes (:func:`_rescore`).
+    After the passes and before the grid stage, the kept points whose ``k``-th neighbour
+    distance exceeds ``_local_density.LOCAL_FACTOR`` times the median over their
+    ``LOCAL_REFERENCE * k`` nearest kept points (floored at a low quantile of the kept points')
+    are removed too, unless they lie on their neighbours' plane
+    (:func:`._local_density.locally_sparse_kept`, :func:`._local_density.on_surface`: a spacing
+    reference that follows the scan's own sampling; ``info["n_locally_sparse"]``; clouds scored
+    on k-d tiles skip it).
     ``threshold=None`` uses
     ``threshold_rule`` (``"valley"``: :func:`valley_threshold`; ``"density"``, ``"otsu"``:
     :func:`auto_threshold`) with the floor :data:`RPCA_MIN_TAU` = 0.5 spacings (chosen on the tuning
@@ -442,6 +450,13 @@ def _outliers(
             # a contamination's worth (docs/decisions.md#outliers4-rescore-passes)
             again = replace(options, grid=None, viewpoint=options.sensor_origin)
             _rescore(X, k, again, threshold, rule, workers, device, keep_f, due, info)
+        if r.kth_distance is not None:  # (docs/decisions.md#outliers5-local-density)
+            local = _local_density.locally_sparse_kept(
+                X, keep_f, r.kth_distance, k, factor=_local_density.LOCAL_FACTOR
+            )
+            local &= ~_local_density.on_surface(X, local, r.knn)
+            info["n_locally_sparse"] = int(np.count_nonzero(local))
+            keep_f &= ~local
         if options.grid is not None:  # the grid stage (docs/decisions.md#outliers-organized-grid)
             pix = options.grid.pixels(X.shape[0] if finite is None else finite.size)
             pix = pix if finite is None else pix[finite]

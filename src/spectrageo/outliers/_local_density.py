@@ -1,0 +1,115 @@
+r"""Locally sparse points: a kept point far sparser than the kept points around it (a stage of
+:func:`spectrageo.outliers.remove_outliers`, ``method="rpca"``).
+
+Let ``d_i`` be the distance from ``v_i`` to its ``k``-th nearest neighbour in the cloud
+(range-normalised when a viewpoint is known: ``PatchRPCAResult.kth_distance``), ``K`` the
+points the other stages keep and, for ``i`` in ``K``, ``N_i`` its ``m k`` nearest neighbours in
+``K`` (itself excluded). ``v_i`` is *locally sparse* when
+
+.. math::
+
+    d_i > \gamma \, \max\bigl(\operatorname{median}_{j \in N_i} d_j,\; Q_q(d_K)\bigr) ,
+
+radius removal's test (``d_i`` over a multiple of a median spacing) with the median taken over
+the kept points around the point instead of the whole cloud, floored at the ``q``-quantile of
+the kept points' ``d`` (the densest spots of a cloud do not make their neighbours sparse; only
+the points with ``d_i > gamma Q_q`` need their neighbours searched). A region sampled uniformly
+more sparsely than the rest of the cloud (grazing angles of a range scan, far ranges of a depth
+frame) is compared with itself and kept; an isolated point above a surface, whose nearest kept
+points are the surface's, is not. :func:`~spectrageo.outliers.remove_outliers` keeps the
+flagged points that lie on their ``k`` neighbours' plane (:func:`on_surface`, the surface test
+of :mod:`._support`): the first row of a region sampled more sparsely than the one next to it.
+Constants chosen on the tuning split; see docs/decisions.md#outliers5-local-density.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._common import SortedCloud, knn_grid
+
+__all__ = ["LOCAL_FACTOR", "LOCAL_FLOOR", "LOCAL_REFERENCE", "locally_sparse_kept", "on_surface"]
+
+#: ``gamma``: the largest ratio of a kept point's ``k``-th neighbour distance to the median of
+#: its kept neighbours'.
+LOCAL_FACTOR = 2.25
+#: ``m``: the reference neighbourhood holds ``m k`` kept points.
+LOCAL_REFERENCE = 3
+#: ``q``: the reference is at least this quantile of the kept points' spacings.
+LOCAL_FLOOR = 0.05
+
+
+def locally_sparse_kept(
+    X: np.ndarray,
+    keep: np.ndarray,
+    spacing: np.ndarray,
+    k: int,
+    *,
+    factor: float | None = LOCAL_FACTOR,
+    reference: int = LOCAL_REFERENCE,
+    floor: float = LOCAL_FLOOR,
+) -> np.ndarray:
+    """Boolean mask (n,) of the kept points of ``X`` that are locally sparse (module notes).
+
+    Parameters
+    ----------
+    X : (n, 3) ndarray
+        Finite points.
+    keep : (n,) bool ndarray
+        The points kept by the other stages (``K``); only they are tested.
+    spacing : (n,) ndarray
+        ``d``: each point's ``k``-th neighbour distance in ``X``.
+    k : int
+        Neighbours per point; the reference holds ``reference * k`` kept points.
+    factor : float or None
+        ``gamma``; None turns the stage off (no point flagged).
+    reference : int
+        ``m``.
+    floor : float
+        ``q``, in [0, 1].
+
+    Returns
+    -------
+    (n,) bool ndarray
+        ``True`` for the flagged points (a subset of ``keep``); none when ``K`` holds at most
+        ``m k`` points; a point whose reference spacing is 0 (exact duplicates) is not flagged.
+    """
+    out = np.zeros(keep.size, dtype=bool)
+    K = np.flatnonzero(keep)
+    m = int(reference) * int(k)
+    if factor is None or K.size <= m:
+        return out
+    d = np.asarray(spacing, dtype=np.float64)[K]
+    low = float(np.quantile(d, floor))
+    cand = np.flatnonzero(d > factor * low)  # the others cannot pass
+    if cand.size == 0:
+        return out
+    sc = SortedCloud.of(np.ascontiguousarray(X[K]))
+    inv = np.empty(K.size, dtype=np.int64)
+    inv[sc.order] = np.arange(K.size)
+    q = np.sort(inv[cand])  # sorted positions of the candidates
+    nb = knn_grid(sc, m, query=q, self_index=q)
+    ds = d[sc.order]  # sorted positions, as the lists
+    ref = np.maximum(np.median(ds[nb.idx], axis=1), low)
+    flag = (ds[q] > factor * ref) & (ref > 0)
+    out[K[sc.order[q[flag]]]] = True
+    return out
+
+
+def on_surface(X: np.ndarray, flagged: np.ndarray, knn: tuple | None) -> np.ndarray:
+    """The points of ``flagged`` (n,) bool that lie on their ``k`` neighbours' plane: the
+    surface candidates of :mod:`._support` (plane residual at most ``SUPPORT_BETA`` times their
+    mean neighbour distance, ``l_1 / trace`` at most ``SUPPORT_FLAT``), e.g. the first row of a
+    region sampled more sparsely than the one next to it. ``knn``: ``(order, idx)`` of
+    :class:`~._rpca_types.PatchRPCAResult` (None: none)."""
+    from ._support import SUPPORT_BETA, SUPPORT_FLAT, _candidates
+
+    out = np.zeros(flagged.size, dtype=bool)
+    rows = np.flatnonzero(flagged)
+    if rows.size == 0 or knn is None:
+        return out
+    order, idx = knn
+    inv = np.empty(X.shape[0], dtype=np.int64)
+    inv[order] = np.arange(X.shape[0])
+    out[rows] = _candidates(X, rows, order[idx[inv[rows]]], SUPPORT_BETA, SUPPORT_FLAT)
+    return out
