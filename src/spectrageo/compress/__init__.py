@@ -107,14 +107,10 @@ def encode(
     F : (m, 3) int
         Every vertex index in ``0..n-1``; vertices that no face uses are coded too.
     method : {"auto", "spectral", "feature", "saliency", "predictive"}
-        ``"auto"`` (default): with a target (``bpv``, ``error`` or ``max_error``) the file of
-        ``"predictive"`` or ``"spectral"`` that serves it best: the smaller file meeting
-        ``error`` / ``max_error``, or, at ``bpv``, the one with the smaller RMS vertex error
-        (ties to ``"predictive"``). ``"spectral"`` is tried only when the ``"predictive"``
-        file's geometry takes at most :data:`AUTO_SPECTRAL_BPV` bits per vertex (at larger
-        rates it is the larger file). Without a target (or with ``step``, or with method
-        options, which are then ``"spectral"``'s) ``"auto"`` is ``"spectral"``, whose files are
-        progressive. :func:`info` names the method chosen.
+        ``"auto"`` (default): with a target, the smaller file of ``"predictive"`` and
+        ``"spectral"`` (at ``bpv``: the smaller RMS error); ``"spectral"`` is tried only when
+        the ``"predictive"`` geometry takes at most :data:`AUTO_SPECTRAL_BPV` bits per vertex.
+        Without a target, with ``step`` or with options: ``"spectral"`` (progressive).
     bpv : float, optional
         Target size in bits per vertex of the whole file (header and connectivity included).
     error : float, optional

@@ -1,25 +1,18 @@
 r"""Locally sparse points: a kept point far sparser than the kept points around it (a stage of
 :func:`spectrageo.outliers.remove_outliers`, ``method="rpca"``).
 
-Let ``d_i`` be the distance from ``v_i`` to its ``k``-th nearest neighbour in the cloud
-(range-normalised when a viewpoint is known: ``PatchRPCAResult.kth_distance``), ``K`` the
-points the other stages keep and, for ``i`` in ``K``, ``N_i`` its ``m k`` nearest neighbours in
-``K`` (itself excluded). ``v_i`` is *locally sparse* when
+With ``d_i`` the distance from ``v_i`` to its ``k``-th nearest neighbour (range-normalised with a
+viewpoint: ``PatchRPCAResult.kth_distance``), ``K`` the points the other stages keep and ``N_i``
+the ``m k`` nearest kept points of ``v_i``, the point is *locally sparse* when
 
 .. math::
 
-    d_i > \gamma \, \max\bigl(\operatorname{median}_{j \in N_i} d_j,\; Q_q(d_K)\bigr) ,
+    d_i > \gamma \, \max\bigl(\operatorname{median}_{j \in N_i} d_j,\; Q_q(d_K)\bigr) :
 
-radius removal's test (``d_i`` over a multiple of a median spacing) with the median taken over
-the kept points around the point instead of the whole cloud, floored at the ``q``-quantile of
-the kept points' ``d`` (the densest spots of a cloud do not make their neighbours sparse; only
-the points with ``d_i > gamma Q_q`` need their neighbours searched). A region sampled uniformly
-more sparsely than the rest of the cloud (grazing angles of a range scan, far ranges of a depth
-frame) is compared with itself and kept; an isolated point above a surface, whose nearest kept
-points are the surface's, is not. :func:`~spectrageo.outliers.remove_outliers` keeps the
-flagged points that lie on their ``k`` neighbours' plane (:func:`on_surface`, the surface test
-of :mod:`._support`): the first row of a region sampled more sparsely than the one next to it.
-Constants chosen on the tuning split; see docs/decisions.md#outliers5-local-density.
+radius removal's test against the kept points around the point instead of the whole cloud. A
+region sampled uniformly more sparsely (grazing angles, far ranges) is compared with itself and
+kept; a point above a surface is compared with the surface. Flagged points on their neighbours'
+plane are kept (:func:`on_surface`). See docs/decisions.md#outliers5-local-density.
 """
 
 from __future__ import annotations

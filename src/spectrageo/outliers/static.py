@@ -334,13 +334,8 @@ def remove_outliers(
     cloud a further pass is tried, which stands only when it removes that share with a median
     score of at least :data:`RESCORE_LIFT` times its threshold (else
     ``info["rescore_dropped"]``), up to :data:`RESCORE_PASSES` passes (:func:`_rescore`).
-    After the passes and before the grid stage, the kept points whose ``k``-th neighbour
-    distance exceeds ``_local_density.LOCAL_FACTOR`` times the median over their
-    ``LOCAL_REFERENCE * k`` nearest kept points (floored at a low quantile of the kept points')
-    are removed too, unless they lie on their neighbours' plane
-    (:func:`._local_density.locally_sparse_kept`, :func:`._local_density.on_surface`: a spacing
-    reference that follows the scan's own sampling; ``info["n_locally_sparse"]``; clouds scored
-    on k-d tiles skip it).
+    Then the locally sparse kept points are removed (:mod:`._local_density`;
+    ``info["n_locally_sparse"]``; not on k-d tiles).
     ``threshold=None`` uses
     ``threshold_rule`` (``"valley"``: :func:`valley_threshold`; ``"density"``, ``"otsu"``:
     :func:`auto_threshold`) with the floor :data:`RPCA_MIN_TAU` = 0.5 spacings (chosen on the tuning
