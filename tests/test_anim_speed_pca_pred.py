@@ -36,7 +36,7 @@ def test_side_by_side_regression_equals_one_at_a_time():
 @pytest.mark.parametrize(
     ("k", "size", "digest"),
     [
-        # 2322 / 13350 bytes before the shorter flush (docs/decisions.md#codec-rc-flush)
+        # sizes with the flush that leaves out trailing zero bytes (docs/decisions.md#codec-rc-flush)
         (7, 2318, "fe2ba7eb7183041709053a40f12918dae694b93258b4e187253f2b559c5415a8"),
         (40, 13347, "582d4bb6bf77d58f947a980ce56e1040629c9e0a40a01f8a72aea11a64caac31"),
     ],
