@@ -148,3 +148,17 @@ def test_files_without_the_direct_flag_decode_with_orthogonal_iterations(fandisk
     # below the full size no flag is written (the files are the same as before)
     small = compress.encode(V, F, step=1e-3, submesh_size=200, k=60)
     assert not _spectral.SpectralParams.from_bytes(compress._container.parse(small).params).direct
+
+
+def test_analysis_with_bases_equals_the_two_passes():
+    # one decomposition per submesh must give the separate passes' values bit for bit: files
+    # written after a max_error / error search equal those of a plain encode at that step
+    V, F = _two_pieces()
+    C = adjacency_matrix(F, len(V))
+    subs = _spectral_fast.overlapped_submeshes(C, submesh_size=90, overlap=0.1, rng=1)
+    fb = _spectral_fast.FullBases(C, subs.parts, workers=2)
+    coefs, bases = fb.analyse_explicit(V)
+    for a, b in zip(coefs, fb.analyse(V)):
+        assert np.array_equal(a, b)
+    for a, b in zip(bases, fb.explicit()):
+        assert np.array_equal(a, b)

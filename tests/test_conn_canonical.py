@@ -111,3 +111,15 @@ def test_adaptive_format_files_still_decode():
     assert _ADAPTIVE_FORMAT[0] == _conn_traverse.MARKER_ADAPTIVE
     np.testing.assert_array_equal(decode_faces(_ADAPTIVE_FORMAT, len(V), len(G)), G)
     assert code[0] == _conn_traverse.MARKER_INLINE2 and len(code) < len(_ADAPTIVE_FORMAT)
+
+
+def test_one_traversal_serves_both_orders():
+    from spectrageo import datasets
+
+    m = datasets.fandisk()
+    F = np.ascontiguousarray(m.faces[::-1], dtype=np.int64)  # out of canonical order
+    t = _conn_traverse.traverse(F)
+    assert _conn_traverse.encode(F, t) == _conn_traverse.encode(F)
+    perm_a, G_a = _conn_traverse.canonical(F, len(m.vertices), t)
+    perm_b, G_b = _conn_traverse.canonical(F, len(m.vertices))
+    assert np.array_equal(perm_a, perm_b) and np.array_equal(G_a, G_b)

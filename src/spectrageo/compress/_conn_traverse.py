@@ -629,15 +629,16 @@ def _traverse(F: np.ndarray):
     return n_univ, topo, bits, pos, Fc, order, L[:nv]
 
 
-def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+def canonical(F: np.ndarray, n_vertices: int, traversed=None) -> tuple[np.ndarray, np.ndarray]:
     """``(perm, G)``: the traversal's vertex order (unused vertices last) and faces ``G`` in it.
 
     ``G`` lists the faces in traversal order, each rotated to start at its smallest index
     (orientation kept), so that :func:`encode` spends almost nothing on the two orders. ``G``
     is a fixed point: ``canonical(G, n)`` is ``(arange(n), G)``, so ``G`` codes inline.
+    ``traversed``: :func:`traverse` of ``F``, when the caller has it.
     """
     F = np.ascontiguousarray(F, dtype=np.int64)
-    _, _, _, _, Fc, _, L = _traverse(F)
+    _, _, _, _, Fc, _, L = _traverse(F) if traversed is None else traversed
     unused = np.ones(n_vertices, dtype=bool)
     unused[L] = False
     perm = np.r_[L, np.flatnonzero(unused)].astype(np.int64)
@@ -646,17 +647,23 @@ def canonical(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     return perm, np.take_along_axis(Fc, idx, axis=1)
 
 
-def encode(F: np.ndarray) -> bytes:
+def traverse(F: np.ndarray):
+    """The traversal of ``F`` (int64, (m, 3), m >= 1) that :func:`encode` and :func:`canonical`
+    start from; pass it to both to traverse once."""
+    return _traverse(np.ascontiguousarray(F, dtype=np.int64))
+
+
+def encode(F: np.ndarray, traversed=None) -> bytes:
     """Traversal code of ``F`` (int64, (m, 3), m >= 1); see the module docstring. Faces in
     :func:`canonical` order: :data:`MARKER_INLINE2`; others: the smaller of the adaptive and the
-    static format."""
+    static format. ``traversed``: :func:`traverse` of ``F``, when the caller has it."""
     F = np.ascontiguousarray(F, dtype=np.int64)
     m = F.shape[0]
     if _maybe_canonical(F):
         code = _encode_inline(F)
         if code is not None:
             return code
-    n_univ, topo, bitsA, posA, Fc, order, L = _traverse(F)
+    n_univ, topo, bitsA, posA, Fc, order, L = _traverse(F) if traversed is None else traversed
     nv = L.size
     vb = np.zeros(nv, dtype=np.int64)
     bitsB = _bitbuf(64 * nv + 64)

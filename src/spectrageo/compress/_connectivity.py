@@ -34,12 +34,13 @@ def _unzigzag(u: np.ndarray) -> np.ndarray:
     return (u >> 1) ^ -(u & 1)
 
 
-def encode_faces(F: np.ndarray) -> bytes:
-    """The smaller of the traversal code and the delta code of ``F``."""
+def encode_faces(F: np.ndarray, traversed=None) -> bytes:
+    """The smaller of the traversal code and the delta code of ``F`` (``traversed``: its
+    :func:`._conn_traverse.traverse`, when the caller has it)."""
     delta = _encode_delta(F)
     if len(F) == 0:
         return delta
-    traversal = _conn_traverse.encode(F)
+    traversal = _conn_traverse.encode(F, traversed)
     return traversal if len(traversal) < len(delta) else delta
 
 
@@ -101,10 +102,11 @@ def reorder_coded(V: np.ndarray, F: np.ndarray):
     """:func:`reorder` and the connectivity code of its faces: ``(V', F', perm, code)``."""
     F = np.asarray(F, dtype=np.int64)
     identity = np.arange(V.shape[0], dtype=np.int64)
-    code = encode_faces(F)
     if len(F) == 0:
-        return V, F, identity, code
-    perm, G = _conn_traverse.canonical(F, V.shape[0])
+        return V, F, identity, encode_faces(F)
+    traversed = _conn_traverse.traverse(F)  # one traversal for both orders
+    code = encode_faces(F, traversed)
+    perm, G = _conn_traverse.canonical(F, V.shape[0], traversed)
     code_g = encode_faces(G)
     if len(code) <= len(code_g):
         return V, F, identity, code

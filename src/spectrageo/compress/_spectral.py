@@ -186,6 +186,18 @@ class _Full:
                 self._fallback = self._dense()
         return self._fallback.analyse(X, parts)
 
+    def analyse_explicit(self, X: np.ndarray, parts) -> list[np.ndarray]:
+        """:meth:`analyse`, forming the bases of :meth:`explicit` on the way (one decomposition
+        per submesh instead of two)."""
+        if self._fallback is None and self._explicit is None:
+            try:
+                coefs, bases = self.fb.analyse_explicit(X)
+                self._explicit = _Explicit(bases)
+                return coefs
+            except np.linalg.LinAlgError:
+                self._fallback = self._dense()
+        return self.analyse(X, parts)
+
     def synthesise(self, coefs) -> list[np.ndarray]:
         if self._fallback is None:
             try:
@@ -363,23 +375,35 @@ class SpectralPlan:
         # new files take the direct computation whenever the bases are complete
         p.direct = self.n >= 2 and min(p.k, size) >= size
         self.subs, self.dic = dictionaries(F, self.n, p)
-        self.coef = self.dic.analyse(X, self.subs.parts)
+        self._X = X
+        self.values = None
+
+    def _analyse(self, explicit: bool) -> None:
+        """The coefficients, once: with the explicit bases when ``explicit`` (repeated synthesis
+        follows), otherwise without forming them."""
+        if self.values is not None:
+            return
+        X, p, parts = self._X, self.p, self.subs.parts
+        if explicit and isinstance(self.dic, _Full):
+            self.coef = self.dic.analyse_explicit(X, parts)
+        else:
+            self.coef = self.dic.analyse(X, parts)
         ks = self.dic.sizes.copy()
         if p.basis == "doi":
-            ks = np.array(
-                [self._doi_size(c, X[part]) for c, part in zip(self.coef, self.subs.parts)]
-            )
+            ks = np.array([self._doi_size(c, X[part]) for c, part in zip(self.coef, parts)])
         self.sizes = ks
         self.cuts = layer_cutoffs(int(self.dic.sizes.max()))
         self.layout = _layout(self.sizes, self.cuts)
-        self.values = []
+        values = []
         for sub, col in self.layout:
             bounds = np.searchsorted(sub, np.arange(len(self.sizes) + 1))
             rows = [
                 self.coef[i][col[bounds[i] : bounds[i + 1]]]
                 for i in np.flatnonzero(np.diff(bounds))
             ]
-            self.values.append(np.concatenate(rows) if rows else np.zeros((0, 3)))
+            values.append(np.concatenate(rows) if rows else np.zeros((0, 3)))
+        self.values = values
+        self._X = None
 
     def _doi_size(self, c: np.ndarray, Xi: np.ndarray) -> int:
         total = float(np.sum((Xi - Xi.mean(axis=0)) ** 2))
@@ -395,6 +419,7 @@ class SpectralPlan:
         return self.p.to_bytes()
 
     def chunks(self, step: float) -> list[tuple[int, bytes]]:
+        self._analyse(False)
         out = []
         if self.p.basis == "doi":
             out.append((TAG_SIZES, zstd_compress(self.sizes.astype("<u2").tobytes())))
@@ -407,6 +432,7 @@ class SpectralPlan:
     def reconstruct(self, step: float | None) -> np.ndarray:
         from ..spectral import reassemble
 
+        self._analyse(True)
         vals = [v if step is None else np.rint(v / step) * step for v in self.values]
         coefs = _scatter(self.layout, vals, self.sizes)
         return reassemble(self.dic.explicit().synthesise(coefs), self.subs)

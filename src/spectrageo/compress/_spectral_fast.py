@@ -103,15 +103,33 @@ def _transform_range(indptr, indices, flat, offs, lo, hi, src, out, status, synt
             apply_q(A, tau, Y)
             out[o : offs[i + 1]] = Y
         else:
-            for a in range(part.size):
-                for c in range(d):
-                    Y[a, c] = src[part[a], c]
-            apply_qt(A, tau, Y)
-            rotate_t(idx, cs, sn, M, Y)
-            for j in range(part.size):
-                q = order[j]
-                for c in range(d):
-                    out[o + j, c] = sign[q] * Y[q, c]
+            _analyse_one(A, tau, idx, cs, sn, M, order, sign, part, src, Y, out, o)
+
+
+@njit(nogil=True, cache=True)
+def _analyse_one(A, tau, idx, cs, sn, M, order, sign, part, src, Y, out, o):
+    """``out[o + j] = (U^T src[part])[j]`` for one decomposed submesh (``Y``: (n_i, d) scratch)."""
+    d = src.shape[1]
+    for a in range(part.size):
+        for c in range(d):
+            Y[a, c] = src[part[a], c]
+    apply_qt(A, tau, Y)
+    rotate_t(idx, cs, sn, M, Y)
+    for j in range(part.size):
+        q = order[j]
+        for c in range(d):
+            out[o + j, c] = sign[q] * Y[q, c]
+
+
+@njit(nogil=True, cache=True)
+def _basis_one(A, tau, idx, cs, sn, M, order, sign, n):
+    """The explicit basis ``U = Q (Z P S)`` (n, n) of one decomposed submesh."""
+    W = np.zeros((n, n))
+    for j in range(n):
+        W[order[j], j] = sign[order[j]]
+    rotate(idx, cs, sn, M, W)
+    apply_q(A, tau, W)
+    return W
 
 
 @njit(nogil=True, cache=True)
@@ -137,13 +155,27 @@ def _bases_range(indptr, indices, flat, offs, lo, hi, boffs, out, status):
         A, tau, idx, cs, sn, M, order, sign, info = _decompose(indptr, indices, part, ws)
         ws = (ws[0], idx, cs, sn)
         if info == 0:
-            W = np.zeros((n, n))
-            for j in range(n):
-                W[order[j], j] = sign[order[j]]
-            rotate(idx, cs, sn, M, W)
-            apply_q(A, tau, W)
+            W = _basis_one(A, tau, idx, cs, sn, M, order, sign, n)
             out[boffs[i] : boffs[i + 1]] = W.ravel()
         status[i] = info
+
+
+@njit(nogil=True, cache=True)
+def _analyse_bases_range(indptr, indices, flat, offs, lo, hi, X, out, boffs, bout, status):
+    """:func:`_analyse_range` and :func:`_bases_range` from one decomposition per submesh."""
+    ws = _workspace(offs, lo, hi)
+    for i in range(lo, hi):
+        part = flat[offs[i] : offs[i + 1]]
+        n = part.size
+        A, tau, idx, cs, sn, M, order, sign, info = _decompose(indptr, indices, part, ws)
+        ws = (ws[0], idx, cs, sn)
+        status[i] = info
+        if info != 0:
+            continue
+        Y = np.empty((n, X.shape[1]))
+        _analyse_one(A, tau, idx, cs, sn, M, order, sign, part, X, Y, out, offs[i])
+        W = _basis_one(A, tau, idx, cs, sn, M, order, sign, n)
+        bout[boffs[i] : boffs[i + 1]] = W.ravel()
 
 
 def default_workers() -> int:
@@ -216,13 +248,29 @@ class FullBases:
         self._run(_synthesise_range, flat, out)
         return np.split(out, self.offs[1:-1])
 
-    def explicit(self) -> list[np.ndarray]:
-        """The bases ``U_i`` as dense (n_i, n_i) arrays, columns in ascending eigenvalue order."""
+    def _basis_offsets(self) -> np.ndarray:
         boffs = np.zeros(len(self.parts) + 1, dtype=np.int64)
         np.cumsum(self.sizes**2, out=boffs[1:])
+        return boffs
+
+    def _split_bases(self, out: np.ndarray, boffs: np.ndarray) -> list[np.ndarray]:
+        return [out[a:b].reshape(s, s) for a, b, s in zip(boffs[:-1], boffs[1:], self.sizes)]
+
+    def explicit(self) -> list[np.ndarray]:
+        """The bases ``U_i`` as dense (n_i, n_i) arrays, columns in ascending eigenvalue order."""
+        boffs = self._basis_offsets()
         out = np.empty(int(boffs[-1]))
         self._run(_bases_range, boffs, out)
-        return [out[a:b].reshape(s, s) for a, b, s in zip(boffs[:-1], boffs[1:], self.sizes)]
+        return self._split_bases(out, boffs)
+
+    def analyse_explicit(self, X: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """``(analyse(X), explicit())`` from one decomposition per submesh (the same values)."""
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        out = np.empty((self.flat.size, X.shape[1]))
+        boffs = self._basis_offsets()
+        bout = np.empty(int(boffs[-1]))
+        self._run(_analyse_bases_range, X, out, boffs, bout)
+        return np.split(out, self.offs[1:-1]), self._split_bases(bout, boffs)
 
 
 # ----------------------------------------------------------------------------- submeshes
