@@ -108,6 +108,12 @@ _DEFAULTS = [
        "benchmarks/outliers4_lidar.py",
        "a bound on the cost: at most 3 passes on every scan-type and pattern tuning case; "
        "docs/decisions.md#outliers4-rescore-passes"),
+    _d(_O + "static.RESCORE_AFTER_LOCAL", True, "tuning", "outliers-scantypes",
+       "benchmarks/outliers6_lidar.py",
+       "the only tuning case it changes is LiDAR 4_6_crop 30 % (first pass 0.106 + locally "
+       "sparse 0.012 of the cloud; others <= 0.099): 0.675 -> 0.781; pattern split and robot "
+       "halo 10 % unchanged, horse-gallop robot 20 % flying / lidar / mixed higher; "
+       "docs/decisions.md#outliers6-rescore-after-local"),
     _d(_O + "static.HARM_SHARE", 0.03, "tuning", "outliers-scantypes",
        "benchmarks/outliers3_harm.py",
        "score-removed share: clean tuning scans 0.003-0.023, contaminated tuning cases >= 0.030 "

@@ -65,6 +65,11 @@ RESCORE_LOCAL = 2.0
 RESCORE_FOUND = 0.01
 RESCORE_LIFT = 1.2
 RESCORE_PASSES = 4
+#: When the first pass removed under ``rescore_share`` of the cloud, the locally sparse points
+#: (:mod:`._local_density`) count towards that share: reaching it with them, the passes of
+#: :func:`_rescore` run on the points still kept, followed by the locally sparse test again;
+#: chosen on the tuning split (docs/decisions.md#outliers6-rescore-after-local).
+RESCORE_AFTER_LOCAL = True
 #: Do no harm on a nearly clean cloud (scores remove under ``HARM_SHARE`` of it): a point removed
 #: by its score alone is kept when ``score < HARM_SCORE * tau``, its ``k``-th neighbour distance is
 #: at most ``HARM_SPACING`` times the median and it lies within ``HARM_SPREAD`` standard
@@ -294,6 +299,20 @@ def _locally_sparse(r) -> np.ndarray:
     return d >= RESCORE_LOCAL * _inverse(order, np.median(ds[idx], axis=1))
 
 
+def _locally_sparse_stage(X: np.ndarray, k: int, r, keep: np.ndarray) -> int:
+    """Remove the locally sparse kept points from ``keep`` in place (:mod:`._local_density`,
+    flagged points on their neighbours' plane exempted); their count (0 on k-d tiles, which have
+    no ``kth_distance``)."""
+    if r.kth_distance is None:
+        return 0
+    local = _local_density.locally_sparse_kept(
+        X, keep, r.kth_distance, k, factor=_local_density.LOCAL_FACTOR
+    )
+    local &= ~_local_density.on_surface(X, local, r.knn)
+    keep &= ~local
+    return int(np.count_nonzero(local))
+
+
 def _inverse(order: np.ndarray, v: np.ndarray) -> np.ndarray:
     out = np.empty_like(v)
     out[order] = v
@@ -335,7 +354,10 @@ def remove_outliers(
     score of at least :data:`RESCORE_LIFT` times its threshold (else
     ``info["rescore_dropped"]``), up to :data:`RESCORE_PASSES` passes (:func:`_rescore`).
     Then the locally sparse kept points are removed (:mod:`._local_density`;
-    ``info["n_locally_sparse"]``; not on k-d tiles).
+    ``info["n_locally_sparse"]``; not on k-d tiles); when no second pass ran and the first
+    pass's removals with them reach ``options.rescore_share``, the passes run on the points
+    still kept and the locally sparse test once more (:data:`RESCORE_AFTER_LOCAL`;
+    ``info["rescore_after_local"]``).
     ``threshold=None`` uses
     ``threshold_rule`` (``"valley"``: :func:`valley_threshold`; ``"density"``, ``"otsu"``:
     :func:`auto_threshold`) with the floor :data:`RPCA_MIN_TAU` = 0.5 spacings (chosen on the tuning
@@ -438,20 +460,24 @@ def _outliers(
         keep_f, r, tau = _rpca_pass(X, k, options, threshold, rule, smoothed, workers, device, info)
         s = r.scores
         due = _rescore_due(options, r, keep_f, k, info)
+        again = replace(options, grid=None, viewpoint=options.sensor_origin)
         if due is not None:
             # a second pass on the kept points (docs/decisions.md#outliers-rescore); of uneven
             # spacing, its locally sparse outliers only
             # (docs/decisions.md#outliers-lidar-local-rescore); further passes while they find
             # a contamination's worth (docs/decisions.md#outliers4-rescore-passes)
-            again = replace(options, grid=None, viewpoint=options.sensor_origin)
             _rescore(X, k, again, threshold, rule, workers, device, keep_f, due, info)
         if r.kth_distance is not None:  # (docs/decisions.md#outliers5-local-density)
-            local = _local_density.locally_sparse_kept(
-                X, keep_f, r.kth_distance, k, factor=_local_density.LOCAL_FACTOR
-            )
-            local &= ~_local_density.on_surface(X, local, r.knn)
-            info["n_locally_sparse"] = int(np.count_nonzero(local))
-            keep_f &= ~local
+            n_local = _locally_sparse_stage(X, k, r, keep_f)
+            if due is None and n_local and RESCORE_AFTER_LOCAL:
+                # the locally sparse points count towards the second pass's share
+                # (docs/decisions.md#outliers6-rescore-after-local)
+                due = _rescore_due(options, r, keep_f, k, info)
+                if due is not None:
+                    info["rescore_after_local"] = True
+                    _rescore(X, k, again, threshold, rule, workers, device, keep_f, due, info)
+                    n_local += _locally_sparse_stage(X, k, r, keep_f)
+            info["n_locally_sparse"] = n_local
         if options.grid is not None:  # the grid stage (docs/decisions.md#outliers-organized-grid)
             pix = options.grid.pixels(X.shape[0] if finite is None else finite.size)
             pix = pix if finite is None else pix[finite]
