@@ -113,3 +113,32 @@ def test_cli_names_the_method_chosen(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["method"] == "spectral"
     assert main(["compress", str(src), str(out), "--max-error", "1e-4", "--method", "auto"]) == 0
     assert "predictive (chosen by auto)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("wiggle", [0.0, 0.08, 0.2])
+@pytest.mark.parametrize("start", [1e-4, 3e-3, 0.05])
+def test_max_error_search_ends_on_a_passing_step_next_to_a_failing_one(wiggle, start):
+    # a deviation that grows linearly with the step, with the non-monotone ripple of rounding
+    from spectrageo.compress import MAX_ERROR_STEP_TOL, _ladder_step
+    from spectrageo.compress._rate import STEP_MIN
+
+    bound = 1e-2
+    seen = []
+
+    def worst(s):
+        seen.append(s)
+        return 0.9 * s * (1.0 + wiggle * np.sin(400.0 * s))
+
+    s = _ladder_step(worst, bound, start)
+    tried = sorted(set(seen))
+    assert len(tried) < 40
+    assert STEP_MIN <= s and worst(s) <= bound
+    above = [t for t in tried if s < t <= s * (1 + MAX_ERROR_STEP_TOL) * 1.0001]
+    assert any(worst(t) > bound for t in above), "the search ends next to a failing step"
+
+
+def test_max_error_search_returns_the_largest_step_when_every_step_passes():
+    from spectrageo.compress import _ladder_step
+    from spectrageo.compress._rate import STEP_MAX
+
+    assert _ladder_step(lambda s: 0.0, 1e-3, 1e-2) == STEP_MAX

@@ -60,6 +60,11 @@ TAG_CONNECTIVITY = 1
 #: numerical tolerance (files within about 0.4 % of the largest step's), not a tuned default
 #: (docs/decisions.md#codec-auto)
 MAX_ERROR_STEP_TOL = 0.002
+#: the ``max_error`` search goes on past a failing step while the largest deviation stays within
+#: this factor of the bound, and for at most ``LADDER_FAILS`` failing steps in a row: search
+#: effort, not tuned defaults (docs/decisions.md#codec-max-error-ladder)
+LADDER_SLACK = 1.1
+LADDER_FAILS = 4
 
 #: default quantisation step (fraction of the bounding-box diagonal) when no rate is requested
 DEFAULT_STEP = {"spectral": 1e-3, "feature": 4e-4, "saliency": 4e-4, "predictive": 5e-4}
@@ -304,8 +309,8 @@ def _encode_auto(prep: _Prepared, target: _Target) -> bytes:
 
 def _max_error_step(plan, X: np.ndarray, bound: float, method: str) -> float:
     """The step for ``max_error``: a step whose decoded vertices all lie within ``bound`` of the
-    input, within :data:`MAX_ERROR_STEP_TOL` (relative) of the largest such step (log-bisected;
-    ``predictive`` computes its step directly)."""
+    input, within :data:`MAX_ERROR_STEP_TOL` (relative) of a larger step that does not
+    (``predictive`` computes its step directly; the others search, :func:`_ladder_step`)."""
 
     def worst(s) -> float:
         d = plan.reconstruct(s) - X
@@ -313,16 +318,51 @@ def _max_error_step(plan, X: np.ndarray, bound: float, method: str) -> float:
 
     if method == "predictive":
         return plan.for_max_error(bound)
-    floor = worst(None)
-    if floor > bound or worst(STEP_MIN) > bound:
+    w0 = worst(STEP_MIN)
+    if w0 > bound:
         raise InvalidInputError(
             f"`max_error` = {bound:g} is below what method {method!r} reaches here (largest "
-            f"deviation {max(floor, worst(STEP_MIN)):.3g} at the finest step); use "
+            f"deviation {max(worst(None), w0):.3g} at the finest step); use "
             "method='predictive', which reaches any bound."
         )
-    lo, hi = math.log(STEP_MIN), math.log(STEP_MAX)
-    if worst(STEP_MAX) <= bound:
-        return STEP_MAX
+    s1 = min(max(bound, STEP_MIN), STEP_MAX)
+    w1 = worst(s1)
+    slope = (w1 - w0) / (s1 - STEP_MIN) if s1 > STEP_MIN else 0.0
+    guess = STEP_MIN + (bound - w0) / slope if slope > 0 else STEP_MAX
+    return _ladder_step(worst, bound, min(max(guess, STEP_MIN), STEP_MAX))
+
+
+def _ladder_step(worst, bound: float, s: float) -> float:
+    """The search of :func:`_max_error_step` from the step ``s``; ``worst(STEP_MIN) <= bound``.
+
+    The largest deviation grows about linearly with the step but not monotonically (it is a
+    maximum over rounded coefficients). From ``s``, the search steps down by factors
+    ``q = 1 + 16 MAX_ERROR_STEP_TOL`` (squared at each step) to a passing step, or up by ``q``
+    (squared after each pass) while the deviation stays within :data:`LADDER_SLACK` ``bound``,
+    past isolated failures. It then log-bisects between the largest passing step and the failing
+    step above it.
+    """
+    q = 1.0 + 16.0 * MAX_ERROR_STEP_TOL
+    lo, hi, r = None, None, q
+    while lo is None:  # down to a passing step
+        if s <= STEP_MIN or worst(s) <= bound:
+            lo = max(s, STEP_MIN)
+        else:
+            hi, s, r = s, max(s / r, STEP_MIN), r * r
+    if hi is None:  # up while the deviation stays near the bound
+        t, r, fails = lo, q, 0
+        while t < STEP_MAX and fails < LADDER_FAILS:
+            t = min(t * r, STEP_MAX)
+            w = worst(t)
+            if w <= bound:
+                lo, hi, r, fails = t, None, min(r * r, 2.0), 0
+                continue
+            hi, r, fails = hi or t, q, fails + 1
+            if w > LADDER_SLACK * bound:
+                break
+        if hi is None:
+            return STEP_MAX
+    lo, hi = math.log(lo), math.log(hi)
     while hi - lo > math.log1p(MAX_ERROR_STEP_TOL):
         mid = 0.5 * (lo + hi)
         if worst(math.exp(mid)) <= bound:

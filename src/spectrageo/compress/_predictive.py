@@ -62,9 +62,9 @@ class PredictivePlan:
         self.sphere: float | None = None
         self._cache: tuple = (None, b"", None)
 
-    def _bounds(self, q: float) -> np.ndarray:
+    def _bounds(self, q: float, sphere: float | None) -> np.ndarray:
         G = np.rint(self.X / q)
-        reach = (self.sphere or 0.0) / q + 1.0
+        reach = (sphere or 0.0) / q + 1.0
         if G.size and np.abs(G).max() + reach >= MAX_GRID:
             raise InvalidInputError("quantisation step too small for this mesh; use a larger one.")
         return G.astype(np.int64)
@@ -73,23 +73,25 @@ class PredictivePlan:
         q = f32_below(float(q))
         key = (q, self.sphere, FORMAT)
         if self._cache[0] != key:
-            from . import _predictive_kernel as kernel
-
-            R = self._bounds(q)
-            X = self.X / q if self.sphere else np.zeros((1, 3))
-            rho = self.sphere / q if self.sphere else 0.0
-            G = np.zeros_like(R)
-            buf = np.zeros(self.n * 3 * 16 + 64, dtype=np.uint8)
-            nb = kernel.run(True, self.F, self.n, G, buf, R, R, X, rho, FORMAT)
-            if FORMAT >= 3:  # no vertex count; the coder's first byte (always 0: the
-                # interval starts inside [0, 1)) and the trailing zero bytes are implied
-                if buf[0] != 0:  # pragma: no cover - LZMA's coder never carries into it
-                    raise RuntimeError("predictive range coder wrote a nonzero first byte")
-                data = buf[1:nb].tobytes().rstrip(b"\0")
-            else:
-                data = varint(self.n) + buf[:nb].tobytes()
-            self._cache = (key, data, G)
+            self._cache = (key, *self._run(q, self.sphere))
         return self._cache[1], self._cache[2]
+
+    def _run(self, q: float, sphere: float | None) -> tuple[bytes, np.ndarray]:
+        """The residual stream and the grid coordinates at step ``q`` (float32) and ``sphere``."""
+        from . import _predictive_kernel as kernel
+
+        R = self._bounds(q, sphere)
+        X = self.X / q if sphere else np.zeros((1, 3))
+        rho = sphere / q if sphere else 0.0
+        G = np.zeros_like(R)
+        buf = np.zeros(self.n * 3 * 16 + 64, dtype=np.uint8)
+        nb = kernel.run(True, self.F, self.n, G, buf, R, R, X, rho, FORMAT)
+        if FORMAT >= 3:  # no vertex count; the coder's first byte (always 0: the
+            # interval starts inside [0, 1)) and the trailing zero bytes are implied
+            if buf[0] != 0:  # pragma: no cover - LZMA's coder never carries into it
+                raise RuntimeError("predictive range coder wrote a nonzero first byte")
+            return buf[1:nb].tobytes().rstrip(b"\0"), G
+        return varint(self.n) + buf[:nb].tobytes(), G
 
     def params(self, q: float) -> bytes:
         q = f32_below(float(q))
@@ -113,25 +115,31 @@ class PredictivePlan:
         ``bits + 3 n log2(D)``, ``D`` the candidate's largest vertex displacement (equal slope
         on the rate-error curve; docs/decisions.md#codec-sphere).
         """
+        from ._spectral_fast import thread_map
+
         R = float(bound) * (1.0 - 1e-9)
         cands = [(None, 2.0 * R / math.sqrt(3.0))] + [(R, R / rho) for rho in SPHERE_RHO]
-        best = None
-        for sphere, q in cands:
-            if not STEP_MIN <= q <= STEP_MAX:
-                continue
-            sphere = None if sphere is None else f32_below(sphere)  # stored as float32
-            self.sphere, q = sphere, f32_below(q)
-            data, G = self._encode(q)
-            D = float(np.sqrt(((G * q - self.X) ** 2).sum(axis=1).max())) if self.n else 0.0
-            score = 8 * len(data) + 3 * self.n * math.log2(max(D, 1e-300))
-            if best is None or score < best[0]:
-                best = (score, sphere, q)
-        if best is None:
+        # spheres and steps as stored (float32)
+        cands = [
+            (None if sphere is None else f32_below(sphere), f32_below(q))
+            for sphere, q in cands
+            if STEP_MIN <= q <= STEP_MAX
+        ]
+        if not cands:
             raise InvalidInputError(
                 f"`max_error` = {bound:g} is below what 'predictive' reaches (its finest step "
                 f"{STEP_MIN:g} bounds the error by {STEP_MIN * math.sqrt(3) / 2:.3g})."
             )
+        best = None
+        for (sphere, q), (data, G) in zip(
+            cands, thread_map(lambda c: self._run(c[1], c[0]), cands)
+        ):
+            D = float(np.sqrt(((G * q - self.X) ** 2).sum(axis=1).max())) if self.n else 0.0
+            score = 8 * len(data) + 3 * self.n * math.log2(max(D, 1e-300))
+            if best is None or score < best[0]:
+                best = (score, sphere, q, data, G)
         self.sphere = best[1]
+        self._cache = ((best[2], best[1], FORMAT), best[3], best[4])
         return best[2]
 
 

@@ -658,7 +658,7 @@ def _order(F, n, ptr, vf):
     return order
 
 
-@numba.njit(cache=True)
+@numba.njit(nogil=True, cache=True)
 def run(enc, F, n, G, buf, L, H, X, rho, ver=1):
     """Encode into ``buf`` (returns the byte count) or decode ``buf`` into ``G`` (n, 3) int64
     (returns the bytes read, or -1 when the data ran out), the vertices in

@@ -126,8 +126,8 @@ class SpectralParams:
         }
 
 
-#: threads for the direct complete bases (:class:`_Full`); None: every CPU this process may use.
-#: The result does not depend on it.
+#: threads for the direct complete bases (:class:`_Full`) and the products of :class:`_Explicit`;
+#: None: every CPU this process may use. The result does not depend on it.
 WORKERS: int | None = None
 
 
@@ -150,11 +150,15 @@ class _Explicit:
 
     def synthesise(self, coefs) -> list[np.ndarray]:
         from ._dense_fixed import matmul
+        from ._spectral_fast import CHUNK, thread_map
 
-        return [
-            matmul(np.ascontiguousarray(U[:, : c.shape[0]]), np.ascontiguousarray(c))
-            for U, c in zip(self.bases, coefs)
-        ]
+        def job(a: int) -> list[np.ndarray]:
+            return [
+                matmul(np.ascontiguousarray(U[:, : c.shape[0]]), np.ascontiguousarray(c))
+                for U, c in zip(self.bases[a : a + CHUNK], coefs[a : a + CHUNK])
+            ]
+
+        return [y for ys in thread_map(job, range(0, len(coefs), CHUNK), WORKERS) for y in ys]
 
     def explicit(self) -> _Explicit:
         return self

@@ -178,6 +178,17 @@ def _analyse_bases_range(indptr, indices, flat, offs, lo, hi, X, out, boffs, bou
         bout[boffs[i] : boffs[i + 1]] = W.ravel()
 
 
+def thread_map(fn, items, workers: int | None = None) -> list:
+    """``[fn(x) for x in items]``, on ``workers`` threads (default :func:`default_workers`) when
+    there are several items; for ``nogil`` kernels whose results do not depend on the thread."""
+    items = list(items)
+    w = default_workers() if workers is None else max(1, int(workers))
+    if w == 1 or len(items) <= 1:
+        return [fn(x) for x in items]
+    with ThreadPoolExecutor(min(w, len(items))) as ex:
+        return list(ex.map(fn, items))
+
+
 def default_workers() -> int:
     """Threads used by default: the CPUs this process may run on."""
     try:
@@ -219,12 +230,7 @@ class FullBases:
         def job(r):
             kernel(self.indptr, self.indices, self.flat, self.offs, r[0], r[1], *args, status)
 
-        if self.workers == 1 or len(ranges) <= 1:
-            for r in ranges:
-                job(r)
-        else:
-            with ThreadPoolExecutor(min(self.workers, len(ranges))) as ex:
-                list(ex.map(job, ranges))
+        thread_map(job, ranges, self.workers)
         if status.any():
             i = int(np.flatnonzero(status)[0])
             raise np.linalg.LinAlgError(
