@@ -9,7 +9,8 @@ Layers, lowest first (a package may import only packages of a strictly lower ran
 package may import each other as long as they form no cycle)::
 
     0  _errors                                                  the error hierarchy
-    0.5 _validation, _progress, _device, _colormap, _plugins    base helpers
+    0.5 _validation, _progress, _device, _colormap, _plugins,   base helpers
+        _threads
     1  geometry                                                 data types, primitives, kNN
     1.5 spectrageo (the package root: errors and data types)
     2  graph, io                                                graphs and Laplacians; format registry
@@ -40,6 +41,7 @@ RANK = {
     "_errors": 0,
     "_validation": 0.5,
     "_progress": 0.5,
+    "_threads": 0.5,
     "_device": 0.5,
     "_colormap": 0.5,
     "_plugins": 0.5,

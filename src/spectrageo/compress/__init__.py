@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+from .._progress import activity
 from .._validation import as_faces, as_points, check_choice
 from . import _connectivity, _container, _sga
 from ._rate import RATE_TOLERANCE as RATE_TOLERANCE
@@ -318,6 +319,12 @@ def _max_error_step(plan, X: np.ndarray, bound: float, method: str) -> float:
 
     if method == "predictive":
         return plan.for_max_error(bound)
+    with activity("compress: searching the step for `max_error`"):
+        return _search_max_error(worst, bound, method)
+
+
+def _search_max_error(worst, bound: float, method: str) -> float:
+    """The finest step's check, the linear guess, then :func:`_ladder_step`."""
     w0 = worst(STEP_MIN)
     if w0 > bound:
         raise InvalidInputError(
@@ -333,15 +340,9 @@ def _max_error_step(plan, X: np.ndarray, bound: float, method: str) -> float:
 
 
 def _ladder_step(worst, bound: float, s: float) -> float:
-    """The search of :func:`_max_error_step` from the step ``s``; ``worst(STEP_MIN) <= bound``.
-
-    The largest deviation grows about linearly with the step but not monotonically (it is a
-    maximum over rounded coefficients). From ``s``, the search steps down by factors
-    ``q = 1 + 16 MAX_ERROR_STEP_TOL`` (squared at each step) to a passing step, or up by ``q``
-    (squared after each pass) while the deviation stays within :data:`LADDER_SLACK` ``bound``,
-    past isolated failures. It then log-bisects between the largest passing step and the failing
-    step above it.
-    """
+    """The search of :func:`_max_error_step` from ``s`` (``worst(STEP_MIN) <= bound``): down to a
+    passing step, up past isolated failures (:data:`LADDER_SLACK`), then log-bisection
+    (docs/decisions.md#codec-max-error-ladder)."""
     q = 1.0 + 16.0 * MAX_ERROR_STEP_TOL
     lo, hi, r = None, None, q
     while lo is None:  # down to a passing step

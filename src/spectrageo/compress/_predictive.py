@@ -115,7 +115,7 @@ class PredictivePlan:
         ``bits + 3 n log2(D)``, ``D`` the candidate's largest vertex displacement (equal slope
         on the rate-error curve; docs/decisions.md#codec-sphere).
         """
-        from ._spectral_fast import thread_map
+        from .._threads import thread_map
 
         R = float(bound) * (1.0 - 1e-9)
         cands = [(None, 2.0 * R / math.sqrt(3.0))] + [(R, R / rho) for rho in SPHERE_RHO]

@@ -149,8 +149,9 @@ class _Explicit:
         return [matmul_tn(U, X[part]) for U, part in zip(self.bases, parts)]
 
     def synthesise(self, coefs) -> list[np.ndarray]:
+        from .._threads import thread_map
         from ._dense_fixed import matmul
-        from ._spectral_fast import CHUNK, thread_map
+        from ._spectral_fast import CHUNK
 
         def job(a: int) -> list[np.ndarray]:
             return [
@@ -191,8 +192,7 @@ class _Full:
         return self._fallback.analyse(X, parts)
 
     def analyse_explicit(self, X: np.ndarray, parts) -> list[np.ndarray]:
-        """:meth:`analyse`, forming the bases of :meth:`explicit` on the way (one decomposition
-        per submesh instead of two)."""
+        """:meth:`analyse`, forming the bases of :meth:`explicit` in the same pass."""
         if self._fallback is None and self._explicit is None:
             try:
                 coefs, bases = self.fb.analyse_explicit(X)
@@ -383,8 +383,7 @@ class SpectralPlan:
         self.values = None
 
     def _analyse(self, explicit: bool) -> None:
-        """The coefficients, once: with the explicit bases when ``explicit`` (repeated synthesis
-        follows), otherwise without forming them."""
+        """The coefficients, once (with the explicit bases when ``explicit``)."""
         if self.values is not None:
             return
         X, p, parts = self._X, self.p, self.subs.parts

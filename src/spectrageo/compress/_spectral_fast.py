@@ -10,12 +10,10 @@ the same way whatever the thread count. :func:`overlapped_submeshes` is
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 from numba import njit
 
+from .._threads import default_workers, thread_map
 from ._dense_fixed import apply_q, apply_qt, ql_rotations, rotate, rotate_t, tridiagonalise
 
 #: submeshes handed to a worker thread at a time
@@ -176,25 +174,6 @@ def _analyse_bases_range(indptr, indices, flat, offs, lo, hi, X, out, boffs, bou
         _analyse_one(A, tau, idx, cs, sn, M, order, sign, part, X, Y, out, offs[i])
         W = _basis_one(A, tau, idx, cs, sn, M, order, sign, n)
         bout[boffs[i] : boffs[i + 1]] = W.ravel()
-
-
-def thread_map(fn, items, workers: int | None = None) -> list:
-    """``[fn(x) for x in items]``, on ``workers`` threads (default :func:`default_workers`) when
-    there are several items; for ``nogil`` kernels whose results do not depend on the thread."""
-    items = list(items)
-    w = default_workers() if workers is None else max(1, int(workers))
-    if w == 1 or len(items) <= 1:
-        return [fn(x) for x in items]
-    with ThreadPoolExecutor(min(w, len(items))) as ex:
-        return list(ex.map(fn, items))
-
-
-def default_workers() -> int:
-    """Threads used by default: the CPUs this process may run on."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 class FullBases:

@@ -6,7 +6,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True)
+@numba.njit(nogil=True, cache=True)
 def ialm_fused_step(
     M: np.ndarray,
     A: np.ndarray,
@@ -17,18 +17,19 @@ def ialm_fused_step(
     mu_next: float,
     thr: float,
     group: bool,
+    lo: int,
+    hi: int,
 ) -> float:  # pragma: no cover - jitted
-    """One inexact-ALM row pass (SVT rebuild, shrinkage, multiplier, next SVT input), in place;
-    returns ``||M - L - S||_F^2``.
-    """
-    m, p = M.shape
+    """One inexact-ALM pass over the rows ``lo..hi-1`` (SVT rebuild, shrinkage, multiplier, next
+    SVT input), in place; returns their share of ``||M - L - S||_F^2``."""
+    p = M.shape[1]
     r = Qk.shape[1]
     inv = 1.0 / mu
     inv_next = 1.0 / mu_next
     t = np.empty(r)
     L = np.empty(p)
     acc = 0.0
-    for i in range(m):
+    for i in range(lo, hi):
         t[:] = 0.0
         for j in range(p):
             a = A[i, j]

@@ -15,6 +15,9 @@ from ._common import mesh_normals as _mesh_normals
 SPARSE_NORMS = ("patch", "center")
 SHRINKAGES = ("group", "elementwise")
 SOLVERS = ("internal", "ialm", "godec")
+#: rows of the patch matrix per block of the internal solver's row pass (one thread each); the
+#: residual is summed per block, so it depends on this, not on the thread count
+ROWS = 32768
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,7 @@ def _ialm_tall(
     M: np.ndarray, *, lam: float, tol: float, max_iter: int, group: bool
 ) -> tuple[np.ndarray, int, bool, float, int]:
     """Inexact ALM for ``min ||E||_* + lam ||S||`` s.t. ``M = E + S``, O(q p^2) per iteration."""
+    from .._threads import thread_map
     from ._kernels import ialm_fused_step
 
     m, p = M.shape
@@ -66,12 +70,15 @@ def _ialm_tall(
     mu_bar = mu * 1e7
     rho = 1.5
     A = M + Y / mu  # M - S + Y / mu with S = 0
+    blocks = range(0, m, ROWS)
     converged, resid, rank, it = False, np.inf, 0, 0
     for it in range(1, max_iter + 1):  # noqa: B007 - returned below
         Qk, W = _svt_basis(A, 1.0 / mu)
         rank = Qk.shape[1]
         mu_next = min(mu * rho, mu_bar)
-        zz = ialm_fused_step(M, A, Y, Qk, W, mu, mu_next, lam / mu, group)
+        args = (M, A, Y, Qk, W, mu, mu_next, lam / mu, group)
+        # row blocks on threads; the partial sums added in block order (the same on any count)
+        zz = sum(thread_map(lambda a, x=args: ialm_fused_step(*x, a, min(a + ROWS, m)), blocks))
         mu = mu_next
         resid = float(np.sqrt(zz)) / norm_fro
         if resid <= tol:
