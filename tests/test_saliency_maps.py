@@ -179,7 +179,8 @@ def test_fused_internal_solver_matches_textbook_ialm(group):
 
 
 def test_internal_solver_rows_in_blocks_give_the_same_decomposition(monkeypatch):
-    # rows are independent; only the residual's summation follows the blocks
+    # rows are independent; the Gram matrix and the residual are summed per block, so blocks
+    # change the decomposition by rounding only
     from spectrageo.geometry import face_normals
     from spectrageo.saliency import geometric
 
@@ -190,8 +191,9 @@ def test_internal_solver_rows_in_blocks_give_the_same_decomposition(monkeypatch)
     S, it, _, resid, _ = geometric._ialm_tall(M, lam=lam, tol=1e-6, max_iter=500, group=True)
     monkeypatch.setattr(geometric, "ROWS", 7)
     S7, it7, _, resid7, _ = geometric._ialm_tall(M, lam=lam, tol=1e-6, max_iter=500, group=True)
-    assert it7 == it and np.array_equal(S7, S)
-    assert resid7 == pytest.approx(resid, rel=1e-12)  # summation order only
+    assert it7 == it
+    np.testing.assert_allclose(S7, S, rtol=0, atol=1e-10)
+    assert resid7 == pytest.approx(resid, rel=1e-6)
 
 
 def test_group_shrinkage_is_rotation_invariant_elementwise_is_close():

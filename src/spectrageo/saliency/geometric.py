@@ -15,8 +15,8 @@ from ._common import mesh_normals as _mesh_normals
 SPARSE_NORMS = ("patch", "center")
 SHRINKAGES = ("group", "elementwise")
 SOLVERS = ("internal", "ialm", "godec")
-#: rows of the patch matrix per block of the internal solver's row pass (one thread each); the
-#: residual is summed per block, so it depends on this, not on the thread count
+#: rows of the patch matrix per block of the internal solver's passes (one thread each); the Gram
+#: matrix and the residual are summed per block, so they depend on this, not on the threads
 ROWS = 32768
 
 
@@ -39,9 +39,20 @@ def coherence_matrix(normals: np.ndarray, patches: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(normals[patches].reshape(patches.shape[0], -1), dtype=np.float64)
 
 
+def _gram(A: np.ndarray) -> np.ndarray:
+    """``A^T A``: blocks of :data:`ROWS` rows on threads, added in block order."""
+    from .._threads import thread_map
+
+    parts = thread_map(lambda a: A[a : a + ROWS].T @ A[a : a + ROWS], range(0, A.shape[0], ROWS))
+    G = parts[0]
+    for P in parts[1:]:
+        G += P
+    return G
+
+
 def _svt_basis(A: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
     """``(Qk, W)`` with ``D_tau(A) = (A Qk) W`` for a tall ``A``, from its Gram matrix."""
-    w, Q = np.linalg.eigh(A.T @ A)
+    w, Q = np.linalg.eigh(_gram(A))
     sv = np.sqrt(np.maximum(w, 0.0))
     keep = sv > tau
     Qk = np.ascontiguousarray(Q[:, keep])
@@ -60,7 +71,7 @@ def _ialm_tall(
     norm_fro = float(np.linalg.norm(M))
     if norm_fro == 0.0:
         return np.zeros_like(M), 0, True, 0.0, 0
-    two = float(np.sqrt(max(np.linalg.eigvalsh(M.T @ M)[-1], 0.0)))
+    two = float(np.sqrt(max(np.linalg.eigvalsh(_gram(M))[-1], 0.0)))
     if group:
         dual = float(np.sqrt((M.reshape(m, -1, 3) ** 2).sum(axis=2)).max()) / lam
     else:
