@@ -72,16 +72,21 @@ def _ialm_tall(
     if norm_fro == 0.0:
         return np.zeros_like(M), 0, True, 0.0, 0
     two = float(np.sqrt(max(np.linalg.eigvalsh(_gram(M))[-1], 0.0)))
+    # row blocks throughout: whole-matrix temporaries cost more in fresh pages than in arithmetic
+    blocks = range(0, m, ROWS)
     if group:
-        dual = float(np.sqrt((M.reshape(m, -1, 3) ** 2).sum(axis=2)).max()) / lam
+        dual = max(
+            float(np.sqrt((M[a : a + ROWS].reshape(-1, 3) ** 2).sum(axis=1)).max()) for a in blocks
+        )
     else:
-        dual = float(np.abs(M).max()) / lam
+        dual = max(float(np.abs(M[a : a + ROWS]).max()) for a in blocks)
+    dual /= lam
     Y = M / max(two, dual)
     mu = 1.25 / two
     mu_bar = mu * 1e7
     rho = 1.5
-    A = M + Y / mu  # M - S + Y / mu with S = 0
-    blocks = range(0, m, ROWS)
+    A = Y / mu
+    A += M  # M - S + Y / mu with S = 0
     converged, resid, rank, it = False, np.inf, 0, 0
     for it in range(1, max_iter + 1):  # noqa: B007 - returned below
         Qk, W = _svt_basis(A, 1.0 / mu)
@@ -95,7 +100,9 @@ def _ialm_tall(
         if resid <= tol:
             converged = True
             break
-    S = M - A + Y / mu  # A = M - S + Y / mu after the last step
+    # S = M - A + Y / mu (A = M - S + Y / mu after the last step), in A's and Y's memory
+    S = np.subtract(M, A, out=A)
+    S += np.divide(Y, mu, out=Y)
     return S, it, converged, resid, rank
 
 
