@@ -143,24 +143,9 @@ def _synthesise_range(indptr, indices, flat, offs, lo, hi, coef, out, status):
 
 
 @njit(nogil=True, cache=True)
-def _bases_range(indptr, indices, flat, offs, lo, hi, boffs, out, status):
+def _bases_range(indptr, indices, flat, offs, lo, hi, X, out, boffs, bout, analyse, status):
     """The explicit bases ``U_i = Q (Z P S)`` of the submeshes ``lo..hi-1``, row-major into
-    ``out[boffs[i]:boffs[i + 1]]`` (``Z`` and ``Q`` applied to the signed permutation)."""
-    ws = _workspace(offs, lo, hi)
-    for i in range(lo, hi):
-        part = flat[offs[i] : offs[i + 1]]
-        n = part.size
-        A, tau, idx, cs, sn, M, order, sign, info = _decompose(indptr, indices, part, ws)
-        ws = (ws[0], idx, cs, sn)
-        if info == 0:
-            W = _basis_one(A, tau, idx, cs, sn, M, order, sign, n)
-            out[boffs[i] : boffs[i + 1]] = W.ravel()
-        status[i] = info
-
-
-@njit(nogil=True, cache=True)
-def _analyse_bases_range(indptr, indices, flat, offs, lo, hi, X, out, boffs, bout, status):
-    """:func:`_analyse_range` and :func:`_bases_range` from one decomposition per submesh."""
+    ``bout[boffs[i]:boffs[i + 1]]``, and with ``analyse`` :func:`_analyse_range` into ``out``."""
     ws = _workspace(offs, lo, hi)
     for i in range(lo, hi):
         part = flat[offs[i] : offs[i + 1]]
@@ -170,8 +155,9 @@ def _analyse_bases_range(indptr, indices, flat, offs, lo, hi, X, out, boffs, bou
         status[i] = info
         if info != 0:
             continue
-        Y = np.empty((n, X.shape[1]))
-        _analyse_one(A, tau, idx, cs, sn, M, order, sign, part, X, Y, out, offs[i])
+        if analyse:
+            Y = np.empty((n, X.shape[1]))
+            _analyse_one(A, tau, idx, cs, sn, M, order, sign, part, X, Y, out, offs[i])
         W = _basis_one(A, tau, idx, cs, sn, M, order, sign, n)
         bout[boffs[i] : boffs[i + 1]] = W.ravel()
 
@@ -244,9 +230,10 @@ class FullBases:
     def explicit(self) -> list[np.ndarray]:
         """The bases ``U_i`` as dense (n_i, n_i) arrays, columns in ascending eigenvalue order."""
         boffs = self._basis_offsets()
-        out = np.empty(int(boffs[-1]))
-        self._run(_bases_range, boffs, out)
-        return self._split_bases(out, boffs)
+        bout = np.empty(int(boffs[-1]))
+        none = np.zeros((0, 3))
+        self._run(_bases_range, none, none, boffs, bout, False)
+        return self._split_bases(bout, boffs)
 
     def analyse_explicit(self, X: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """``(analyse(X), explicit())`` from one decomposition per submesh (the same values)."""
@@ -254,7 +241,7 @@ class FullBases:
         out = np.empty((self.flat.size, X.shape[1]))
         boffs = self._basis_offsets()
         bout = np.empty(int(boffs[-1]))
-        self._run(_analyse_bases_range, X, out, boffs, bout)
+        self._run(_bases_range, X, out, boffs, bout, True)
         return np.split(out, self.offs[1:-1]), self._split_bases(bout, boffs)
 
 
