@@ -1,8 +1,10 @@
-"""Threads for compiled kernels that release the GIL: the worker count and an ordered map."""
+"""Threads for compiled kernels: the worker count, an ordered map, numba's thread limit."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
 
@@ -22,3 +24,19 @@ def thread_map(fn, items, workers: int | None = None) -> list:
         return [fn(x) for x in items]
     with ThreadPoolExecutor(min(w, len(items))) as ex:
         return list(ex.map(fn, items))
+
+
+@contextlib.contextmanager
+def numba_threads(workers: int | None) -> Iterator[None]:
+    """Numba's thread-local limit set to ``workers`` threads inside (-1 or None: all)."""
+    import numba
+
+    if workers is None or workers < 0:
+        yield
+        return
+    old = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(workers), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)

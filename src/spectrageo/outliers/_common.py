@@ -5,8 +5,6 @@ duplicate handling."""
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,25 +20,6 @@ KNN_CHUNK = 131_072
 #: Below this many query points the kd-tree and the grid/octree kernels are queried on the
 #: calling thread (starting the query threads costs more than it saves).
 KNN_SERIAL_BELOW = 16_384
-
-
-@contextlib.contextmanager
-def numba_threads(workers: int | None) -> Iterator[None]:
-    """Limit the numba kernels called inside to ``workers`` threads (-1 or None: all).
-
-    The limit is numba's thread-local setting, restored on exit.
-    """
-    import numba
-
-    if workers is None or workers < 0:
-        yield
-        return
-    old = numba.get_num_threads()
-    numba.set_num_threads(max(1, min(int(workers), numba.config.NUMBA_NUM_THREADS)))
-    try:
-        yield
-    finally:
-        numba.set_num_threads(old)
 
 
 def as_cloud(P: Any, name: str = "P") -> tuple[np.ndarray, PointCloud | None]:
@@ -230,8 +209,13 @@ class SortedCloud:
     scale: float
 
     @classmethod
-    def of(cls, P: np.ndarray) -> SortedCloud:
+    def of(cls, P: np.ndarray, order: np.ndarray | None = None) -> SortedCloud:
+        """The sorted cloud of ``P``; a given ``order`` that sorts the codes saves the sort."""
         codes, lo, scale = morton_codes(P)
+        if order is not None:
+            c = codes[order]
+            if c.size == P.shape[0] and bool(np.all(c[1:] >= c[:-1])):
+                return cls(take_rows(P, order), order, c, lo, scale)
         order = sort_codes(codes)
         return cls(take_rows(P, order), order, codes[order], lo, scale)
 
@@ -260,25 +244,25 @@ def knn_grid(
     X, codes = sc.points, sc.codes
     if subset is not None:
         X, codes = take_rows(X, subset), codes[subset]
-    n_query = sc.points.shape[0] if query is None else query.shape[0]
     # few queries: on the calling thread (docs/decisions.md#outliers-speed-serial-regions)
-    with numba_threads(1) if n_query < KNN_SERIAL_BELOW else contextlib.nullcontext():
-        if query is None and subset is None:
-            idx, dmean, dlast, dzero = knn_sorted(X, codes, k, sc.lo, sc.scale)
-        else:
-            qi = np.arange(sc.points.shape[0]) if query is None else query
-            if query is None and self_index is None:
-                self_index = qi
-            idx, dmean, dlast, dzero = knn_sorted(
-                X,
-                codes,
-                k,
-                sc.lo,
-                sc.scale,
-                query=take_rows(sc.points, qi),
-                qcodes=sc.codes[qi],
-                self_index=self_index,
-            )
+    few = KNN_SERIAL_BELOW
+    if query is None and subset is None:
+        idx, dmean, dlast, dzero = knn_sorted(X, codes, k, sc.lo, sc.scale, serial_below=few)
+    else:
+        qi = np.arange(sc.points.shape[0]) if query is None else query
+        if query is None and self_index is None:
+            self_index = qi
+        idx, dmean, dlast, dzero = knn_sorted(
+            X,
+            codes,
+            k,
+            sc.lo,
+            sc.scale,
+            query=take_rows(sc.points, qi),
+            qcodes=sc.codes[qi],
+            self_index=self_index,
+            serial_below=few,
+        )
     if subset is not None:
         idx = subset.astype(idx.dtype, copy=False)[idx]
     return Neighbours(idx, dmean, dlast, int(np.count_nonzero(dzero)))

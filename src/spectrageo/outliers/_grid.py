@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from .._threads import numba_threads
+
 #: Points per cell, averaged over points, of the first grid level.
 TARGET_PER_CELL = 8.0
 #: The octree search scans a cell's points directly once it holds at most this many.
@@ -25,6 +27,9 @@ BUFMAX = 1024
 TOP_CELLS = 64
 #: Bits per axis of the Morton codes.
 BITS = 21
+#: Cost of an octree-pass query in grid-pass queries (the ``serial_below`` rule of
+#: :func:`knn_sorted`): they are far from the data, or on its borders.
+TREE_QUERY_COST = 8
 
 
 @njit(cache=True, inline="always")
@@ -485,13 +490,16 @@ def knn_sorted(
     query: np.ndarray | None = None,
     qcodes: np.ndarray | None = None,
     self_index: np.ndarray | None = None,
+    serial_below: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Exact kNN of Morton-sorted points by the grid and octree passes of this module.
 
     ``X`` (n, 3) sorted by ``codes`` (quantised with ``lo`` and ``scale``); ``query`` (m, 3) sorted
     by ``qcodes`` (default ``X``); ``self_index[i]`` the row excluded for query ``i`` (or -1).
-    Returns ``(idx, dmean, dlast, dzero)``: (m, k) neighbour rows nearest first (int32 when
-    ``n < 2^31``), mean and ``k``-th distances and whether the nearest is at distance 0.
+    A pass of fewer than ``serial_below`` queries (octree: :data:`TREE_QUERY_COST` each) runs
+    on the calling thread. Returns ``(idx, dmean, dlast, dzero)``: (m, k) neighbour rows nearest
+    first (int32 when ``n < 2^31``), mean and ``k``-th distances and whether the nearest is at
+    distance 0.
     """
     n = X.shape[0]
     if query is None:
@@ -517,26 +525,27 @@ def knn_sorted(
     bound = np.empty(m)
     w0 = float(2**L0) / scale
     table, shift = _cell_table(keys)
-    _grid_pass(
-        X,
-        keys,
-        starts,
-        table,
-        shift,
-        query,
-        gstart,
-        gkeys,
-        self_index,
-        k,
-        L0,
-        lo,
-        w0,
-        out_idx,
-        dmean,
-        dlast,
-        dzero,
-        bound,
-    )
+    with numba_threads(1 if m < serial_below else -1):
+        _grid_pass(
+            X,
+            keys,
+            starts,
+            table,
+            shift,
+            query,
+            gstart,
+            gkeys,
+            self_index,
+            k,
+            L0,
+            lo,
+            w0,
+            out_idx,
+            dmean,
+            dlast,
+            dzero,
+            bound,
+        )
     sel = np.flatnonzero(bound >= 0)
     if sel.size == 0:
         return out_idx, dmean, dlast, dzero
@@ -561,24 +570,25 @@ def knn_sorted(
         chlo[off[i] : off[i + 1]] = f[:-1]
         chhi[off[i] : off[i + 1]] = f[1:]
     wl = np.array([float(2 ** (L0 + i)) / scale for i in range(len(lev_keys))])
-    _tree_pass(
-        X,
-        _cell_boxes(ckey, clev, wl, lo),
-        cbeg,
-        cend,
-        clev,
-        chlo,
-        chhi,
-        int(off[-2]),
-        int(off[-1]),
-        query,
-        sel,
-        self_index,
-        bound,
-        k,
-        out_idx,
-        dmean,
-        dlast,
-        dzero,
-    )
+    with numba_threads(1 if sel.size * TREE_QUERY_COST < serial_below else -1):
+        _tree_pass(
+            X,
+            _cell_boxes(ckey, clev, wl, lo),
+            cbeg,
+            cend,
+            clev,
+            chlo,
+            chhi,
+            int(off[-2]),
+            int(off[-1]),
+            query,
+            sel,
+            self_index,
+            bound,
+            k,
+            out_idx,
+            dmean,
+            dlast,
+            dzero,
+        )
     return out_idx, dmean, dlast, dzero

@@ -16,7 +16,8 @@ from collections.abc import Callable
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._common import SortedCloud, knn_grid, numba_threads
+from .._threads import numba_threads
+from ._common import SortedCloud, knn_grid
 from ._tiles import load
 
 __all__ = ["tile_job"]

@@ -41,6 +41,7 @@ def locally_sparse_kept(
     factor: float | None = LOCAL_FACTOR,
     reference: int = LOCAL_REFERENCE,
     floor: float = LOCAL_FLOOR,
+    order: np.ndarray | None = None,
 ) -> np.ndarray:
     """Boolean mask (n,) of the kept points of ``X`` that are locally sparse (module notes).
 
@@ -60,12 +61,14 @@ def locally_sparse_kept(
         ``m``.
     floor : float
         ``q``, in [0, 1].
+    order : (n,) ndarray, optional
+        The Morton order of ``X`` (``PatchRPCAResult.knn[0]``): saves its sort.
 
     Returns
     -------
     (n,) bool ndarray
-        ``True`` for the flagged points (a subset of ``keep``); none when ``K`` holds at most
-        ``m k`` points; a point whose reference spacing is 0 (exact duplicates) is not flagged.
+        The flagged points, a subset of ``keep``: none when ``K`` holds at most ``m k`` points,
+        none whose reference spacing is 0.
     """
     out = np.zeros(keep.size, dtype=bool)
     K = np.flatnonzero(keep)
@@ -77,15 +80,16 @@ def locally_sparse_kept(
     cand = np.flatnonzero(d > factor * low)  # the others cannot pass
     if cand.size == 0:
         return out
-    sc = SortedCloud.of(np.ascontiguousarray(X[K]))
-    inv = np.empty(K.size, dtype=np.int64)
-    inv[sc.order] = np.arange(K.size)
-    q = np.sort(inv[cand])  # sorted positions of the candidates
-    nb = knn_grid(sc, m, query=q, self_index=q)
-    ds = d[sc.order]  # sorted positions, as the lists
+    # the kept points as a subset of the sorted cloud of X (lists: rows of that cloud)
+    sc = SortedCloud.of(X, order)
+    rows = np.flatnonzero(keep[sc.order])
+    ds = np.asarray(spacing, dtype=np.float64)[sc.order]  # sorted positions, as the lists
+    cand = np.flatnonzero(ds[rows] > factor * low)
+    q = rows[cand]
+    nb = knn_grid(sc, m, subset=rows, query=q, self_index=cand)
     ref = np.maximum(np.median(ds[nb.idx], axis=1), low)
     flag = (ds[q] > factor * ref) & (ref > 0)
-    out[K[sc.order[q[flag]]]] = True
+    out[sc.order[q[flag]]] = True
     return out
 
 

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .._threads import numba_threads
 from . import _kernels as _k
 from . import _thresholds
 from ._clusters import cluster_outliers
@@ -19,7 +20,6 @@ from ._common import (
     check_span,
     knn_grid,
     morton_codes,
-    numba_threads,
     sort_codes,
     spacing_from,
 )

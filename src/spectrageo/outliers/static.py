@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
+from .._threads import numba_threads
 from .._validation import (
     check_choice,
     check_positive,
@@ -19,7 +20,7 @@ from .._validation import (
 )
 from ..geometry import PointCloud
 from . import _local_density
-from ._common import SortedCloud, check_k, knn_grid, numba_threads
+from ._common import SortedCloud, check_k, knn_grid
 from ._organized import grid_labels
 from ._support import sparse_surface, within_spread
 from ._thresholds import (  # noqa: F401 - the VALLEY_* constants are re-exported
@@ -305,8 +306,9 @@ def _locally_sparse_stage(X: np.ndarray, k: int, r, keep: np.ndarray) -> int:
     no ``kth_distance``)."""
     if r.kth_distance is None:
         return 0
+    order = None if r.knn is None else r.knn[0]
     local = _local_density.locally_sparse_kept(
-        X, keep, r.kth_distance, k, factor=_local_density.LOCAL_FACTOR
+        X, keep, r.kth_distance, k, factor=_local_density.LOCAL_FACTOR, order=order
     )
     local &= ~_local_density.on_surface(X, local, r.knn)
     keep &= ~local
