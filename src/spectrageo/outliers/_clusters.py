@@ -42,8 +42,9 @@ def _find(parent, i):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _components(X, idx, r2):  # pragma: no cover - compiled
-    """Component label (a root index) of every point of the graph of kNN edges ``<= sqrt(r2)``."""
+def _components(X, idx, r2, near):  # pragma: no cover - compiled
+    """Component label (a root index) of every point of the graph of kNN edges ``<= sqrt(r2)``;
+    ``near[i]``: every edge of ``i`` is that short (not measured)."""
     n, k = idx.shape
     parent = np.arange(n)
     for i in range(n):
@@ -51,12 +52,13 @@ def _components(X, idx, r2):  # pragma: no cover - compiled
             q = idx[i, j]
             if q < 0 or q == i:
                 continue
-            d2 = 0.0
-            for c in range(3):
-                t = X[i, c] - X[q, c]
-                d2 += t * t
-            if d2 > r2:
-                continue
+            if not near[i]:
+                d2 = 0.0
+                for c in range(3):
+                    t = X[i, c] - X[q, c]
+                    d2 += t * t
+                if d2 > r2:
+                    continue
             a = _find(parent, i)
             b = _find(parent, q)
             if a != b:
@@ -77,18 +79,22 @@ def cluster_outliers(
     radius: float = CLUSTER_RADIUS,
     max_size: int = CLUSTER_MAX,
     min_thickness: float = CLUSTER_THICKNESS,
+    kth: np.ndarray | None = None,
 ) -> np.ndarray:
     """Boolean mask of the points in small volumetric clusters (module notes).
 
     ``X`` (n, 3) float64 points, ``idx`` (n, k) their nearest neighbours (self excluded, any
-    order, ``-1`` for none), ``h`` the point spacing (same units as ``X``).
+    order, ``-1`` for none), ``h`` the point spacing (same units as ``X``); ``kth`` (n,), when
+    known, the distance to the farthest listed neighbour (NaN: unknown).
     """
     n = X.shape[0]
     flag = np.zeros(n, dtype=bool)
     limit = min(int(max_size), n // 10)
     if n == 0 or limit < 1 or not np.isfinite(h) or h <= 0:
         return flag
-    lab = _components(np.ascontiguousarray(X, dtype=np.float64), idx, float(radius * h) ** 2)
+    r = float(radius * h)
+    near = np.zeros(n, dtype=bool) if kth is None else kth <= r * (1.0 - 1e-9)
+    lab = _components(np.ascontiguousarray(X, dtype=np.float64), idx, r**2, near)
     size = np.bincount(lab, minlength=n)
     small = (size > 0) & (size <= limit)
     small[int(np.argmax(size))] = False

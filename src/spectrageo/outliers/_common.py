@@ -104,17 +104,11 @@ def morton_order(P: np.ndarray) -> np.ndarray:
 
 
 def sort_codes(codes: np.ndarray) -> np.ndarray:
-    """``np.argsort(codes, kind="stable")``, faster: numpy's quicksort of integers, then the
-    stable order restored inside runs of equal codes, so the permutation is the same on every
-    machine whatever sorting kernel numpy dispatches to."""
-    order = np.argsort(codes)
-    sc = codes[order]
-    tie = sc[1:] == sc[:-1]
-    if tie.any():
-        # equal codes are adjacent: within each run, sort the original indices
-        run = np.concatenate(([0], np.cumsum(~tie)))
-        order = order[np.lexsort((order, run))]
-    return order
+    """``np.argsort(codes, kind="stable")`` of uint64 ``codes``, faster (a compiled radix sort:
+    the same permutation on every machine)."""
+    from ._grid import radix_argsort
+
+    return radix_argsort(np.ascontiguousarray(codes, dtype=np.uint64))
 
 
 @dataclass(frozen=True)

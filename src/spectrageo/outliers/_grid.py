@@ -417,6 +417,41 @@ def _tree_pass(
             _write(qi, bd, bi, k, out_idx, dmean, dlast, dzero)
 
 
+@njit(cache=True, nogil=True)
+def radix_argsort(keys):  # pragma: no cover - compiled
+    """``np.argsort(keys, kind="stable")`` of unsigned 64-bit ``keys``: a least-significant-digit
+    radix sort of 11-bit digits, skipping the digits every key shares."""
+    n = keys.shape[0]
+    order = np.arange(n)
+    if n < 2:
+        return order
+    count = np.zeros((6, 2049), dtype=np.int64)  # one histogram per digit, in one sweep
+    mask = np.uint64(2047)
+    for i in range(n):
+        v = keys[i]
+        for p in range(6):
+            count[p, ((v >> np.uint64(11 * p)) & mask) + 1] += 1
+    src = keys.copy()
+    dst = np.empty(n, dtype=keys.dtype)
+    dst_o = np.empty(n, dtype=np.int64)
+    for p in range(6):
+        c = count[p]
+        if c.max() == n:  # one digit for all: the order stands
+            continue
+        for d in range(2048):
+            c[d + 1] += c[d]
+        shift = np.uint64(11 * p)
+        for i in range(n):
+            d = (src[i] >> shift) & mask
+            q = c[d]
+            c[d] = q + 1
+            dst[q] = src[i]
+            dst_o[q] = order[i]
+        order, dst_o = dst_o, order
+        src, dst = dst, src
+    return order
+
+
 def _coarsen(keys: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One level up (keys ``>> 3``): new keys, run starts (last = n) and first-child positions
     (into ``keys``; last = ``keys.size``)."""

@@ -63,7 +63,7 @@ def score_cloud(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
     check_span(Xs, h, opts["dtype"])
     idx, dlast_s = nb.idx, nb.dlast
     del nb
-    clusters_s = cluster_outliers(Xs, idx, h) if opts["clusters"] else None  # step 8
+    clusters_s = cluster_outliers(Xs, idx, h, kth=dlast_s) if opts["clusters"] else None  # step 8
     solve_kw = {
         key: opts[key]
         for key in ("lam", "rho", "tol", "rank_tol", "max_iter", "block_size", "workers", "dtype")
@@ -93,6 +93,7 @@ def score_cloud(X: np.ndarray, k: int, **opts: Any) -> PatchRPCAResult:
                 scores_s=scores_s,
                 E0_s=E0_s,
                 S_s=S2,
+                workers=solve_kw["workers"],
             )
         elif n_refined:  # otherwise the second pass would repeat the first
             scores_s, E0_s, S2, it2, conv2, res2, _ = solve_blocks(

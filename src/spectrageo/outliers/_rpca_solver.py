@@ -23,6 +23,8 @@ from ._svt import RANK_BIN, RANK_FLOOR, svt_operator
 _MIN_PER_THREAD = 10_000
 #: Most point ranges per block of the fused kernels (see :class:`_Ranges`).
 _MAX_PARTS = 16
+#: Fewest replayed rows whose two passes per iteration run on two threads.
+_REPLAY_THREADED = 2048
 
 
 def solve_blocks(
@@ -128,11 +130,12 @@ def replay_blocks(
     scores_s: np.ndarray,
     E0_s: np.ndarray | None,
     S_s: np.ndarray | None,
+    workers: int = 1,
 ) -> None:
     """Step 5's second pass: the sorted rows ``rows`` (whose patches were rebuilt from
     ``old_idx`` to ``idx[rows]``) rescored, in place in ``scores_s``, ``E0_s`` and ``S_s``, by
     :func:`_replay_ialm` with the recorded iterations of their block (same blocks, centring and
-    scaling as :func:`solve_blocks`)."""
+    scaling as :func:`solve_blocks`); ``workers`` as there."""
     n = Xs.shape[0]
     n_blocks = len(record)
     bounds = np.linspace(0, n, n_blocks + 1).astype(np.int64)
@@ -164,6 +167,7 @@ def replay_blocks(
                 np.ascontiguousarray(idx[sel]),
                 record[b],
                 vec,
+                sel.size >= _REPLAY_THREADED and _n_threads(workers, 2 * _MIN_PER_THREAD) > 1,
             )
             scores_s[sel] = sc
             if E0_s is not None:
@@ -285,6 +289,7 @@ def _replay_ialm(
     nbrs_new: np.ndarray,
     steps: list,
     vec: np.ndarray,
+    threaded: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Step 5's second pass on the rows ``centers`` whose patches changed from ``nbrs_old`` to
     ``nbrs_new``, from the iterations ``steps`` recorded by :func:`_patch_ialm` on all rows.
@@ -293,7 +298,7 @@ def _replay_ialm(
     recorded operators (reproducing their share ``G_t^old`` of each Gram matrix ``G_t``) and on
     their new patches with the operators of ``G_t - G_t^old + G_t^new``; other rows keep their
     first-pass scores. Returns the new rows' scores and ``E`` first columns; ``vec`` receives their
-    residual vectors.
+    residual vectors. ``threaded``: the two passes of an iteration run on two threads.
     """
     m = centers.shape[0]
     K = nbrs_new.shape[1] + 1
@@ -309,11 +314,16 @@ def _replay_ialm(
     _k.patch_gram(Pn, centers, nbrs_new, G_new, 0, m)
     s_old, e_old = np.empty(m), np.empty((m, 3))
     no_vec = np.empty((0, 3), dtype=np.float32)
-    for G, mu, (W, A, B, *scal) in steps:
-        ops = tuple(x.astype(Pn.dtype) for x in svt_operator(G - G_old + G_new, 1.0 / mu))
-        # G_old / G_new are overwritten with the shares of the next iteration's Gram matrix
-        _k.patch_ialm_pass(
-            Pn, centers, nbrs_old, R_old, W, A, B, *scal, e_old, s_old, no_vec, G_old, 0, m
-        )
-        _k.patch_ialm_pass(Pn, centers, nbrs_new, R_new, *ops, *scal, E0, scores, vec, G_new, 0, m)
+    with ThreadPoolExecutor(1) if threaded else contextlib.nullcontext() as pool:
+        for G, mu, (W, A, B, *scal) in steps:
+            ops = tuple(x.astype(Pn.dtype) for x in svt_operator(G - G_old + G_new, 1.0 / mu))
+            # G_old / G_new are overwritten with the shares of the next iteration's Gram matrix
+            old = (Pn, centers, nbrs_old, R_old, W, A, B, *scal, e_old, s_old, no_vec, G_old, 0, m)
+            fut = None if pool is None else pool.submit(_k.patch_ialm_pass, *old)
+            if fut is None:
+                _k.patch_ialm_pass(*old)
+            new = (Pn, centers, nbrs_new, R_new, *ops, *scal, E0, scores, vec, G_new, 0, m)
+            _k.patch_ialm_pass(*new)
+            if fut is not None:
+                fut.result()
     return scores, E0
