@@ -1,7 +1,8 @@
 """Exact speed-ups of the RPCA outlier pipeline at 100k points give the bits of the computations
 they replace (docs/decisions.md#outliers7-speed-100k): the radix sort of the Morton codes, the
 octree pass of few far queries on threads, the locally sparse stage on the pass's sorted cloud,
-the replay's two passes on two threads and the cluster links known short from the kNN."""
+the replay's two passes on two threads, the cluster links known short from the kNN and the
+density rule's bin counts without a sort."""
 
 from __future__ import annotations
 
@@ -93,3 +94,15 @@ def test_replay_on_two_threads_gives_the_same_bits(monkeypatch):
     a, b = runs
     assert a.info["n_refined"] > 500
     assert np.array_equal(a.scores, b.scores) and np.array_equal(a.keep, b.keep)
+
+
+def test_density_rule_counts_equal_numpy_histogram():
+    from spectrageo.outliers._thresholds import _bin_counts
+
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        s = np.abs(rng.standard_normal(int(rng.integers(1, 3000)))) * rng.uniform(0.1, 10)
+        w = rng.uniform(0.01, 1.0)
+        edges = np.arange(0.0, rng.uniform(0.5, 5.0) + w, w)
+        s[:3] = edges[rng.integers(0, edges.size, 3)]  # values on the edges, the last included
+        assert np.array_equal(_bin_counts(s, edges), np.histogram(s, edges)[0])

@@ -63,11 +63,18 @@ def auto_threshold(scores: Any, *, minimum: float = 0.0, rule: str = "otsu") -> 
     edges = np.arange(0.0, t0 + w, w)
     if edges.size < 2:
         return t0
-    counts, _ = np.histogram(s, edges)
+    counts = _bin_counts(s, edges)
     low = np.flatnonzero(counts <= 2.0 * d * w)
     if low.size == 0:
         return t0
     return float(max(edges[low[0]], minimum))
+
+
+def _bin_counts(s: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """``np.histogram(s, edges)[0]`` (last bin closed) without sorting ``s``."""
+    b = np.searchsorted(edges, s, side="right") - 1
+    b[s == edges[-1]] = edges.size - 2
+    return np.bincount(b[(b >= 0) & (b < edges.size - 1)], minlength=edges.size - 1)
 
 
 def valley_threshold(scores: Any, *, minimum: float = RPCA_MIN_TAU) -> tuple[float, dict]:
