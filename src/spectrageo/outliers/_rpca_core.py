@@ -20,7 +20,6 @@ from ._common import (
     check_span,
     knn_grid,
     morton_codes,
-    sort_codes,
     spacing_from,
 )
 from ._rpca_solver import replay_blocks, solve_blocks
@@ -206,8 +205,8 @@ def _subtract_local_baseline(scores: np.ndarray, s1: np.ndarray, idx: np.ndarray
 
 def has_duplicates(X: np.ndarray) -> bool:
     """Whether two rows of ``X`` are equal (exact check only where Morton codes collide)."""
-    codes = morton_codes(X)[0]
-    sc = codes[sort_codes(codes)]
+    sc = morton_codes(X)[0]
+    sc.sort()  # in place: the values only
     if not np.any(sc[1:] == sc[:-1]):
         return False
     return int(np.unique(X, axis=0).shape[0]) < X.shape[0]
