@@ -322,6 +322,32 @@ def test_activity_display_on_terminal_only(monkeypatch, capsys):
     assert capsys.readouterr().err == ""
 
 
+def test_outliers_and_saliency_commands_show_their_activity(tmp_path, monkeypatch, capsys):
+    """Long commands say what runs (on a terminal), as `denoise` does."""
+    import contextlib
+
+    from spectrageo import PointCloud, _progress
+
+    shown = []
+
+    @contextlib.contextmanager
+    def record(desc, **kw):
+        shown.append(desc)
+        yield
+
+    monkeypatch.setattr(_progress, "activity", record)
+    rng = np.random.default_rng(0)
+    io.write(tmp_path / "c.ply", PointCloud(rng.random((400, 3))))
+    V, F = icosphere(2)
+    io.write(tmp_path / "m.ply", Mesh(V, F))
+    code, _, _ = run_cli(capsys, "outliers", tmp_path / "c.ply", tmp_path / "o.ply")
+    assert code == 0
+    code, _, _ = run_cli(capsys, "saliency", tmp_path / "m.ply", "--out", tmp_path / "s.npy")
+    assert code == 0
+    assert shown[0] == "outliers rpca (400 points)"
+    assert shown[1].startswith("saliency ") and shown[1].endswith(f"({V.shape[0]} vertices)")
+
+
 def test_info_piped_into_head_is_not_an_error(tmp_path):
     # a sequence of 30,000 one-point frames: its JSON (the per-frame counts) outgrows a pipe buffer
     n = 30_000

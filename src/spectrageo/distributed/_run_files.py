@@ -162,6 +162,7 @@ def run_denoise(args) -> int:
 
 def run_outliers(args) -> int:
     from .. import io, outliers
+    from .._progress import activity
     from ..geometry import Mesh, PointCloud, PointCloudSequence
 
     check_outputs([args.input], [args.output, args.mask, args.scores])
@@ -187,9 +188,10 @@ def run_outliers(args) -> int:
             raise InvalidInputError(
                 "sequences are cleaned on the CPU; --device cuda applies to single clouds."
             )
-        res = outliers.clean_sequence(
-            obj, k=args.k, **({"tau": args.threshold} if args.threshold else {})
-        )
+        with activity(f"outliers rpca ({obj.n_frames} frames)"):
+            res = outliers.clean_sequence(
+                obj, k=args.k, **({"tau": args.threshold} if args.threshold else {})
+            )
         io.write(args.output, res.frames)
         keep = np.array(res.keep, dtype=object) if not _same_len(res.keep) else np.stack(res.keep)
         if args.mask:
@@ -207,7 +209,8 @@ def run_outliers(args) -> int:
             f"{Path(args.input).name} is a mesh animation; outliers needs a point cloud, a mesh "
             "or a point-cloud sequence."
         )
-    res = outliers.remove_outliers(cloud, **opts)
+    with activity(f"outliers {args.method} ({cloud.n_points} points)"):
+        res = outliers.remove_outliers(cloud, **opts)
     keep = np.asarray(res.keep, dtype=bool)
     scores = np.asarray(res.scores, dtype=np.float64)
     extra = ""
@@ -261,24 +264,27 @@ def _same_len(arrs) -> bool:
 
 def run_saliency(args) -> int:
     from .. import io, saliency
+    from .._progress import activity
     from ..geometry import Mesh, MeshAnimation, PointCloud
 
     value_suffix(args.out)
     obj, rep = io.read_with_report(args.input, nan_points="drop")
     t0 = time.perf_counter()
     if isinstance(obj, Mesh):
-        s = saliency.saliency(
-            obj.vertices,
-            obj.faces,
-            saliency.SaliencyOptions(k=args.k, fast=args.fast),
-            method=args.method,
-            per=args.per,
-        )
+        with activity(f"saliency {args.method} ({obj.n_vertices} vertices)"):
+            s = saliency.saliency(
+                obj.vertices,
+                obj.faces,
+                saliency.SaliencyOptions(k=args.k, fast=args.fast),
+                method=args.method,
+                per=args.per,
+            )
         write_values(args.out, s, geometry=obj, per=args.per, name="saliency")
     elif isinstance(obj, PointCloud):
         if args.per == "face":
             raise InvalidInputError("a point cloud has no faces; use --per vertex.")
-        s = saliency.pointcloud_saliency(obj.points, k=args.k)
+        with activity(f"saliency ({obj.n_points} points)"):
+            s = saliency.pointcloud_saliency(obj.points, k=args.k)
         if rep.source_index is not None and value_suffix(args.out) != ".ply":
             # one value per input row, as the outlier masks: NaN where a row (an organized
             # scan's missing measurement) had no coordinates; a .ply holds the points kept
@@ -294,9 +300,10 @@ def run_saliency(args) -> int:
             raise InvalidInputError("animations are mapped per vertex; use --per vertex.")
         if value_suffix(args.out) == ".ply":
             raise InvalidInputError("an animation map is (frames, vertices): use .npy or .csv.")
-        res = saliency.animation_saliency(
-            obj.frames, obj.faces, saliency.SaliencyOptions(k=args.k), method=args.method
-        )
+        with activity(f"saliency {args.method} ({obj.n_frames} frames)"):
+            res = saliency.animation_saliency(
+                obj.frames, obj.faces, saliency.SaliencyOptions(k=args.k), method=args.method
+            )
         s = res.values
         write_values(args.out, s, name="saliency")
         status(
