@@ -77,8 +77,7 @@ def locally_sparse_kept(
         return out
     d = np.asarray(spacing, dtype=np.float64)[K]
     low = float(np.quantile(d, floor))
-    cand = np.flatnonzero(d > factor * low)  # the others cannot pass
-    if cand.size == 0:
+    if not np.any(d > factor * low):  # only these can pass
         return out
     # the kept points as a subset of the sorted cloud of X (lists: rows of that cloud)
     sc = SortedCloud.of(X, order)
