@@ -27,11 +27,13 @@ HELP = {
         "counts the whole file; --error is the RMS vertex error as a fraction of the\n"
         "bounding-box diagonal; both are met within 5 %. --max-error bounds the largest vertex\n"
         "deviation, hence the symmetric Hausdorff distance (any bound with predictive).\n"
-        "Animations (.npz or a folder of frames) go to a .sga file: eigen-trajectory coding of\n"
-        "delta coordinates (Sec. 5.2.2: pca, pca-q, pca-qs, pca-qp, blocks [default]),\n"
-        "eigen-trajectories in the partitioned GFT basis (pca-spectral: Sec. 5.2.1 + 5.2.2) or\n"
-        "the scalable layered streaming codec (Sec. 5.2.4: layered, one segment per frame); --bpvf\n"
-        "is the whole file in bits per vertex per frame, --error the KG error in percent.",
+        "Animations (.npz or a folder of frames) go to a .sga file: trajectory PCA with the\n"
+        "coefficients predicted along the mesh (pca-pred [default]; --reorder codes vertices and\n"
+        "faces in the connectivity coder's order), eigen-trajectory coding of delta coordinates\n"
+        "(Sec. 5.2.2: pca, pca-q, pca-qs, pca-qp, blocks), eigen-trajectories in the partitioned\n"
+        "GFT basis (pca-spectral: Sec. 5.2.1 + 5.2.2) or the scalable layered streaming codec\n"
+        "(Sec. 5.2.4: layered, one segment per frame); --bpvf is the whole file in bits per\n"
+        "vertex per frame, --error the KG error in percent.",
         "spectrageo compress fandisk.off fandisk.sgc --bpv 20\n"
         "spectrageo compress part.obj part.sgc --method feature --error 0.002\n"
         "spectrageo compress part.obj part.sgc --max-error 1e-4 --reorder   # auto\n"

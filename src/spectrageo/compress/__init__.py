@@ -448,7 +448,7 @@ def encode_animation(
     frames,
     F,
     *,
-    method: str = "blocks",
+    method: str = "pca-pred",
     bpvf: float | None = None,
     error: float | None = None,
     step: float | None = None,
@@ -465,8 +465,8 @@ def encode_animation(
     frames : (T, n, 3) float or MeshAnimation
     F : (m, 3) int
         Shared faces; vertex order and faces are kept exactly.
-    method : {"pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "pca-pred", "layered"}
-        ``"pca-pred"``: trajectory PCA with the coefficients predicted along the mesh
+    method : {"pca-pred", "pca", "pca-q", "pca-qs", "pca-qp", "blocks", "pca-spectral", "layered"}
+        ``"pca-pred"`` (default): trajectory PCA with the coefficients predicted along the mesh
         (:mod:`._pca_pred`; not of the thesis), the smallest files; its step defaults to 2.5e-4.
     bpvf : float, optional
         Target size of the whole file in bits per vertex per frame (met within 5 %).

@@ -228,7 +228,7 @@ def _search(
         if nx == x:  # at a bound and still short of the target
             if err <= RATE_TOLERANCE:
                 return to_step(x)
-            side = "smallest" if (y > yt) == (slope0 > 0) else "largest"
+            side = "smallest" if y > yt else "largest"  # stuck above the target: its floor
             raise InvalidInputError(
                 f"`{what}` = {target:g} cannot be reached: the {side} value this method gives "
                 f"here is {v:.4g}" + _unit(what)

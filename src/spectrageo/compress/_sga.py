@@ -46,7 +46,7 @@ from ._sga_format import (
 
 
 def encode_animation(
-    frames, F, *, method: str = "blocks", bpvf=None, error=None, step=None, **options
+    frames, F, *, method: str = "pca-pred", bpvf=None, error=None, step=None, **options
 ) -> bytes:
     """See :func:`spectrageo.compress.encode_animation`."""
     if method == "layered":

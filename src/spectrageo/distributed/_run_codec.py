@@ -44,7 +44,7 @@ def _compress_animation(args) -> int:
     from .. import compress
     from ..geometry import MeshAnimation
 
-    method = args.method or "blocks"
+    method = args.method or "pca-pred"
     if method not in compress.ANIMATION_METHODS:
         raise InvalidInputError(
             f"--method {method!r} is a mesh codec; animations take one of "
