@@ -53,3 +53,14 @@ def test_unreachable_pca_pred_targets_name_their_side(kw, side):
     A, F = _animation()
     with pytest.raises(InvalidInputError, match=f"cannot be reached: the {side} value"):
         compress.encode_animation(A, F, **kw)
+
+
+@pytest.mark.parametrize("method", ["pca-pred", "blocks", "pca-qp"])
+def test_error_target_on_frames_collapsed_to_a_point_is_refused(method):
+    _A, F = _animation()
+    A = np.zeros((6, int(F.max()) + 1, 3))
+    A[:, :, 0] = np.arange(6)[:, None]  # each frame one point, moving
+    with pytest.raises(InvalidInputError, match="KG\\) is undefined"):
+        compress.encode_animation(A, F, method=method, error=0.5)
+    data = compress.encode_animation(A, F, method=method, step=1e-3)
+    assert np.allclose(compress.decode_animation(data)[0], A, atol=1e-6)

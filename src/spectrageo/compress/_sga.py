@@ -54,6 +54,11 @@ def encode_animation(
             raise InvalidInputError("give at most one of `bpvf` and `error`.")
         return _layered.encode(frames, F, step=step, bpvf=bpvf, error=error, **options)
     A, F = check_encode_args(frames, F, method, step, bpvf, error)
+    if error is not None and not np.any(A != A[:, :1]):
+        raise InvalidInputError(
+            "`error` (KG) is undefined here: every frame has all its vertices at one point; "
+            "give `bpvf` or `step` instead."
+        )
     reorder = options.pop("reorder", False)
     if not isinstance(reorder, bool | np.bool_) or (reorder and method != "pca-pred"):
         raise InvalidInputError(
