@@ -1,5 +1,5 @@
-"""The default animation method (``pca-pred``) through the API and the CLI, the streaming
-encoder's own default, and the sides named by unreachable ``pca-pred`` targets."""
+"""The default animation method (``pca-pred``) through the API, the CLI and the streaming
+encoder, and the sides named by unreachable ``pca-pred`` targets."""
 
 from __future__ import annotations
 
@@ -37,12 +37,13 @@ def test_default_is_pca_pred_in_the_api_and_the_cli(tmp_path):
     assert np.abs(R - A).max() < 1e-3 * diag
 
 
-def test_streaming_keeps_blocks():
-    A, F = _animation()
+def test_streaming_default_is_pca_pred_in_blocks_of_16():
+    A, F = _animation(20)
     enc = compress.StreamEncoder(F)
     parts = [enc.push(X) for X in A]
     data = b"".join(parts) + enc.close()
-    assert compress.info_animation(data)["method"] == "blocks"
+    info = compress.info_animation(data)
+    assert info["method"] == "pca-pred" and info["n_blocks"] == 2
 
 
 @pytest.mark.parametrize(

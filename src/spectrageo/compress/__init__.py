@@ -516,13 +516,15 @@ def info_animation(data) -> dict:
 
 
 class StreamEncoder(_sga.StreamEncoder):
-    """Streaming encoder (``blocks`` or ``layered``): :meth:`push` one frame at a time, then
-    :meth:`close`.
+    """Streaming encoder (``pca-pred``, ``blocks`` or ``layered``): :meth:`push` one frame at a
+    time, then :meth:`close`.
 
-    ``StreamEncoder(F, *, method="blocks", step=None, bpvf=None, **options)``. Every call returns
-    the bytes ready to send; their concatenation is a valid ``.sga`` file. ``blocks`` emits one
-    segment per ``block`` frames (with ``bpvf``, each block at the step that meets the rate) and
-    holds one block in memory. ``layered`` emits one segment per frame, the header and the whole
+    ``StreamEncoder(F, *, method="pca-pred", step=None, bpvf=None, **options)``. Every call
+    returns the bytes ready to send; their concatenation is a valid ``.sga`` file. ``pca-pred``
+    and ``blocks`` emit one segment per ``block`` frames (default 16; with ``bpvf``, each block at
+    the step that meets the rate), hold one block in memory and normalise by twice the first
+    frame's box; ``pca-pred`` takes ``reorder=True`` as :func:`encode_animation` does (the order
+    from the first frame). ``layered`` emits one segment per frame, the header and the whole
     first frame with the first push; with ``bpvf`` it chooses every frame's layer (Algorithm 11
     line 5) and its layer order uses the first frame only.
     """

@@ -600,7 +600,7 @@ def _counts(q: np.ndarray) -> np.ndarray:
 class PcaPredEncoder:
     """Analysis of one block ``X`` (T, n, 3) (normalised frames) shared by every step."""
 
-    def __init__(self, X: np.ndarray, F: np.ndarray) -> None:
+    def __init__(self, X: np.ndarray, F: np.ndarray, plan: tuple | None = None) -> None:
         T, n = X.shape[:2]
         self.T, self.n = T, n
         Y = np.ascontiguousarray(X.transpose(1, 2, 0).reshape(n, 3 * T))
@@ -620,7 +620,7 @@ class PcaPredEncoder:
         self.V = V * sg
         self.energy = np.maximum(w[::-1][: V.shape[1]], 0.0)  # ||Yc v_j||^2
         self._C = np.zeros((n, 0))
-        self.plan = make_plan(F, n)
+        self.plan = make_plan(F, n) if plan is None else plan
         self._q: dict = {}
         self._p: dict = {}
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from .._validation import as_faces
-from . import _animation, _container, _layered
+from . import _animation, _container, _layered, _pca_pred
 from ._animation import (
     DEFAULT_STEP,
     StreamState,
@@ -29,7 +29,13 @@ from ._animation import (
 )
 from ._layered import LayeredEncoder, LayeredState
 from ._rate import bisect_step
-from ._rate_animation import QUANTISED, pred_rate_search, rate_search
+from ._rate_animation import (
+    QUANTISED,
+    SLOPE_PRED_BPVF,
+    _search,
+    pred_rate_search,
+    rate_search,
+)
 from ._sga_format import (
     KIND_INDEX,
     Params,
@@ -204,7 +210,7 @@ def _info_animation(data: bytes) -> dict:
 class StreamEncoder:
     """See :class:`spectrageo.compress.StreamEncoder`."""
 
-    def __init__(self, F, *, method="blocks", step=None, bpvf=None, **options) -> None:
+    def __init__(self, F, *, method="pca-pred", step=None, bpvf=None, **options) -> None:
         self._lay = None
         if method == "layered":
             bad = sorted(set(options) - {"layer", "refresh", "fine"})
@@ -215,10 +221,16 @@ class StreamEncoder:
                 )
             self._lay = LayeredEncoder(F, step=step, bpvf=bpvf, **options)
             return
-        if method != "blocks":
+        if method not in ("blocks", "pca-pred"):
             raise InvalidInputError(
-                f"streaming supports methods 'blocks' and 'layered' (the others need the whole "
-                f"sequence); got {method!r}."
+                f"streaming supports methods 'blocks', 'pca-pred' and 'layered' (the others "
+                f"need the whole sequence); got {method!r}."
+            )
+        self.reorder = options.pop("reorder", False)
+        if not isinstance(self.reorder, bool | np.bool_) or (self.reorder and method != "pca-pred"):
+            raise InvalidInputError(
+                f"`reorder` must be True or False and needs method 'pca-pred'; got "
+                f"{self.reorder!r}."
             )
         if step is not None and bpvf is not None:
             raise InvalidInputError("give at most one of `step` and `bpvf`.")
@@ -228,7 +240,8 @@ class StreamEncoder:
                 raise InvalidInputError(f"`{name}` must be a positive number; got {v!r}.")
         self.o = _check_options(method, options)
         self.F_in = F
-        self.step = DEFAULT_STEP if step is None else float(step)
+        default = _pca_pred.PRED_STEP if method == "pca-pred" else DEFAULT_STEP
+        self.step = default if step is None else float(step)
         self.bpvf = None if bpvf is None else float(bpvf)
         self.method = method
         self.buf: list[np.ndarray] = []
@@ -249,6 +262,9 @@ class StreamEncoder:
         self.origin = 0.5 * (lo + hi)
         diag = float(np.linalg.norm(hi - lo))
         self.scale = 2.0 * diag if diag > 0 else 1.0  # room for motion beyond the first frame
+        self.perm = None
+        if self.method == "pca-pred":
+            return self._start_pred(V0)
         self.L = _laplacian(self.F, n)
         X0 = (V0 - self.origin) / self.scale
         self.anchors = choose_anchors(X0, self.L, float(self.o["anchors"]))
@@ -279,6 +295,30 @@ class StreamEncoder:
         self.offset = len(head)
         return head
 
+    def _start_pred(self, V0: np.ndarray) -> bytes:
+        if self.reorder:
+            from ._connectivity import reorder_coded
+
+            _V, self.F, self.perm, _code = reorder_coded(V0, self.F)
+        self.plan = _pca_pred.make_plan(self.F, self.n)
+        self.p = Params(
+            "pca-pred", 0, int(self.o["block"]), 0, self.step, 1.0, 1.0, 0, _pca_pred.CODER
+        )
+        head = header_segment(
+            "pca-pred",
+            self.n,
+            self.F.shape[0],
+            tuple(self.origin),
+            self.scale,
+            self.p,
+            self.F,
+            np.zeros(0, np.int64),
+            bool(self.reorder),
+        )
+        self.started = True
+        self.offset = len(head)
+        return head
+
     def push(self, frame) -> bytes:
         """Add one frame (n, 3); returns the bytes ready to send (possibly empty)."""
         if self._lay is not None:
@@ -291,6 +331,8 @@ class StreamEncoder:
         if not np.isfinite(V).all():
             raise InvalidInputError("`frame` contains NaN or inf coordinates.")
         out = b"" if self.started else self._start(V)
+        if self.perm is not None:
+            V = V[self.perm]
         self.buf.append((V - self.origin) / self.scale)
         if len(self.buf) == self.p.block:
             out += self._flush()
@@ -301,6 +343,8 @@ class StreamEncoder:
             return b""
         X = np.stack(self.buf)
         self.buf = []
+        if self.method == "pca-pred":
+            return self._emit(X.shape[0], self._pred_segment(X))
         o = self.o
         plan = analyse_block(
             X,
@@ -339,9 +383,33 @@ class StreamEncoder:
                 what="bpvf",
             )
         self.block_steps.append(s)
-        self.entries.append((self.t, plan.nf, self.offset, len(data)))
+        return self._emit(plan.nf, data)
+
+    def _pred_segment(self, X: np.ndarray) -> bytes:
+        """The ``pca-pred`` segment of the normalised block ``X`` (nf, n, 3)."""
+        enc = _pca_pred.PcaPredEncoder(X, self.F, plan=self.plan)
+        nf, m = X.shape[0], self.F.shape[0]
+
+        def seg(s):
+            chunks = enc.chunks(s)
+            o = tuple(self.origin)
+            return block_segment(
+                "pca-pred", self.n, m, o, self.scale, self.b, self.t, nf, s, chunks
+            )
+
+        if self.bpvf is None:
+            s = self.step
+        else:  # per-block rate adaptation: secant steps from the previous block's step
+            nvf = float(self.n * nf)
+            x0 = math.log(self.block_steps[-1] if self.block_steps else self.step)
+            s = _search(lambda s: 8.0 * len(seg(s)) / nvf, self.bpvf, x0, SLOPE_PRED_BPVF, "bpvf")
+        self.block_steps.append(s)
+        return seg(s)
+
+    def _emit(self, nf: int, data: bytes) -> bytes:
+        self.entries.append((self.t, nf, self.offset, len(data)))
         self.offset += len(data)
-        self.t += plan.nf
+        self.t += nf
         self.b += 1
         return data
 
