@@ -15,8 +15,8 @@ layers :data:`LAYERS`; the methods of :data:`TARGETED` also once through their r
 ``error=`` set to the KG error of Draco per frame at 12 bits (setting ``kg=draco12``), so that
 the bpvf they need for it is measured rather than bounded by the nearest step. Peers, in the
 same run: Draco per frame through DracoPy at 8-16 quantisation bits, in its default mode
-(``draco``: compression level 7, which reorders vertices; its KG error is measured after matching
-every decoded vertex to its nearest original vertex of the same frame, a lower bound of the true
+(``draco``: compression level 10 as in ``evaluate compress``, which reorders vertices; its KG
+error is measured after matching every decoded vertex to its nearest original vertex of the same frame, a lower bound of the true
 error, and flagged ``order_kept = no``) and order-preserving (``draco-ordered``); and
 ``quant-delta-zstd``: uniform quantisation of all frames on the animation's bounding box,
 temporal difference of the integer coordinates, zstd level 19, faces once.
@@ -37,6 +37,7 @@ import numpy as np
 from .._errors import InvalidInputError
 from .._progress import progress
 from ..datasets.splits import files as _files
+from .compress import DRACO_LEVEL
 from ._tables import (
     check_names,
     have,
@@ -128,7 +129,7 @@ def _draco(A, F, bits: int, ordered: bool):
             A[t],
             F32,
             quantization_bits=bits,
-            compression_level=1 if ordered else 7,
+            compression_level=1 if ordered else DRACO_LEVEL,  # the level is moot when ordered
             preserve_order=ordered,
         )
         t1 = time.perf_counter()
