@@ -27,6 +27,10 @@ coder's order (most decoded faces first, :func:`._predictive_kernel.traversal_or
    rings'; with the spread of the values the base prediction averages); its sign in contexts
    of the component and the rounding remainder (the side the real prediction leans to).
 
+The mean and basis trajectories are integers on per-column steps, each row predicted from
+its own previous values (order 0, 1 or 2, two bits per row) and range coded under two adaptive
+models (:func:`_code_basis`).
+
 The encoder may round a coefficient to its other nearest integer when that saves more than
 :data:`RDO_LAMBDA` squared steps per bit. The decoder's floating-point steps (the regression,
 one product :func:`._dense_fixed.matmul`) are numba loops in a written order without BLAS or
@@ -44,9 +48,10 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ._container import Reader, varint
-from ._entropy import decode_groups, encode_groups
 from ._predictive_kernel import (
     KMAX,
+    PB3,
+    _code_signed,
     _order,
     _parallelogram_corners,
     _vertex_faces,
@@ -546,28 +551,92 @@ def decode_coefficients(data: bytes, pl, n: int, k: int) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- basis
-def _diff_groups(qs: list[np.ndarray], T: int) -> tuple[np.ndarray, np.ndarray]:
-    """Temporal differences of (3T,) integer trajectories, restarted per coordinate; one group
-    per trajectory (first values apart)."""
-    if not qs:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    Z = np.stack(qs).reshape(len(qs), 3, T)
-    D = np.diff(Z, axis=2, prepend=0).reshape(len(qs), 3 * T)
-    G = np.repeat(np.arange(len(qs))[:, None], 3 * T, axis=1)
-    G[:, ::T] = len(qs)  # first value of each coordinate: its own group
-    return D.ravel(), G.ravel()
+#: bit-length buckets of the basis coder's two contexts
+_BNA = 12
+_BSTRIDE = 2 * KMAX + 2
+#: largest |integer| a decoded basis value may have (a damaged stream is refused beyond it)
+_BMAX = 1 << 40
 
 
-def _undiff(D: np.ndarray, k: int, T: int) -> np.ndarray:
-    return np.cumsum(D.reshape(k, 3, T), axis=2).reshape(k, 3 * T)
+@numba.njit(cache=True, inline="always")
+def _bpred(Z, r, c, t, o):
+    """Prediction of ``Z[r, c, t]`` of order ``o`` (0: none, 1: the previous value, 2: linear
+    from the two previous), lower orders at the start of a coordinate."""
+    if o == 0 or t == 0:
+        return np.int64(0)
+    if o == 1 or t == 1:
+        return Z[r, c, t - 1]
+    return 2 * Z[r, c, t - 1] - Z[r, c, t - 2]
+
+
+@numba.njit(cache=True)
+def _code_basis(enc, Z, orders, buf):
+    """Encode the integer trajectories ``Z`` (R, 3, T) (row 0 the mean, then the basis columns)
+    into ``buf`` (returns the byte count) or decode ``buf`` into ``Z`` (returns the bytes read,
+    -1 when the data ran out or a value left ``[-_BMAX, _BMAX]``). Row ``r`` is predicted with
+    order ``orders[r]`` (:func:`_bpred`); the residual goes through
+    :func:`._predictive_kernel._code_signed` under the mean of two adaptive models: the start
+    class of ``t`` with the mean bit length of the row's two previous residuals, and with the
+    bit lengths of the previous row's residual at the same ``(c, t)`` and of the previous
+    coordinate's at the same ``t``."""
+    R, _c, T = Z.shape
+    probs = np.full(6 * _BNA * _BSTRIDE, 1 << (PB3 - 1), np.int64)
+    cnts = np.zeros(probs.size, np.int64)
+    st = np.zeros(6, np.int64)
+    start(enc, st, buf)
+    E = np.zeros((R, 3, T), np.int64)
+    for r in range(R):
+        o = orders[r]
+        for c in range(3):
+            for t in range(T):
+                p = _bpred(Z, r, c, t, o)
+                tc = 2 if o == 0 or t >= o else t
+                a = E[r, c, t - 1] if t >= 1 else 0
+                a += E[r, c, t - 2] if t >= 2 else a
+                b = (E[r - 1, c, t] if r > 1 else 0) + (E[r, c - 1, t] if c > 0 else 0)
+                base = (tc * _BNA + min((a + 1) // 2, _BNA - 1)) * _BSTRIDE
+                base2 = ((3 + tc) * _BNA + min(b, _BNA - 1)) * _BSTRIDE
+                v = Z[r, c, t] - p if enc else np.int64(0)
+                v = _code_signed(enc, st, buf, probs, cnts, base, v, -1, base2)
+                if not enc:
+                    z = v + p
+                    if z > _BMAX or z < -_BMAX or st[5] > buf.size + 8:
+                        return -1
+                    Z[r, c, t] = z
+                E[r, c, t] = _bitlen(-v if v < 0 else v)
+    if enc:
+        return finish(st, buf)
+    return st[5] if st[5] <= buf.size + 4 else -1
+
+
+def _orders(Z: np.ndarray) -> np.ndarray:
+    """Per row, the prediction order (0, 1 or 2) of the smallest ``sum 2 bitlen|residual| + 1``."""
+    cost = np.stack(
+        [
+            np.sum(2 * np.ceil(np.log2(np.abs(np.diff(Z, n=o, axis=2)) + 1)) + 1, axis=(1, 2))
+            for o in (0, 1, 2)
+        ]
+    )
+    return np.argmin(cost, axis=0).astype(np.int64)
 
 
 def basis_chunk(qm, sm, qB, sb, T: int) -> bytes:
-    """Mean trajectory (step ``sm``) and basis columns (``qB`` (3T, k), steps ``sb``)."""
+    """Mean trajectory (step ``sm``) and basis columns (``qB`` (3T, k), steps ``sb``): the
+    steps, two bits per row (its prediction order), then :func:`_code_basis`'s stream."""
     k = qB.shape[1]
-    D, G = _diff_groups([qm] + [qB[:, j] for j in range(k)], T)
+    Z = np.concatenate([np.asarray(qm).reshape(1, 3, T), qB.T.reshape(k, 3, T)]).astype(np.int64)
+    if np.abs(Z).max() > _BMAX:
+        raise InvalidInputError("quantised basis values are too large to code; use a coarser step.")
+    orders = _orders(Z)
+    bits = np.stack([orders >> 1, orders & 1], axis=1).astype(np.uint8)
     head = varint(k) + np.float32(sm).tobytes() + sb.astype("<f4").tobytes()
-    return head + encode_groups(D, G, k + 2)
+    size = 64 + 2 * Z.size
+    while True:
+        buf = np.zeros(size, np.uint8)
+        used = _code_basis(True, Z, orders, buf)
+        if used <= size:
+            return head + np.packbits(bits.ravel()).tobytes() + buf[:used].tobytes()
+        size = int(used) + 16
 
 
 def read_basis(buf: bytes, T: int) -> tuple[np.ndarray, np.ndarray]:
@@ -580,9 +649,15 @@ def read_basis(buf: bytes, T: int) -> tuple[np.ndarray, np.ndarray]:
     sb = np.frombuffer(r.take(4 * k), "<f4").astype(np.float64)
     if not (math.isfinite(sm) and sm > 0 and np.isfinite(sb).all() and (sb > 0).all()):
         raise InvalidInputError(".sga trajectory basis is malformed (bad steps).")
-    G = np.repeat(np.arange(k + 1)[:, None], 3 * T, axis=1)
-    G[:, ::T] = k + 1
-    Z = _undiff(decode_groups(r.rest(), G.ravel(), k + 2, "trajectory basis"), k + 1, T)
+    nb = (2 * (k + 1) + 7) // 8
+    bits = np.unpackbits(np.frombuffer(r.take(nb), np.uint8))[: 2 * (k + 1)].reshape(k + 1, 2)
+    orders = (2 * bits[:, 0] + bits[:, 1]).astype(np.int64)
+    if (orders > 2).any():
+        raise InvalidInputError(".sga trajectory basis is malformed (bad prediction order).")
+    Z = np.zeros((k + 1, 3, T), np.int64)
+    if _code_basis(False, Z, orders, np.frombuffer(r.rest(), np.uint8).copy()) < 0:
+        raise InvalidInputError(".sga trajectory basis is malformed (truncated or damaged).")
+    Z = Z.reshape(k + 1, 3 * T)
     return Z[0] * sm, (Z[1:] * sb[:, None]).T
 
 
@@ -714,10 +789,11 @@ def reconstruct(pl, n: int, chunks, nf: int, step: float) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- file
-#: coefficient coder version, in the stream header's ``n_iter`` field (1: the breadth-first
-#: order and floor predictions of the first development code; 2: one magnitude context per
-#: residual bit, the regression on the first 12 components; neither read any more)
-CODER = 3
+#: coder version, in the stream header's ``n_iter`` field (1: the breadth-first order and floor
+#: predictions of the first development code; 2: one magnitude context per residual bit, the
+#: regression on the first 12 components; 3: the basis in Laplace groups of first differences;
+#: none read any more)
+CODER = 4
 #: default frames per block (one trajectory PCA each; its covariance is (3 block)^2)
 PRED_BLOCK = 512
 #: default coefficient step (fraction of the frames' bounding-box diagonal)
