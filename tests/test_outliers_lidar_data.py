@@ -14,6 +14,8 @@ from spectrageo.datasets._split_outliers import OUTLIER_SCAN_TYPES, OUTLIER_SCAN
 _SHA = {
     "lidar/pdal_4_6_crop.las": "c432b44d4e938ed3",
     "lidar/pdal_hexbin_crop.las": "d1206c580a8c9c56",
+    "lidar/pdal_warsaw_small.las": "e416058a79306c5a",
+    "lidar/pdal_mvk_thin.las": "c3707f90cc153b4a",
 }
 
 

@@ -74,11 +74,18 @@ OUTLIER_SCAN_TYPES = {
     "scans/rangemap/face000.ply": ("range map", None),
     "lidar/pdal_4_6_crop.las": ("LiDAR", None),
     "lidar/pdal_hexbin_crop.las": ("LiDAR", None),
+    "lidar/pdal_warsaw_small.las": ("LiDAR", None),
+    "lidar/pdal_mvk_thin.las": ("LiDAR", None),
 }
 #: scan-type files shipped in the repository's ``benchmarks/data`` (``Case.root == "repo"``):
 #: PDAL's airborne test tiles (BSD; benchmarks/data/lidar/README.md,
 #: docs/decisions.md#outliers-lidar-tuning-data)
-OUTLIER_SCAN_TYPES_IN_REPO = ("lidar/pdal_4_6_crop.las", "lidar/pdal_hexbin_crop.las")
+OUTLIER_SCAN_TYPES_IN_REPO = (
+    "lidar/pdal_4_6_crop.las",
+    "lidar/pdal_hexbin_crop.las",
+    "lidar/pdal_warsaw_small.las",
+    "lidar/pdal_mvk_thin.las",
+)
 #: the split of each scan-type case: bunny scans with real labels, the Kinect frame whose range
 #: model exponent was chosen, the fragments (validation where the outlier task has them)
 _SCAN_TYPE_TUNING = (
