@@ -3,12 +3,12 @@
     python benchmarks/anim_pca_pred.py [--split tuning|validation|both] [NAME ...]
 
 For every animation of the split registry's ``compress-animation`` task (split named in every
-row): Draco per frame through DracoPy at 10 and 12 quantisation bits (default mode, which
-reorders vertices, KG after nearest-vertex matching: a lower bound; and order-preserving); then
-``pca-pred`` with ``error=`` set to each Draco KG error, with ``reorder=True`` (against Draco's
-default mode; KG exact through the known permutation) and order kept (against order-preserving
-Draco); ``blocks`` (the default) and ``pca-qp`` at the same errors and at 4x Draco-10's and a
-quarter of Draco-12's KG (the rate range of the default's choice); and ``pca-pred`` at whole-file
+row): Draco per frame through DracoPy at 10 and 12 quantisation bits (default mode at
+compression level 10, which reorders vertices, KG after nearest-vertex matching: a lower bound;
+and order-preserving); then ``pca-pred`` with ``error=`` set to each Draco KG error, with
+``reorder=True`` (against Draco's default mode; KG exact through the known permutation) and
+order kept (against order-preserving Draco); the thesis's ``blocks`` and ``pca-qp`` at the same
+errors and at 4x Draco-10's and a quarter of Draco-12's KG; and ``pca-pred`` at whole-file
 ``bpvf=`` 0.5 and 1.0 (Table 5.12's ``q_s`` range), the KG error there. Encode times in this
 process.
 """
