@@ -4,8 +4,9 @@ fixed-step encode, and size at the KG errors of Draco per frame at 10 and 12 bit
     python benchmarks/rate_animation.py [NAME ...]     # about 15 minutes for the six animations
 
 For every animation of the split registry's ``compress-animation`` task (its split named in
-every row): Draco per frame through DracoPy (default mode, which reorders vertices, KG after
-nearest-vertex matching: a lower bound; and order-preserving) at 10 and 12 quantisation bits;
+every row): Draco per frame through DracoPy (default mode at compression level 10, which
+reorders vertices, KG after nearest-vertex matching: a lower bound; and order-preserving) at 10
+and 12 quantisation bits;
 then the thesis's variants ``pca-q``, ``pca-qp`` (``pca-qs`` codes the same bits and decodes
 serially) and ``blocks`` through their rate control with ``error=`` set to each Draco KG error,
 and with ``bpvf=`` 0.5 and 1.0 (the range of Table 5.12's ``q_s``), the KG error there. Every
