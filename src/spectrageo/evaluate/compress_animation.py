@@ -37,7 +37,6 @@ import numpy as np
 from .._errors import InvalidInputError
 from .._progress import progress
 from ..datasets.splits import files as _files
-from .compress import DRACO_LEVEL
 from ._tables import (
     check_names,
     have,
@@ -46,6 +45,7 @@ from ._tables import (
     unmet_request,
     write_rate_outputs,
 )
+from .compress import DRACO_LEVEL
 
 #: the splits of the split registry's ``compress-animation`` task (:mod:`spectrageo.datasets.splits`)
 TUNING_SPLIT = _files("compress-animation", "tuning")
