@@ -65,11 +65,7 @@ def encode_animation(
             "`error` (KG) is undefined here: every frame has all its vertices at one point; "
             "give `bpvf` or `step` instead."
         )
-    reorder = options.pop("reorder", False)
-    if not isinstance(reorder, bool | np.bool_) or (reorder and method != "pca-pred"):
-        raise InvalidInputError(
-            f"`reorder` must be True or False and needs method 'pca-pred'; got {reorder!r}."
-        )
+    reorder = _pop_reorder(options, method)
     if reorder:
         from ._connectivity import reorder_coded
 
@@ -83,6 +79,16 @@ def encode_animation(
     if method in QUANTISED and (bpvf is not None or error is not None):
         return rate_search(enc, A, bpvf, error)[1]
     return encode_at_rate(enc.build, A, method, step, bpvf, error)
+
+
+def _pop_reorder(options: dict, method: str) -> bool:
+    """The ``reorder`` option taken out of ``options``: a bool, True only with ``pca-pred``."""
+    reorder = options.pop("reorder", False)
+    if not isinstance(reorder, bool | np.bool_) or (reorder and method != "pca-pred"):
+        raise InvalidInputError(
+            f"`reorder` must be True or False and needs method 'pca-pred'; got {reorder!r}."
+        )
+    return bool(reorder)
 
 
 def _check_header_memory(head: _container.Container, name: str) -> None:
@@ -226,12 +232,7 @@ class StreamEncoder:
                 f"streaming supports methods 'blocks', 'pca-pred' and 'layered' (the others "
                 f"need the whole sequence); got {method!r}."
             )
-        self.reorder = options.pop("reorder", False)
-        if not isinstance(self.reorder, bool | np.bool_) or (self.reorder and method != "pca-pred"):
-            raise InvalidInputError(
-                f"`reorder` must be True or False and needs method 'pca-pred'; got "
-                f"{self.reorder!r}."
-            )
+        self.reorder = _pop_reorder(options, method)
         if step is not None and bpvf is not None:
             raise InvalidInputError("give at most one of `step` and `bpvf`.")
         for name, v in (("step", step), ("bpvf", bpvf)):
